@@ -1,0 +1,590 @@
+"""Meshed 2D SHPB geometries: incident bar, specimen, transmission bar, along x.
+
+Two set-ups (DESIGN section 4):
+
+* ``brazilian_disc`` -- the paper's case (Godinez & Rougier 2021, Figure 1): a granite disc between two
+  steel bars, loaded by a velocity history at the incident bar's free end.
+* ``cylinder`` -- a uniaxial compression specimen (the Freiburg records' case) between titanium bars; the
+  measured incident wave is injected at the incident gauge section through an absorbing boundary.
+
+Conventions
+-----------
+* SI units. The specimen's centre is the origin; x runs from the incident bar through the specimen to the
+  transmission bar; y is the diameter direction. The bodies touch along the loaded faces with zero gap:
+  the incident bar's end face is the line ``x = x_front`` (the specimen's minimum x), the transmission
+  bar's is ``x = x_back`` (its maximum x). A disc touches each bar at one node, its extreme node
+  ``(+-R, 0)``; a cylinder touches along its whole end face.
+* Plane stress with a thickness per body chosen so that each cross-section area matches the 3D test:
+  a bar of diameter ``D`` is a strip of height ``D`` and thickness ``t = pi D / 4`` (so ``D t = pi D^2/4``);
+  the disc's thickness is its real thickness; a cylinder of diameter ``D`` is a rectangle of height ``D``
+  and thickness ``pi D / 4``.
+* Meshes come from Shewchuk's Triangle (minimum angle 30 degrees, maximum-area constraints from
+  ``shpb.presets``). The specimen is uniform; each bar is refined near its specimen face and graded to a
+  coarse size away from it. Boundary vertices are placed here and Triangle may not add any on the
+  boundary (switch ``Y``), so the end faces are exactly straight and their node sets are exact.
+  Triangle is deterministic: the same arguments give identical arrays.
+
+Bar-length rule (``window_s``)
+------------------------------
+``c = sqrt(E/rho)`` is the bar wave speed (a long-wavelength pulse in a plane-stress strip travels at
+the 1D bar speed). The *recorded window* is ``[t_s, t_s + window_s]``, where ``t_s`` is the time the
+incident front reaches the specimen. A strain gauge at distance ``d`` from the specimen sees the same
+window shifted by ``d / c`` (this is how the data reduction time-shifts gauge records to the faces).
+
+* Transmission bar (free far end): the transmitted front reaches the far end at ``t_s + L_t/c`` and its
+  reflection comes back to the gauge at ``t_s + (2 L_t - d_t)/c``; the gauge's window ends at
+  ``t_s + d_t/c + window_s``. Hence ``L_t >= d_t + c window_s / 2`` (and then the specimen, reached at
+  ``t_s + 2 L_t / c``, is clean as well).
+* Incident bar loaded at its free end (``brazilian_disc``): the wave reflected by the specimen goes back to
+  the loaded end (a velocity-driven or free end reflects it) and returns to the gauge at
+  ``t_s + (2 L_i - d_i)/c``; the gauge's window for the reflected wave ends at ``t_s + d_i/c + window_s``.
+  Hence ``L_i >= d_i + c window_s / 2`` -- so in particular ``2 L_i / c >= window_s`` at the specimen.
+* Incident bar loaded at the gauge section through an absorbing boundary (``cylinder``): the reflected
+  wave leaves the model there, so the bar is exactly the gauge-to-specimen distance, ``L_i = d_i``.
+
+Default gauge distances for the disc put each gauge at mid-length, ``d = c window_s / 2``, so ``L = c
+window_s``: there the incident and reflected pulses of any incident pulse up to ``window_s`` long pass the
+incident gauge one after the other (the reflected front arrives ``2 d / c = window_s`` after the incident
+front). Steel bars and the 400 us default window give ``L = 2.019 m``, ``d = 1.010 m`` (compare Yan et al.
+2023: 2.0 m / 1.5 m bars). Bar lengths shorter than the rule raise ``ValueError`` unless
+``enforce_window=False`` (e.g. for a transmission bar that ends in an absorbing boundary).
+
+Sets
+----
+Node sets (indices into the body's nodes):
+  incident bar: ``load_end`` (all nodes of its x-min end face), ``specimen_face`` (all nodes of the end
+  face at ``x_front``); transmission bar: ``specimen_face`` (at ``x_back``), ``free_end`` (its x-max end);
+  specimen: ``front_face`` / ``back_face`` (nodes at ``x_front`` / ``x_back``: one node for a disc, the
+  end-face nodes for a cylinder).
+Element sets (indices into the body's triangles):
+  bars: ``gauge`` -- triangles whose centroid lies within one local bar element size of the gauge
+  section (``|x_c - x_gauge| <= h_bar(x_gauge)``); the engine averages the axial stress over them to mimic
+  a strain gauge (a gauge also averages over its grid length, a few mm to a few cm).
+  specimen: ``centre`` -- triangles whose centroid lies within ``r = D/20`` of the specimen centre
+  (``min(L, D)/20`` for a cylinder), the radius grown if needed so the set holds at least 6 triangles.
+
+Materials
+---------
+``GRANITE``: the paper's Table 1 (E 35 GPa, nu 0.16, rho 2550 kg/m^3). ``STEEL_BAR``: the paper does not
+give its bar material; we take a generic high-strength bar steel (E 200 GPa, rho 7850 kg/m^3, nu 0.29,
+typical of the maraging / 4340 steels used for SHPB bars; c = 5,048 m/s). ``TITANIUM_BAR``: the
+Freiburg bars (E 110 GPa, rho 4430 kg/m^3 from the authors' processing script ``SHPB_v4.0.py``, see the
+data's PROVENANCE.md; c = 4,983 m/s) with nu 0.32, a handbook value for Ti-6Al-4V (not in the source).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import triangle
+
+from fdem.body import Body, Material
+from shpb.presets import MIN_ANGLE_DEG, Preset, get_preset
+
+GRANITE = Material(E=35.0e9, nu=0.16, rho=2550.0)
+STEEL_BAR = Material(E=200.0e9, nu=0.29, rho=7850.0)
+TITANIUM_BAR = Material(E=110.0e9, nu=0.32, rho=4430.0)
+
+#: Default recorded window at the specimen [s].
+DEFAULT_WINDOW_S = 400e-6
+#: Gauge-to-specimen distances of the Freiburg set-up [m] (incident, transmission).
+FREIBURG_GAUGE_DISTANCES_M = (1.25, 1.00)
+#: The specimen's ``centre`` set: radius as a fraction of the diameter, and minimum size.
+CENTRE_RADIUS_FRACTION = 1.0 / 20.0
+CENTRE_MIN_TRIANGLES = 6
+#: A specimen must be at least this many specimen element sizes across.
+MIN_ELEMENTS_ACROSS = 5
+
+
+def bar_thickness(diameter_m: float) -> float:
+    """Plane-stress thickness of a round bar of diameter D [m]: ``pi D / 4``, so that ``D t = pi D^2 / 4``."""
+    return float(np.pi * diameter_m / 4.0)
+
+
+def min_bar_length(gauge_distance_m: float, wave_speed_m_s: float, window_s: float) -> float:
+    """Shortest bar [m] whose far-end reflection misses the gauge's window: ``d + c window / 2``.
+
+    Applies to the transmission bar and to an incident bar loaded at its free end (module docstring).
+    """
+    return float(gauge_distance_m + 0.5 * wave_speed_m_s * window_s)
+
+
+@dataclass
+class Geometry:
+    """A meshed SHPB set-up: three bodies plus the metadata the model and the data reduction need.
+
+    kind: ``"brazilian_disc"`` or ``"cylinder"``; preset: the mesh preset's name.
+    bodies: ``[incident bar, specimen, transmission bar]`` as ``fdem.body.Body``.
+    incident_bar, specimen, transmission_bar: the names of the bodies playing these roles.
+    specimen_face_x: ``(x_front, x_back)`` [m], the specimen's contact faces (the bar end faces).
+    gauge_x: ``(incident, transmission)`` gauge x positions [m].
+    gauge_distance_m: ``(d_i, d_t)`` gauge-to-specimen-face distances [m].
+    specimen_dims: ``diameter_m``, ``thickness_m`` (plane-stress), and ``length_m`` for a cylinder [m].
+    bar_material, bar_diameter_m, bar_thickness_m (= pi D / 4): the bars' properties.
+    bar_length_m: ``(L_i, L_t)`` [m].
+    window_s: recorded window [s] used for the bar-length rule (module docstring).
+    loading: ``"free_end_velocity"`` (velocity at the incident ``load_end``) or ``"gauge_injection"``
+        (measured incident wave injected at ``load_end``, which is the incident gauge section, with an
+        absorbing boundary).
+    element_size_m: the preset's sizes (``specimen``, ``bar``, ``bar_near``) [m].
+    centre_radius_m: radius of the specimen's ``centre`` set [m].
+    """
+
+    kind: str
+    preset: str
+    bodies: list[Body]
+    incident_bar: str
+    specimen: str
+    transmission_bar: str
+    specimen_face_x: tuple[float, float]
+    gauge_x: tuple[float, float]
+    gauge_distance_m: tuple[float, float]
+    specimen_dims: dict[str, float]
+    bar_material: Material
+    bar_diameter_m: float
+    bar_thickness_m: float
+    bar_length_m: tuple[float, float]
+    window_s: float
+    loading: str
+    element_size_m: dict[str, float] = field(default_factory=dict)
+    centre_radius_m: float = 0.0
+
+    def body(self, name: str) -> Body:
+        """The body called ``name`` (a body name or one of the roles' names)."""
+        for b in self.bodies:
+            if b.name == name:
+                return b
+        raise KeyError(f"no body named {name!r}; bodies: {[b.name for b in self.bodies]}")
+
+    @property
+    def element_counts(self) -> dict[str, int]:
+        """Number of triangles per body name."""
+        return {b.name: int(len(b.triangles)) for b in self.bodies}
+
+    @property
+    def node_counts(self) -> dict[str, int]:
+        """Number of nodes per body name."""
+        return {b.name: int(len(b.nodes)) for b in self.bodies}
+
+    @property
+    def bar_wave_speed_m_s(self) -> float:
+        """1D bar wave speed sqrt(E / rho) of the bars [m/s]."""
+        return self.bar_material.c_bar
+
+    @property
+    def arrival_time_s(self) -> float:
+        """Time [s] for the incident front to travel from the loaded section to the specimen at ``c``.
+
+        The recorded window is ``[arrival_time_s, arrival_time_s + window_s]`` if loading starts at t = 0.
+        """
+        return float(self.bar_length_m[0] / self.bar_wave_speed_m_s)
+
+    def summary(self) -> dict:
+        """JSON-ready description (plain floats, ints, strings, lists and dicts)."""
+        roles = {self.incident_bar: "incident_bar", self.specimen: "specimen",
+                 self.transmission_bar: "transmission_bar"}
+        bodies = []
+        for b in self.bodies:
+            bodies.append({
+                "name": b.name, "role": roles.get(b.name, ""),
+                "n_nodes": int(len(b.nodes)), "n_triangles": int(len(b.triangles)),
+                "thickness_m": float(b.thickness), "fracturable": bool(b.fracturable),
+                "material": {"E": float(b.material.E), "nu": float(b.material.nu), "rho": float(b.material.rho)},
+                "x_range_m": [float(b.nodes[:, 0].min()), float(b.nodes[:, 0].max())],
+                "y_range_m": [float(b.nodes[:, 1].min()), float(b.nodes[:, 1].max())],
+                "area_m2": float(_triangle_areas(b.nodes, b.triangles).sum()),
+                "node_sets": {k: int(len(v)) for k, v in b.node_sets.items()},
+                "element_sets": {k: int(len(v)) for k, v in b.element_sets.items()},
+            })
+        return {
+            "kind": self.kind, "preset": self.preset, "loading": self.loading,
+            "roles": {"incident_bar": self.incident_bar, "specimen": self.specimen,
+                      "transmission_bar": self.transmission_bar},
+            "specimen_dims_m": {k: float(v) for k, v in self.specimen_dims.items()},
+            "specimen_face_x_m": [float(x) for x in self.specimen_face_x],
+            "gauge_x_m": [float(x) for x in self.gauge_x],
+            "gauge_distance_m": [float(x) for x in self.gauge_distance_m],
+            "bar": {"E": float(self.bar_material.E), "nu": float(self.bar_material.nu),
+                    "rho": float(self.bar_material.rho), "diameter_m": float(self.bar_diameter_m),
+                    "thickness_m": float(self.bar_thickness_m),
+                    "length_m": [float(x) for x in self.bar_length_m],
+                    "wave_speed_m_s": float(self.bar_wave_speed_m_s)},
+            "window_s": float(self.window_s), "arrival_time_s": float(self.arrival_time_s),
+            "element_size_m": {k: float(v) for k, v in self.element_size_m.items()},
+            "centre_radius_m": float(self.centre_radius_m),
+            "element_counts": self.element_counts,
+            "n_triangles_total": int(sum(self.element_counts.values())),
+            "bodies": bodies,
+        }
+
+
+# --------------------------------------------------------------------------------------------------
+# Public builders
+# --------------------------------------------------------------------------------------------------
+
+def brazilian_disc(preset: str | Preset = "standard", *,
+                   diameter_m: float = 0.050, thickness_m: float = 0.025,
+                   disc: Material = GRANITE, bar: Material = STEEL_BAR, bar_diameter_m: float = 0.050,
+                   window_s: float = DEFAULT_WINDOW_S,
+                   incident_gauge_m: float | None = None, transmission_gauge_m: float | None = None,
+                   incident_length_m: float | None = None, transmission_length_m: float | None = None,
+                   enforce_window: bool = True) -> Geometry:
+    """Brazilian disc between an incident and a transmission bar (the paper's set-up), 2D along x.
+
+    diameter_m, thickness_m: disc diameter and real thickness [m] (the plane-stress thickness).
+    disc, bar: materials (defaults: the paper's granite, Table 1; bar steel, module docstring).
+    bar_diameter_m: bar diameter [m]; the bars are strips of that height, thickness ``pi D / 4``.
+    window_s: recorded window at the specimen [s]; sets the default gauge distances
+        ``d = c window_s / 2`` and bar lengths ``L = d + c window_s / 2`` (module docstring).
+    incident_gauge_m, transmission_gauge_m: gauge-to-specimen-face distances [m].
+    incident_length_m, transmission_length_m: bar lengths [m]; checked against the rule unless
+        ``enforce_window=False``.
+    The incident bar is loaded by a velocity history on its ``load_end`` nodes.
+    """
+    p = get_preset(preset)
+    _check_positive(diameter_m=diameter_m, thickness_m=thickness_m, bar_diameter_m=bar_diameter_m,
+                    window_s=window_s)
+    _check_material(disc=disc, bar=bar)
+    _check_resolved("diameter_m", diameter_m, p)
+    c = bar.c_bar
+    d_i = 0.5 * c * window_s if incident_gauge_m is None else incident_gauge_m
+    d_t = 0.5 * c * window_s if transmission_gauge_m is None else transmission_gauge_m
+    _check_positive(incident_gauge_m=d_i, transmission_gauge_m=d_t)
+    L_i = min_bar_length(d_i, c, window_s) if incident_length_m is None else incident_length_m
+    L_t = min_bar_length(d_t, c, window_s) if transmission_length_m is None else transmission_length_m
+    _check_bar_lengths(L_i, L_t, d_i, d_t, c, window_s, enforce_window, incident_free_end=True)
+
+    R = 0.5 * diameter_m
+    x_front, x_back = -R, R
+    nodes, tris = _mesh_disc(R, p.specimen_h_m, p)
+    centre, r_c = _centre_set(nodes, tris, (0.0, 0.0), CENTRE_RADIUS_FRACTION * diameter_m)
+    front = np.flatnonzero((nodes[:, 0] == x_front) & (nodes[:, 1] == 0.0))
+    back = np.flatnonzero((nodes[:, 0] == x_back) & (nodes[:, 1] == 0.0))
+    specimen = Body("disc", nodes, tris, disc, thickness=thickness_m, fracturable=True,
+                    node_sets={"front_face": front, "back_face": back},
+                    element_sets={"centre": centre})
+
+    incident, transmission, gauge_x = _bars(p, bar, bar_diameter_m, x_front, x_back, L_i, L_t, d_i, d_t,
+                                            odd_face=True)
+    return Geometry(
+        kind="brazilian_disc", preset=p.name, bodies=[incident, specimen, transmission],
+        incident_bar=incident.name, specimen=specimen.name, transmission_bar=transmission.name,
+        specimen_face_x=(x_front, x_back), gauge_x=gauge_x, gauge_distance_m=(float(d_i), float(d_t)),
+        specimen_dims={"diameter_m": float(diameter_m), "thickness_m": float(thickness_m)},
+        bar_material=bar, bar_diameter_m=float(bar_diameter_m), bar_thickness_m=bar_thickness(bar_diameter_m),
+        bar_length_m=(float(L_i), float(L_t)), window_s=float(window_s), loading="free_end_velocity",
+        element_size_m=_sizes(p), centre_radius_m=r_c)
+
+
+def cylinder(preset: str | Preset = "standard", length_m: float = 0.040, diameter_m: float = 0.040,
+             rock: Material = GRANITE, *, bar: Material = TITANIUM_BAR, bar_diameter_m: float = 0.050,
+             window_s: float = DEFAULT_WINDOW_S,
+             incident_gauge_m: float = FREIBURG_GAUGE_DISTANCES_M[0],
+             transmission_gauge_m: float = FREIBURG_GAUGE_DISTANCES_M[1],
+             transmission_length_m: float | None = None, enforce_window: bool = True) -> Geometry:
+    """Cylindrical compression specimen between titanium bars (the Freiburg set-up), 2D along x.
+
+    length_m, diameter_m: specimen length (along x) and diameter [m]; it is a rectangle of height D with
+        plane-stress thickness ``pi D / 4`` (area match). D must not exceed the bar diameter.
+    rock: the specimen's material. bar: bar material (default: Freiburg titanium, module docstring).
+    incident_gauge_m, transmission_gauge_m: gauge-to-specimen distances [m] (Freiburg: 1.25 and 1.00).
+    The incident bar starts exactly at the incident gauge section, ``x = x_front - incident_gauge_m``:
+    the measured incident wave is injected there (``load_end``) through an absorbing boundary, so
+    ``L_i = incident_gauge_m``. The transmission bar's default length is ``d_t + c window_s / 2``; a
+    shorter bar needs ``enforce_window=False`` (e.g. with an absorbing boundary on ``free_end``).
+    """
+    p = get_preset(preset)
+    _check_positive(length_m=length_m, diameter_m=diameter_m, bar_diameter_m=bar_diameter_m,
+                    window_s=window_s, incident_gauge_m=incident_gauge_m,
+                    transmission_gauge_m=transmission_gauge_m)
+    _check_material(rock=rock, bar=bar)
+    _check_resolved("length_m", length_m, p)
+    _check_resolved("diameter_m", diameter_m, p)
+    if diameter_m > bar_diameter_m:
+        raise ValueError(f"diameter_m ({diameter_m} m) must not exceed bar_diameter_m ({bar_diameter_m} m): "
+                         "the bar end face must cover the specimen's end face")
+    c = bar.c_bar
+    L_i = float(incident_gauge_m)
+    L_t = min_bar_length(transmission_gauge_m, c, window_s) if transmission_length_m is None \
+        else transmission_length_m
+    _check_bar_lengths(L_i, L_t, incident_gauge_m, transmission_gauge_m, c, window_s, enforce_window,
+                       incident_free_end=False)
+
+    x_front, x_back = -0.5 * length_m, 0.5 * length_m
+    nodes, tris = _mesh_rectangle(x_front, x_back, diameter_m, p.specimen_h_m, p)
+    centre, r_c = _centre_set(nodes, tris, (0.0, 0.0), CENTRE_RADIUS_FRACTION * min(length_m, diameter_m))
+    specimen = Body("cylinder", nodes, tris, rock, thickness=bar_thickness(diameter_m), fracturable=True,
+                    node_sets={"front_face": np.flatnonzero(nodes[:, 0] == x_front),
+                               "back_face": np.flatnonzero(nodes[:, 0] == x_back)},
+                    element_sets={"centre": centre})
+
+    incident, transmission, gauge_x = _bars(p, bar, bar_diameter_m, x_front, x_back, L_i, L_t,
+                                            incident_gauge_m, transmission_gauge_m, odd_face=False)
+    return Geometry(
+        kind="cylinder", preset=p.name, bodies=[incident, specimen, transmission],
+        incident_bar=incident.name, specimen=specimen.name, transmission_bar=transmission.name,
+        specimen_face_x=(x_front, x_back), gauge_x=gauge_x,
+        gauge_distance_m=(float(incident_gauge_m), float(transmission_gauge_m)),
+        specimen_dims={"length_m": float(length_m), "diameter_m": float(diameter_m),
+                       "thickness_m": bar_thickness(diameter_m)},
+        bar_material=bar, bar_diameter_m=float(bar_diameter_m), bar_thickness_m=bar_thickness(bar_diameter_m),
+        bar_length_m=(L_i, float(L_t)), window_s=float(window_s), loading="gauge_injection",
+        element_size_m=_sizes(p), centre_radius_m=r_c)
+
+
+def plot_geometry(geometry: Geometry, path, *, zoom_m: float | None = None) -> None:
+    """Draw the meshes to an image file: the whole set-up (top) and a zoom on the specimen (bottom).
+
+    zoom_m: half-width of the zoom window around the specimen [m] (default: 1.5 x the specimen's size).
+    Uses matplotlib's Agg canvas directly (no global backend change).
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(11, 7.5))
+    FigureCanvasAgg(fig)
+    ax_all, ax_zoom = fig.subplots(2, 1, gridspec_kw={"height_ratios": [1, 3]})
+    colours = {geometry.incident_bar: "tab:blue", geometry.specimen: "tab:brown",
+               geometry.transmission_bar: "tab:green"}
+    half = zoom_m if zoom_m is not None else 0.75 * max(geometry.specimen_dims.get("length_m", 0.0),
+                                                         geometry.specimen_dims["diameter_m"],
+                                                         geometry.bar_diameter_m)
+    for ax, lw in ((ax_all, 0.2), (ax_zoom, 0.3)):
+        for b in geometry.bodies:
+            ax.triplot(b.nodes[:, 0], b.nodes[:, 1], b.triangles, color=colours.get(b.name, "k"), lw=lw)
+        for xg in geometry.gauge_x:
+            ax.axvline(xg, color="tab:red", lw=0.8, ls="--")
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel("y [m]")
+    for b in geometry.bodies:
+        for name, idx in b.element_sets.items():
+            c = b.nodes[b.triangles[idx]].mean(axis=1)
+            ax_zoom.plot(c[:, 0], c[:, 1], ".", ms=2, color="tab:red" if name == "gauge" else "k")
+    ax_all.set_aspect("auto")  # bars are ~80 diameters long: stretch y to see them
+    ax_zoom.set_aspect("equal")
+    ax_zoom.set_xlim(-half, half)
+    ax_zoom.set_ylim(-0.6 * geometry.bar_diameter_m, 0.6 * geometry.bar_diameter_m)
+    counts = geometry.element_counts
+    ax_all.set_title(f"{geometry.kind}, preset {geometry.preset}: "
+                     + ", ".join(f"{k} {v} triangles" for k, v in counts.items()), fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=150)
+
+
+# --------------------------------------------------------------------------------------------------
+# Checks
+# --------------------------------------------------------------------------------------------------
+
+def _check_positive(**values) -> None:
+    for name, v in values.items():
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                or not np.isfinite(v) or v <= 0:
+            raise ValueError(f"{name} must be a finite positive number (SI units), got {v!r}")
+
+
+def _check_material(**materials) -> None:
+    for name, m in materials.items():
+        if not isinstance(m, Material):
+            raise TypeError(f"{name} must be a fdem.body.Material, got {type(m).__name__}")
+
+
+def _check_resolved(name: str, size: float, p: Preset) -> None:
+    if size < MIN_ELEMENTS_ACROSS * p.specimen_h_m:
+        raise ValueError(f"{name} = {size} m is too small for preset {p.name!r}: expected at least "
+                         f"{MIN_ELEMENTS_ACROSS} elements of {p.specimen_h_m} m across, i.e. "
+                         f">= {MIN_ELEMENTS_ACROSS * p.specimen_h_m} m")
+
+
+def _check_bar_lengths(L_i, L_t, d_i, d_t, c, window_s, enforce, incident_free_end) -> None:
+    _check_positive(incident_length_m=L_i, transmission_length_m=L_t)
+    if d_i > L_i * (1 + 1e-12):
+        raise ValueError(f"incident_gauge_m ({d_i} m) must lie on the incident bar (length {L_i} m)")
+    if d_t >= L_t:
+        raise ValueError(f"transmission_gauge_m ({d_t} m) must be less than transmission_length_m ({L_t} m)")
+    if not enforce:
+        return
+    rules = [("transmission_length_m", L_t, min_bar_length(d_t, c, window_s))]
+    if incident_free_end:
+        rules.append(("incident_length_m", L_i, min_bar_length(d_i, c, window_s)))
+    for name, L, L_min in rules:
+        if L < L_min * (1 - 1e-12):
+            raise ValueError(f"{name} = {L} m is too short for window_s = {window_s} s: expected >= "
+                             f"gauge distance + c*window_s/2 = {L_min:.6g} m (c = {c:.1f} m/s); "
+                             "shorten window_s or pass enforce_window=False")
+
+
+# --------------------------------------------------------------------------------------------------
+# Meshing
+# --------------------------------------------------------------------------------------------------
+
+def _sizes(p: Preset) -> dict[str, float]:
+    return {"specimen": p.specimen_h_m, "bar": p.bar_h_m, "bar_near": p.bar_near_h_m}
+
+
+def _area_opt(a: float) -> str:
+    # Triangle's option parser does not read exponents: write the area in positional notation.
+    return np.format_float_positional(a, trim="-")
+
+
+def _triangulate(vertices: np.ndarray, segments: np.ndarray, max_area: float) -> tuple[np.ndarray, np.ndarray]:
+    """Quality mesh of a polygon (no Steiner points on its boundary); returns CCW (nodes, triangles)."""
+    out = triangle.triangulate({"vertices": vertices, "segments": segments},
+                               f"pq{MIN_ANGLE_DEG:g}Ya{_area_opt(max_area)}Q")
+    return _ccw(out["vertices"], out["triangles"])
+
+
+def _ccw(nodes: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    nodes = np.ascontiguousarray(nodes, dtype=np.float64)
+    tris = np.ascontiguousarray(tris, dtype=np.int64)
+    flip = _signed_areas(nodes, tris) < 0
+    tris[flip] = tris[flip][:, [0, 2, 1]]
+    return nodes, tris
+
+
+def _signed_areas(nodes: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    p = nodes[tris]
+    return 0.5 * ((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
+                  - (p[:, 1, 1] - p[:, 0, 1]) * (p[:, 2, 0] - p[:, 0, 0]))
+
+
+def _triangle_areas(nodes: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    return np.abs(_signed_areas(nodes, tris))
+
+
+def _loop_segments(n: int) -> np.ndarray:
+    i = np.arange(n)
+    return np.column_stack([i, (i + 1) % n])
+
+
+def _mesh_disc(R: float, h: float, p: Preset) -> tuple[np.ndarray, np.ndarray]:
+    """Disc of radius R centred at the origin: an inscribed polygon of n = 4k vertices, chord ~ h.
+
+    Vertices at angles 0, pi/2, pi, 3pi/2 are placed exactly, so (-R, 0) and (R, 0) are nodes (the
+    contact points with the bars).
+    """
+    n = 4 * max(2, int(round(2.0 * np.pi * R / (4.0 * h))))
+    theta = 2.0 * np.pi * np.arange(n) / n
+    v = np.column_stack([R * np.cos(theta), R * np.sin(theta)])
+    q = n // 4
+    v[0] = (R, 0.0)
+    v[q] = (0.0, R)
+    v[2 * q] = (-R, 0.0)
+    v[3 * q] = (0.0, -R)
+    return _triangulate(v, _loop_segments(n), p.max_area(h))
+
+
+def _mesh_rectangle(x0: float, x1: float, height: float, h: float, p: Preset) -> tuple[np.ndarray, np.ndarray]:
+    """Rectangle [x0, x1] x [-height/2, height/2] with a uniform boundary split of length ~ h."""
+    nx = max(1, int(round((x1 - x0) / h)))
+    ny = max(1, int(round(height / h)))
+    y0, y1 = -0.5 * height, 0.5 * height
+    xs = np.linspace(x0, x1, nx + 1)
+    ys = np.linspace(y0, y1, ny + 1)
+    xs[0], xs[-1], ys[0], ys[-1] = x0, x1, y0, y1
+    v = np.concatenate([
+        np.column_stack([xs[:-1], np.full(nx, y0)]),          # bottom, left to right
+        np.column_stack([np.full(ny, x1), ys[:-1]]),          # right face, upwards
+        np.column_stack([xs[::-1][:-1], np.full(nx, y1)]),    # top, right to left
+        np.column_stack([np.full(ny, x0), ys[::-1][:-1]]),    # left face, downwards
+    ])
+    return _triangulate(v, _loop_segments(len(v)), p.max_area(h))
+
+
+def _bar_size(s: np.ndarray, p: Preset) -> np.ndarray:
+    """Element size [m] in a bar at distance s [m] from its specimen face."""
+    return np.minimum(p.bar_h_m, p.bar_near_h_m + p.bar_grading * np.maximum(0.0, s - p.bar_near_length_m))
+
+
+def _graded_stations(length: float, p: Preset) -> np.ndarray:
+    """Stations 0 = s_0 < ... < s_n = length along a bar with local spacing ~ _bar_size(s)."""
+    s = np.linspace(0.0, length, 20001)
+    inv_h = 1.0 / _bar_size(s, p)
+    count = np.concatenate([[0.0], np.cumsum(0.5 * (inv_h[1:] + inv_h[:-1]) * np.diff(s))])
+    n = max(1, int(round(count[-1])))
+    st = np.interp(np.arange(n + 1) * count[-1] / n, count, s)
+    st[0], st[-1] = 0.0, length
+    return st
+
+
+def _split(height: float, h: float, odd: bool) -> np.ndarray:
+    n = max(1, int(round(height / h)))
+    if odd and n % 2 == 0:
+        n += 1
+    y = np.linspace(-0.5 * height, 0.5 * height, n + 1)
+    y[0], y[-1] = -0.5 * height, 0.5 * height
+    return y
+
+
+def _mesh_bar(length: float, height: float, p: Preset, odd_face: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Bar strip in local coordinates (s, y): s in [0, length] is the distance from the specimen face.
+
+    Refined to ``bar_near_h_m`` near s = 0 and graded to ``bar_h_m`` (``_bar_size``). With ``odd_face`` the
+    face s = 0 is split into an odd number of segments so that y = 0 (a disc's contact point) falls
+    inside an edge, not on a node.
+    """
+    st = _graded_stations(length, p)
+    y_face = _split(height, p.bar_near_h_m, odd_face)
+    y_end = _split(height, float(_bar_size(np.array([length]), p)[0]), False)
+    y0, y1 = -0.5 * height, 0.5 * height
+    v = np.concatenate([
+        np.column_stack([st[:-1], np.full(len(st) - 1, y0)]),               # bottom, s increasing
+        np.column_stack([np.full(len(y_end) - 1, length), y_end[:-1]]),      # far end, upwards
+        np.column_stack([st[::-1][:-1], np.full(len(st) - 1, y1)]),         # top, s decreasing
+        np.column_stack([np.zeros(len(y_face) - 1), y_face[::-1][:-1]]),    # face s = 0, downwards
+    ])
+    seg = _loop_segments(len(v))
+    out = triangle.triangulate({"vertices": v, "segments": seg},
+                               f"pq{MIN_ANGLE_DEG:g}Ya{_area_opt(p.max_area(p.bar_h_m))}Q")
+    # Refine to the graded size: the area cap of a triangle is set by the smallest size at its vertices.
+    for _ in range(6):
+        nodes, tris = out["vertices"], out["triangles"]
+        target = p.max_area(_bar_size(nodes[tris][:, :, 0], p).min(axis=1))
+        if np.all(_triangle_areas(nodes, tris) <= target):
+            break
+        out = triangle.triangulate({"vertices": nodes, "segments": out["segments"], "triangles": tris,
+                                    "triangle_max_area": target}, f"rpq{MIN_ANGLE_DEG:g}YaQ")
+    return _ccw(out["vertices"], out["triangles"])
+
+
+def _bars(p: Preset, bar: Material, D: float, x_front: float, x_back: float, L_i: float, L_t: float,
+          d_i: float, d_t: float, odd_face: bool) -> tuple[Body, Body, tuple[float, float]]:
+    """Incident bar on [x_front - L_i, x_front] and transmission bar on [x_back, x_back + L_t]."""
+    t = bar_thickness(D)
+    # Incident bar: x = x_front - s (a mirror image, so reverse the triangles to keep them CCW).
+    s_nodes, tris = _mesh_bar(L_i, D, p, odd_face)
+    x_load = x_front - L_i
+    nodes = np.column_stack([x_front - s_nodes[:, 0], s_nodes[:, 1]])
+    nodes[s_nodes[:, 0] == L_i, 0] = x_load
+    tris = tris[:, [0, 2, 1]].copy()
+    xg_i = x_front - d_i
+    incident = Body("incident_bar", nodes, tris, bar, thickness=t,
+                    node_sets={"load_end": np.flatnonzero(nodes[:, 0] == x_load),
+                               "specimen_face": np.flatnonzero(nodes[:, 0] == x_front)},
+                    element_sets={"gauge": _gauge_set(nodes, tris, xg_i, float(_bar_size(np.array([d_i]), p)[0]))})
+    # Transmission bar: x = x_back + s.
+    s_nodes, tris = _mesh_bar(L_t, D, p, odd_face)
+    x_end = x_back + L_t
+    nodes = np.column_stack([x_back + s_nodes[:, 0], s_nodes[:, 1]])
+    nodes[s_nodes[:, 0] == L_t, 0] = x_end
+    xg_t = x_back + d_t
+    transmission = Body("transmission_bar", nodes, tris, bar, thickness=t,
+                        node_sets={"specimen_face": np.flatnonzero(nodes[:, 0] == x_back),
+                                   "free_end": np.flatnonzero(nodes[:, 0] == x_end)},
+                        element_sets={"gauge": _gauge_set(nodes, tris, xg_t,
+                                                          float(_bar_size(np.array([d_t]), p)[0]))})
+    return incident, transmission, (float(xg_i), float(xg_t))
+
+
+def _gauge_set(nodes: np.ndarray, tris: np.ndarray, x_gauge: float, half_width: float) -> np.ndarray:
+    xc = nodes[tris][:, :, 0].mean(axis=1)
+    return np.flatnonzero(np.abs(xc - x_gauge) <= half_width)
+
+
+def _centre_set(nodes: np.ndarray, tris: np.ndarray, centre: tuple[float, float],
+                radius: float) -> tuple[np.ndarray, float]:
+    """Triangles with centroid within ``radius`` of ``centre``, grown to at least CENTRE_MIN_TRIANGLES."""
+    c = nodes[tris].mean(axis=1)
+    r = np.hypot(c[:, 0] - centre[0], c[:, 1] - centre[1])
+    if np.count_nonzero(r <= radius) < CENTRE_MIN_TRIANGLES:
+        radius = float(np.sort(r)[CENTRE_MIN_TRIANGLES - 1])
+    return np.flatnonzero(r <= radius), float(radius)
