@@ -1,1 +1,38 @@
-"""enkf package."""
+"""Ensemble inference for model calibration (pure NumPy/SciPy; knows nothing about FDEM).
+
+Sees parameter matrices ``(N, n)`` and response matrices ``(N, m)``, one row per ensemble member.
+
+* :mod:`enkf.sampling`    Latin hypercube initial ensemble in the prior box.
+* :mod:`enkf.transforms`  bounded box <-> unbounded space (logit, probit).
+* :mod:`enkf.covariance`  observation error models (diagonal, AR(1), squared exponential, dense) and
+  the pre-trigger noise estimate.
+* :mod:`enkf.analysis`    the paper's EnKF smoother (eqs. 3-5, localization) and ES-MDA.
+* :mod:`enkf.inflation`   parameter inflation (eq. 5): multiplicative and the paper's spread floor.
+* :mod:`enkf.stopping`    discrepancy principle, tolerance, collapse guard, iteration budget.
+* :mod:`enkf.diagnostics` misfits and spreads as numbers, dicts and DataFrames.
+* :mod:`enkf.loop`        a reference iterate-until-stop driver for in-process forward models.
+
+Reference: Godinez & Rougier (2021), Appl. Sci. 11, 2898, section 4.
+"""
+
+from .analysis import (AnalysisResult, EnsembleFailure, enkf_update, esmda_alphas, esmda_update,
+                       localization_mask, truncation_rank)
+from .covariance import (AR1Error, DenseError, DiagonalError, NoiseEstimate, ObservationError,
+                         SquaredExponentialError, estimate_noise, observation_error)
+from .diagnostics import (chi2_per_obs, jsonable, mean_misfit, member_table, misfit_table, nrmse,
+                          parameter_summary, posterior_dict, rmse)
+from .inflation import Multiplicative, SpreadFloor, as_inflation, inflate
+from .loop import AssimilationResult, assimilate
+from .sampling import latin_hypercube, latin_hypercube_unit, stratum_index
+from .stopping import StopCriteria, StopDecision, check_stop
+from .transforms import BoxTransform, IdentityTransform
+
+__all__ = [
+    "AR1Error", "AnalysisResult", "AssimilationResult", "BoxTransform", "DenseError", "DiagonalError",
+    "EnsembleFailure", "IdentityTransform", "Multiplicative", "NoiseEstimate", "ObservationError",
+    "SpreadFloor", "SquaredExponentialError", "StopCriteria", "StopDecision", "as_inflation", "assimilate",
+    "check_stop", "chi2_per_obs", "enkf_update", "esmda_alphas", "esmda_update", "estimate_noise", "inflate",
+    "jsonable", "latin_hypercube", "latin_hypercube_unit", "localization_mask", "mean_misfit",
+    "member_table", "misfit_table", "nrmse", "observation_error", "parameter_summary", "posterior_dict",
+    "rmse", "stratum_index", "truncation_rank",
+]

@@ -1,0 +1,157 @@
+"""Misfit and spread diagnostics, as plain numbers, JSON-ready dicts and pandas DataFrames.
+
+Definitions (units are whatever the caller passes; for stress curves in Pa, ``rmse`` is in Pa):
+
+* ``rmse(sim, obs)   = sqrt(mean_k (sim_k - obs_k)^2)``
+* ``nrmse(sim, obs)  = rmse / (max(obs) - min(obs))``   (normalised by the observed range, so a
+  stress-time curve's nrmse reads as a fraction of its peak-to-trough span)
+* ``chi2_per_obs(sim, obs, R) = |L^{-1} (sim - obs)|^2 / m``   with ``R = L L^T``
+  (about 1 when the residual is pure observation noise: the discrepancy principle)
+
+The misfit "of the mean" is that of the ensemble-mean response ``y_bar = mean_i y_i`` over the members
+alive, the quantity the paper's stopping rule ``|x_bar - y_o| < tol`` uses. Member rows of failed
+members are NaN in arrays and ``None`` in JSON dicts.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+import pandas as pd
+
+from .covariance import ObservationError
+
+
+def _rows(sim) -> np.ndarray:
+    return np.atleast_2d(np.asarray(sim, dtype=float))
+
+
+def _squeeze(values: np.ndarray, sim) -> np.ndarray | float:
+    return float(values[0]) if np.ndim(sim) == 1 else values
+
+
+def rmse(sim, obs):
+    """Root-mean-square error of ``sim`` (shape ``(m,)`` or ``(N, m)``, rows = members) against ``obs``."""
+    r = _rows(sim) - np.asarray(obs, dtype=float)
+    return _squeeze(np.sqrt(np.mean(r * r, axis=1)), sim)
+
+
+def nrmse(sim, obs):
+    """``rmse / (max(obs) - min(obs))``."""
+    obs = np.asarray(obs, dtype=float)
+    span = float(obs.max() - obs.min())
+    if span <= 0:
+        raise ValueError("observations have zero range; nrmse is undefined")
+    return rmse(sim, obs) / span
+
+
+def chi2_per_obs(sim, obs, obs_error: ObservationError):
+    """``|L^{-1}(sim - obs)|^2 / m``, the whitened misfit per observation (rows = members)."""
+    r = _rows(sim) - np.asarray(obs, dtype=float)
+    out = np.full(r.shape[0], np.nan)
+    ok = np.all(np.isfinite(r), axis=1)
+    if np.any(ok):
+        out[ok] = obs_error.chi2(r[ok].T) / r.shape[1]
+    return _squeeze(out, sim)
+
+
+def default_names(n_params: int, names: Sequence[str] | None = None) -> list[str]:
+    if names is None:
+        return [f"p{j}" for j in range(n_params)]
+    names = [str(n) for n in names]
+    if len(names) != n_params:
+        raise ValueError(f"{len(names)} names for {n_params} parameters")
+    return names
+
+
+def jsonable(obj):
+    """Recursively convert NumPy scalars/arrays to Python types and non-finite floats to ``None``."""
+    if isinstance(obj, dict):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return jsonable(obj.tolist())
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        v = float(obj)
+        return v if math.isfinite(v) else None
+    return obj
+
+
+def misfit_table(responses, obs, obs_error: ObservationError, alive=None) -> pd.DataFrame:
+    """One row per member: ``member, alive, rmse, nrmse, chi2_per_obs`` (NaN for failed members)."""
+    y = _rows(responses)
+    alive = _alive_mask(y, alive)
+    out = pd.DataFrame({"member": np.arange(y.shape[0]), "alive": alive})
+    for name, fn in (("rmse", rmse), ("nrmse", nrmse)):
+        v = np.full(y.shape[0], np.nan)
+        if np.any(alive):
+            v[alive] = fn(y[alive], obs)
+        out[name] = v
+    c = np.full(y.shape[0], np.nan)
+    if np.any(alive):
+        c[alive] = chi2_per_obs(y[alive], obs, obs_error)
+    out["chi2_per_obs"] = c
+    return out
+
+
+def mean_misfit(responses, obs, obs_error: ObservationError, alive=None) -> dict:
+    """Misfit of the ensemble-mean response over the alive members: ``{rmse, nrmse, chi2_per_obs}``."""
+    y = _rows(responses)
+    alive = _alive_mask(y, alive)
+    if not np.any(alive):
+        return {"rmse": math.nan, "nrmse": math.nan, "chi2_per_obs": math.nan}
+    y_bar = y[alive].mean(axis=0)
+    return {"rmse": float(rmse(y_bar, obs)), "nrmse": float(nrmse(y_bar, obs)),
+            "chi2_per_obs": float(chi2_per_obs(y_bar, obs, obs_error))}
+
+
+def parameter_summary(params, names: Sequence[str] | None = None, alive=None) -> pd.DataFrame:
+    """Per parameter over the alive members: ``mean, std, q05, q50, q95, min, max`` (index = names)."""
+    p = _rows(params)
+    names = default_names(p.shape[1], names)
+    alive = np.ones(p.shape[0], bool) if alive is None else np.asarray(alive, bool)
+    q = p[alive]
+    return pd.DataFrame(
+        {"mean": q.mean(axis=0), "std": q.std(axis=0, ddof=1) if q.shape[0] > 1 else np.zeros(q.shape[1]),
+         "q05": np.quantile(q, 0.05, axis=0), "q50": np.quantile(q, 0.50, axis=0),
+         "q95": np.quantile(q, 0.95, axis=0), "min": q.min(axis=0), "max": q.max(axis=0)},
+        index=pd.Index(names, name="param"),
+    )
+
+
+def posterior_dict(params, names: Sequence[str] | None = None, alive=None) -> dict:
+    """``{param: {mean, std, q05, q95}}``, the ``posterior`` block of ``summary.json``."""
+    s = parameter_summary(params, names, alive)
+    return {name: {k: float(s.loc[name, k]) for k in ("mean", "std", "q05", "q95")} for name in s.index}
+
+
+def member_table(params, names: Sequence[str] | None = None, responses=None, obs=None,
+                 obs_error: ObservationError | None = None, alive=None) -> pd.DataFrame:
+    """One row per member: the parameters (named columns) and, if responses are given, the misfits.
+
+    Ready to write as ``iter_<k>/params.csv``.
+    """
+    p = _rows(params)
+    names = default_names(p.shape[1], names)
+    table = pd.DataFrame(p, columns=names)
+    table.insert(0, "member", np.arange(p.shape[0]))
+    if responses is not None:
+        if obs is None or obs_error is None:
+            raise ValueError("misfits need obs and obs_error")
+        mis = misfit_table(responses, obs, obs_error, alive)
+        table = pd.concat([table, mis.drop(columns="member")], axis=1)
+    elif alive is not None:
+        table["alive"] = np.asarray(alive, bool)
+    return table
+
+
+def _alive_mask(y: np.ndarray, alive) -> np.ndarray:
+    finite = np.all(np.isfinite(y), axis=1)
+    return finite if alive is None else finite & np.asarray(alive, bool)
