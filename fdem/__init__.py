@@ -1,1 +1,11 @@
-"""fdem package."""
+"""fdem: a 2D combined finite-discrete element engine (Munjiza's model) compiled with Numba.
+
+Public API: Material, Body (inputs); JointParams, ContactParams, build_model, stable_time_step
+(assembly); VelocityBC, TractionBC, run, Result (simulation); softening.A0 / z / delta_max.
+"""
+from .body import Body, Material
+from .model import ContactParams, JointParams, Model, build_model, stable_time_step
+from .solver import Result, TractionBC, VelocityBC, run
+
+__all__ = ["Body", "Material", "ContactParams", "JointParams", "Model", "build_model",
+           "stable_time_step", "Result", "TractionBC", "VelocityBC", "run"]

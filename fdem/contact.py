@@ -1,0 +1,141 @@
+"""Contact neighbour search on a uniform cell grid.
+
+Candidate (node, edge) pairs within a buffer distance are collected from the active surface edges
+(body boundaries plus the faces of broken joints). The list is rebuilt when any surface node has
+travelled more than half the buffer since the last build (then no pair closer than the penetration
+limit can have been missed) or, a few steps after new crack faces appear.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def surface_nodes(edges, edge_active, n_nodes):
+    """Indices of the nodes on active edges."""
+    flag = np.zeros(n_nodes, dtype=np.bool_)
+    for e in range(edges.shape[0]):
+        if edge_active[e]:
+            flag[edges[e, 0]] = True
+            flag[edges[e, 1]] = True
+    return np.nonzero(flag)[0]
+
+
+@njit(cache=True)
+def _excluded(n, p, q, node_vertex, node_body, node_tri, e_tri, body_fracturable):
+    if node_tri[n] == e_tri:
+        return True
+    if node_vertex[n] == node_vertex[p] or node_vertex[n] == node_vertex[q]:
+        return True
+    b = node_body[n]
+    if b == node_body[p] and not body_fracturable[b]:
+        return True
+    return False
+
+
+@njit(cache=True)
+def build_pairs(x, edges, edge_active, edge_tri, snodes, node_vertex, node_body, node_tri,
+                body_fracturable, buffer):
+    """All (node, edge) pairs with node-to-segment distance <= buffer, excluding a node against an
+    edge of its own triangle, an edge sharing its mesh vertex, and pairs inside a body that cannot
+    fracture. Returns (pair_node, pair_edge)."""
+    act = np.nonzero(edge_active)[0]
+    ne = act.shape[0]
+    nn = snodes.shape[0]
+    if ne == 0 or nn == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    xmin = np.inf
+    ymin = np.inf
+    xmax = -np.inf
+    ymax = -np.inf
+    Lsum = 0.0
+    for k in range(nn):
+        n = snodes[k]
+        xmin = min(xmin, x[n, 0])
+        xmax = max(xmax, x[n, 0])
+        ymin = min(ymin, x[n, 1])
+        ymax = max(ymax, x[n, 1])
+    for k in range(ne):
+        e = act[k]
+        p = edges[e, 0]
+        q = edges[e, 1]
+        Lsum += math.sqrt((x[q, 0] - x[p, 0]) ** 2 + (x[q, 1] - x[p, 1]) ** 2)
+    xmin -= buffer
+    ymin -= buffer
+    xmax += buffer
+    ymax += buffer
+    # Cells about one mean edge long, but never more than ~4 cells per surface node.
+    cs = Lsum / ne + 2.0 * buffer
+    area = (xmax - xmin) * (ymax - ymin)
+    cs_min = math.sqrt(area / (4.0 * nn + 1.0))
+    if cs < cs_min:
+        cs = cs_min
+    ncx = int((xmax - xmin) / cs) + 1
+    ncy = int((ymax - ymin) / cs) + 1
+    counts = np.zeros(ncx * ncy + 1, np.int64)
+    for pass_ in range(2):
+        if pass_ == 1:
+            for c in range(ncx * ncy):
+                counts[c + 1] += counts[c]
+            fill = counts[:-1].copy()
+            cell_edges = np.empty(counts[ncx * ncy], np.int64)
+        for k in range(ne):
+            e = act[k]
+            p = edges[e, 0]
+            q = edges[e, 1]
+            i0 = int((min(x[p, 0], x[q, 0]) - buffer - xmin) / cs)
+            i1 = int((max(x[p, 0], x[q, 0]) + buffer - xmin) / cs)
+            j0 = int((min(x[p, 1], x[q, 1]) - buffer - ymin) / cs)
+            j1 = int((max(x[p, 1], x[q, 1]) + buffer - ymin) / cs)
+            i0 = max(i0, 0)
+            j0 = max(j0, 0)
+            i1 = min(i1, ncx - 1)
+            j1 = min(j1, ncy - 1)
+            for ii in range(i0, i1 + 1):
+                for jj in range(j0, j1 + 1):
+                    c = jj * ncx + ii
+                    if pass_ == 0:
+                        counts[c + 1] += 1
+                    else:
+                        cell_edges[fill[c]] = e
+                        fill[c] += 1
+    npair = 0
+    out_n = np.empty(16, np.int64)
+    out_e = np.empty(16, np.int64)
+    b2 = buffer * buffer
+    for k in range(nn):
+        n = snodes[k]
+        ii = int((x[n, 0] - xmin) / cs)
+        jj = int((x[n, 1] - ymin) / cs)
+        c = jj * ncx + ii
+        for m in range(counts[c], counts[c + 1]):
+            e = cell_edges[m]
+            p = edges[e, 0]
+            q = edges[e, 1]
+            if _excluded(n, p, q, node_vertex, node_body, node_tri, edge_tri[e], body_fracturable):
+                continue
+            ex = x[q, 0] - x[p, 0]
+            ey = x[q, 1] - x[p, 1]
+            rx = x[n, 0] - x[p, 0]
+            ry = x[n, 1] - x[p, 1]
+            L2 = ex * ex + ey * ey
+            s = (rx * ex + ry * ey) / L2
+            s = min(max(s, 0.0), 1.0)
+            dx = rx - s * ex
+            dy = ry - s * ey
+            if dx * dx + dy * dy > b2:
+                continue
+            if npair == out_n.shape[0]:
+                tmp_n = np.empty(2 * npair, np.int64)
+                tmp_e = np.empty(2 * npair, np.int64)
+                tmp_n[:npair] = out_n
+                tmp_e[:npair] = out_e
+                out_n = tmp_n
+                out_e = tmp_e
+            out_n[npair] = n
+            out_e[npair] = e
+            npair += 1
+    return out_n[:npair].copy(), out_e[:npair].copy()

@@ -1,0 +1,330 @@
+"""Force kernels: constant-strain triangles, cohesive joints, node-to-edge penalty contact.
+
+Plain loops over structure-of-arrays buffers, compiled with Numba. Every kernel *adds* into the
+force buffer ``f`` (shape (n_nodes, 2), N) and returns the energy terms it owns, so the integrator can
+close the energy balance.
+"""
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from .softening import z
+
+# Two-point Gauss rule on [0, 1] for the joint traction integral.
+_G0 = 0.5 - 0.5 / math.sqrt(3.0)
+_G1 = 0.5 + 0.5 / math.sqrt(3.0)
+
+
+@njit(cache=True)
+def triangle_forces(x, v, tri, dminv, vol0, lam, mu, eta, f):
+    """Internal forces of 3-node constant-strain triangles in plane stress.
+
+    Total Lagrangian: deformation gradient F = Ds Dm^-1, Green-Lagrange strain E = (F^T F - I)/2,
+    St. Venant-Kirchhoff second Piola-Kirchhoff stress S = lam tr(E) I + 2 mu E with the plane-stress
+    lam = E nu / (1 - nu^2). E is exactly zero for any rigid rotation, so a rotated body carries no
+    stress. vol0 = reference area * thickness [m^3]. Optional viscous stress S_v = eta dE/dt
+    (eta [Pa s]), whose dissipated power is returned.
+
+    Returns (strain energy [J], damping power [W]).
+    """
+    U = 0.0
+    P_damp = 0.0
+    for e in range(tri.shape[0]):
+        i = tri[e, 0]
+        j = tri[e, 1]
+        k = tri[e, 2]
+        d11 = x[j, 0] - x[i, 0]
+        d21 = x[j, 1] - x[i, 1]
+        d12 = x[k, 0] - x[i, 0]
+        d22 = x[k, 1] - x[i, 1]
+        m11 = dminv[e, 0, 0]
+        m12 = dminv[e, 0, 1]
+        m21 = dminv[e, 1, 0]
+        m22 = dminv[e, 1, 1]
+        F11 = d11 * m11 + d12 * m21
+        F12 = d11 * m12 + d12 * m22
+        F21 = d21 * m11 + d22 * m21
+        F22 = d21 * m12 + d22 * m22
+        E11 = 0.5 * (F11 * F11 + F21 * F21 - 1.0)
+        E22 = 0.5 * (F12 * F12 + F22 * F22 - 1.0)
+        E12 = 0.5 * (F11 * F12 + F21 * F22)
+        tr = E11 + E22
+        S11 = lam[e] * tr + 2.0 * mu[e] * E11
+        S22 = lam[e] * tr + 2.0 * mu[e] * E22
+        S12 = 2.0 * mu[e] * E12
+        V = vol0[e]
+        U += 0.5 * V * (S11 * E11 + S22 * E22 + 2.0 * S12 * E12)
+        if eta[e] > 0.0:
+            w11 = v[j, 0] - v[i, 0]
+            w21 = v[j, 1] - v[i, 1]
+            w12 = v[k, 0] - v[i, 0]
+            w22 = v[k, 1] - v[i, 1]
+            G11 = w11 * m11 + w12 * m21
+            G12 = w11 * m12 + w12 * m22
+            G21 = w21 * m11 + w22 * m21
+            G22 = w21 * m12 + w22 * m22
+            R11 = F11 * G11 + F21 * G21
+            R22 = F12 * G12 + F22 * G22
+            R12 = 0.5 * (F11 * G12 + F21 * G22 + G11 * F12 + G21 * F22)
+            Sv11 = eta[e] * R11
+            Sv22 = eta[e] * R22
+            Sv12 = eta[e] * R12
+            P_damp += V * (Sv11 * R11 + Sv22 * R22 + 2.0 * Sv12 * R12)
+            S11 += Sv11
+            S22 += Sv22
+            S12 += Sv12
+        P11 = F11 * S11 + F12 * S12
+        P12 = F11 * S12 + F12 * S22
+        P21 = F21 * S11 + F22 * S12
+        P22 = F21 * S12 + F22 * S22
+        H11 = -V * (P11 * m11 + P12 * m12)
+        H12 = -V * (P11 * m21 + P12 * m22)
+        H21 = -V * (P21 * m11 + P22 * m12)
+        H22 = -V * (P21 * m21 + P22 * m22)
+        f[j, 0] += H11
+        f[j, 1] += H21
+        f[k, 0] += H12
+        f[k, 1] += H22
+        f[i, 0] -= H11 + H12
+        f[i, 1] -= H21 + H22
+    return U, P_damp
+
+
+@njit(cache=True)
+def triangle_cauchy(x, tri, dminv, lam, mu, e):
+    """Cauchy stress (sxx, syy, sxy) [Pa] of triangle e: sigma = F S F^T / det F."""
+    i = tri[e, 0]
+    j = tri[e, 1]
+    k = tri[e, 2]
+    d11 = x[j, 0] - x[i, 0]
+    d21 = x[j, 1] - x[i, 1]
+    d12 = x[k, 0] - x[i, 0]
+    d22 = x[k, 1] - x[i, 1]
+    m11 = dminv[e, 0, 0]
+    m12 = dminv[e, 0, 1]
+    m21 = dminv[e, 1, 0]
+    m22 = dminv[e, 1, 1]
+    F11 = d11 * m11 + d12 * m21
+    F12 = d11 * m12 + d12 * m22
+    F21 = d21 * m11 + d22 * m21
+    F22 = d21 * m12 + d22 * m22
+    E11 = 0.5 * (F11 * F11 + F21 * F21 - 1.0)
+    E22 = 0.5 * (F12 * F12 + F22 * F22 - 1.0)
+    E12 = 0.5 * (F11 * F12 + F21 * F22)
+    tr = E11 + E22
+    S11 = lam[e] * tr + 2.0 * mu[e] * E11
+    S22 = lam[e] * tr + 2.0 * mu[e] * E22
+    S12 = 2.0 * mu[e] * E12
+    J = F11 * F22 - F12 * F21
+    # F S F^T
+    A11 = F11 * S11 + F12 * S12
+    A12 = F11 * S12 + F12 * S22
+    A21 = F21 * S11 + F22 * S12
+    A22 = F21 * S12 + F22 * S22
+    sxx = (A11 * F11 + A12 * F12) / J
+    syy = (A21 * F21 + A22 * F22) / J
+    sxy = (A11 * F21 + A12 * F22) / J
+    return sxx, syy, sxy
+
+
+@njit(cache=True, inline="always")
+def _psi_branch(u, k, fmax):
+    """Energy per unit area of the elastic-to-peak branch, capped at the strength (J/m^2)."""
+    au = abs(u)
+    up = fmax / k
+    if au <= up:
+        return 0.5 * k * au * au
+    return 0.5 * fmax * up + fmax * (au - up)
+
+
+@njit(cache=True)
+def joint_forces(x, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax, broken, f, newly_broken):
+    """Cohesive 4-node joints (Munjiza's combined single and smeared crack, paper Appendix A).
+
+    Nodes (a1, a2, b1, b2): a1->a2 is the edge of triangle A in its counter-clockwise order, b1/b2 the
+    coincident nodes of triangle B; the joint normal n points from A to B. At two Gauss points the gap
+    g = x_B - x_A gives the opening o = g.n and slip s = g.t.
+
+    Constitutive law per unit area (jarea = reference length * thickness):
+    - compression (o < 0): sigma = kn o, never damaged;
+    - tension / shear: elastic penalty branch up to the strength, sigma = zeta min(kn o, ft),
+      tau = zeta sign(s) min(kt |s|, fs), with fs = sigma_t - tan(phi) sigma (Mohr-Coulomb, optional);
+    - coupled damage (paper Fig. A1): D = sqrt(((o - o_p)+/delta_n)^2 + ((|s| - s_p)+/delta_t)^2),
+      delta = E / (sigma_max A0) (eqs. A8-A9); Dmax stores its history maximum, zeta = z(Dmax)
+      (eq. A3) scales both modes, so unloading and reloading never restores strength.
+    The energy released when Dmax grows at fixed gap is the dissipated energy (psi(zeta_old) -
+    psi(zeta_new)); a monotonic pull dissipates E + sigma_max o_p / 2 per unit area. A joint whose
+    two Gauss points reach D >= 1 is broken: it carries nothing more and its faces join the contact.
+
+    Returns (stored joint energy [J], dissipated energy this call [J], number newly broken).
+    """
+    Psi = 0.0
+    dissipated = 0.0
+    nnew = 0
+    for jj in range(jn.shape[0]):
+        if broken[jj]:
+            continue
+        a1 = jn[jj, 0]
+        a2 = jn[jj, 1]
+        b1 = jn[jj, 2]
+        b2 = jn[jj, 3]
+        m1x = 0.5 * (x[a1, 0] + x[b1, 0])
+        m1y = 0.5 * (x[a1, 1] + x[b1, 1])
+        tx = 0.5 * (x[a2, 0] + x[b2, 0]) - m1x
+        ty = 0.5 * (x[a2, 1] + x[b2, 1]) - m1y
+        L = math.sqrt(tx * tx + ty * ty)
+        tx /= L
+        ty /= L
+        nx = ty
+        ny = -tx
+        g1x = x[b1, 0] - x[a1, 0]
+        g1y = x[b1, 1] - x[a1, 1]
+        g2x = x[b2, 0] - x[a2, 0]
+        g2y = x[b2, 1] - x[a2, 1]
+        w = 0.5 * jarea[jj]
+        k_n = kn[jj]
+        k_t = kt[jj]
+        f_t = ft[jj]
+        n_broken_gp = 0
+        psi_gp0 = 0.0
+        psi_gp1 = 0.0
+        T0x = 0.0
+        T0y = 0.0
+        T1x = 0.0
+        T1y = 0.0
+        for gp in range(2):
+            xi = _G0 if gp == 0 else _G1
+            gx = (1.0 - xi) * g1x + xi * g2x
+            gy = (1.0 - xi) * g1y + xi * g2y
+            o = gx * nx + gy * ny
+            s = gx * tx + gy * ty
+            sig_c = k_n * o if o < 0.0 else 0.0
+            f_s = fs[jj] - tanphi[jj] * sig_c
+            o_pos = o if o > 0.0 else 0.0
+            ex_o = o_pos - f_t / k_n
+            ex_s = abs(s) - f_s / k_t
+            ex_o = ex_o if ex_o > 0.0 else 0.0
+            ex_s = ex_s if ex_s > 0.0 else 0.0
+            D = math.sqrt((ex_o / dn[jj]) ** 2 + (ex_s / dt_[jj]) ** 2)
+            psi_pos = _psi_branch(o_pos, k_n, f_t) + _psi_branch(s, k_t, f_s)
+            psi_neg = 0.5 * sig_c * o
+            dm = Dmax[jj, gp]
+            zeta = 1.0 if dm <= 0.0 else z(dm, a, b, c)
+            if D > dm:
+                zeta_new = z(D, a, b, c)
+                dissipated += w * (zeta - zeta_new) * psi_pos
+                Dmax[jj, gp] = D
+                zeta = zeta_new
+            if Dmax[jj, gp] >= 1.0:
+                n_broken_gp += 1
+            psi = w * (zeta * psi_pos + psi_neg)
+            sig = sig_c + zeta * min(k_n * o_pos, f_t)
+            tau = zeta * min(k_t * abs(s), f_s)
+            if s < 0.0:
+                tau = -tau
+            Tx = w * (sig * nx + tau * tx)
+            Ty = w * (sig * ny + tau * ty)
+            if gp == 0:
+                psi_gp0 = psi
+                T0x = Tx
+                T0y = Ty
+            else:
+                psi_gp1 = psi
+                T1x = Tx
+                T1y = Ty
+        if n_broken_gp == 2:
+            # Breaking releases what the joint still stores (its compressive part, if any).
+            dissipated += psi_gp0 + psi_gp1
+            broken[jj] = True
+            newly_broken[nnew] = jj
+            nnew += 1
+            continue
+        Psi += psi_gp0 + psi_gp1
+        fa1x = (1.0 - _G0) * T0x + (1.0 - _G1) * T1x
+        fa1y = (1.0 - _G0) * T0y + (1.0 - _G1) * T1y
+        fa2x = _G0 * T0x + _G1 * T1x
+        fa2y = _G0 * T0y + _G1 * T1y
+        f[a1, 0] += fa1x
+        f[a1, 1] += fa1y
+        f[a2, 0] += fa2x
+        f[a2, 1] += fa2y
+        f[b1, 0] -= fa1x
+        f[b1, 1] -= fa1y
+        f[b2, 0] -= fa2x
+        f[b2, 1] -= fa2y
+    return Psi, dissipated, nnew
+
+
+@njit(cache=True)
+def contact_forces(x, v, inv_mass, pair_node, pair_edge, n_pairs, edges, edge_dlim, edge_thick,
+                   node_thick, node_body, p_c, mu_c, dt, f, body_force):
+    """Node-to-edge penalty contact with optional Coulomb friction.
+
+    Edges are oriented counter-clockwise around their triangle, so the outward normal of edge p->q is
+    (t_y, -t_x). A node behind an edge by 0 < d <= edge_dlim (within the edge's span) is pushed out with
+    F_n = p_c w d, w the smaller of the two bodies' thicknesses (the real contact width), so equal and
+    opposite forces act on both sides and linear momentum is conserved exactly. Friction opposes the
+    relative tangential velocity with |F_t| <= mu_c F_n, and never more than the force that stops the
+    sliding within one step (stable regularisation of the stick state).
+
+    Accumulates per-body contact force into body_force (n_bodies, 2).
+    Returns (contact energy [J], friction power [W], maximum penetration [m]).
+    """
+    Uc = 0.0
+    P_fric = 0.0
+    max_pen = 0.0
+    for ip in range(n_pairs):
+        n = pair_node[ip]
+        ed = pair_edge[ip]
+        p = edges[ed, 0]
+        q = edges[ed, 1]
+        ex = x[q, 0] - x[p, 0]
+        ey = x[q, 1] - x[p, 1]
+        L = math.sqrt(ex * ex + ey * ey)
+        tx = ex / L
+        ty = ey / L
+        rx = x[n, 0] - x[p, 0]
+        ry = x[n, 1] - x[p, 1]
+        xi = (rx * tx + ry * ty) / L
+        if xi < 0.0 or xi > 1.0:
+            continue
+        d = -(rx * ty - ry * tx)
+        if d <= 0.0 or d > edge_dlim[ed]:
+            continue
+        wth = node_thick[n] if node_thick[n] < edge_thick[ed] else edge_thick[ed]
+        kc = p_c * wth
+        Fn = kc * d
+        Uc += 0.5 * kc * d * d
+        if d > max_pen:
+            max_pen = d
+        fx = Fn * ty
+        fy = -Fn * tx
+        if mu_c > 0.0:
+            vrx = v[n, 0] - (1.0 - xi) * v[p, 0] - xi * v[q, 0]
+            vry = v[n, 1] - (1.0 - xi) * v[p, 1] - xi * v[q, 1]
+            vt = vrx * tx + vry * ty
+            invm = inv_mass[n] + (1.0 - xi) ** 2 * inv_mass[p] + xi * xi * inv_mass[q]
+            Ft = mu_c * Fn
+            Fstop = 0.5 * abs(vt) / (dt * invm)
+            if Fstop < Ft:
+                Ft = Fstop
+            if vt > 0.0:
+                Ft = -Ft
+            P_fric += -Ft * vt
+            fx += Ft * tx
+            fy += Ft * ty
+        f[n, 0] += fx
+        f[n, 1] += fy
+        f[p, 0] -= (1.0 - xi) * fx
+        f[p, 1] -= (1.0 - xi) * fy
+        f[q, 0] -= xi * fx
+        f[q, 1] -= xi * fy
+        bn = node_body[n]
+        be = node_body[p]
+        body_force[bn, 0] += fx
+        body_force[bn, 1] += fy
+        body_force[be, 0] -= fx
+        body_force[be, 1] -= fy
+    return Uc, P_fric, max_pen
