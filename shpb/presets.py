@@ -13,7 +13,7 @@ preset       specimen size h disc triangles (band)        bar triangles (sum)
 ``paper``    0.5 mm          17,820 (paper: 17,500)       5,016 (paper: ~5,000)
 ============ =============== ============================ ====================
 
-(The exact numbers are asserted in ``tests/test_geometry.py``.) The paper (Godinez & Rougier 2021,
+(``tests/test_geometry.py`` asserts the bands.) The paper (Godinez & Rougier 2021,
 section 3) meshes the disc with 17,500 triangles "with an average size of 0.5 mm" and the bars with
 about 5,000 triangles.
 
