@@ -59,7 +59,8 @@ Node sets (indices into the body's nodes):
 Element sets (indices into the body's triangles):
   bars: ``gauge`` -- triangles whose centroid lies within one local bar element size of the gauge
   section (``|x_c - x_gauge| <= h_bar(x_gauge)``); the engine averages the axial stress over them to mimic
-  a strain gauge (a gauge also averages over its grid length, a few mm to a few cm).
+  a strain gauge (a gauge also averages over its grid length, a few mm to a few cm). For the cylinder's
+  incident bar the gauge section is the bar's end (the injection section), so its slab is one-sided.
   specimen: ``centre`` -- triangles whose centroid lies within ``r = D/20`` of the specimen centre
   (``min(L, D)/20`` for a cylinder), the radius grown if needed so the set holds at least 6 triangles.
 
@@ -276,8 +277,7 @@ def brazilian_disc(preset: str | Preset = "standard", *,
         element_size_m=_sizes(p), centre_radius_m=r_c)
 
 
-def cylinder(preset: str | Preset = "standard", length_m: float = 0.040, diameter_m: float = 0.040,
-             rock: Material = GRANITE, *, bar: Material = TITANIUM_BAR, bar_diameter_m: float = 0.050,
+def cylinder(preset: str | Preset, length_m: float, diameter_m: float, rock: Material, *, bar: Material = TITANIUM_BAR, bar_diameter_m: float = 0.050,
              window_s: float = DEFAULT_WINDOW_S,
              incident_gauge_m: float = FREIBURG_GAUGE_DISTANCES_M[0],
              transmission_gauge_m: float = FREIBURG_GAUGE_DISTANCES_M[1],
