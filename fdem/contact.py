@@ -41,12 +41,34 @@ def build_pairs(x, edges, edge_active, edge_tri, snodes, node_vertex, node_body,
                 body_fracturable, buffer):
     """All (node, edge) pairs with node-to-segment distance <= buffer, excluding a node against an
     edge of its own triangle, an edge sharing its mesh vertex, and pairs inside a body that cannot
-    fracture. Returns (pair_node, pair_edge)."""
+    fracture.
+
+    Also returns the outward unit normal of every surface node (mean of its active edges' normals),
+    which the contact kernel uses to reject an edge facing the same way (node-to-segment corner
+    ambiguity). Returns (pair_node, pair_edge, node_normal).
+    """
+    node_normal = np.zeros((x.shape[0], 2))
     act = np.nonzero(edge_active)[0]
+    for k in range(act.shape[0]):
+        e = act[k]
+        p = edges[e, 0]
+        q = edges[e, 1]
+        ex = x[q, 0] - x[p, 0]
+        ey = x[q, 1] - x[p, 1]
+        L = math.sqrt(ex * ex + ey * ey)
+        node_normal[p, 0] += ey / L
+        node_normal[p, 1] -= ex / L
+        node_normal[q, 0] += ey / L
+        node_normal[q, 1] -= ex / L
+    for n in range(x.shape[0]):
+        L = math.sqrt(node_normal[n, 0] ** 2 + node_normal[n, 1] ** 2)
+        if L > 0.0:
+            node_normal[n, 0] /= L
+            node_normal[n, 1] /= L
     ne = act.shape[0]
     nn = snodes.shape[0]
     if ne == 0 or nn == 0:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), node_normal
     xmin = np.inf
     ymin = np.inf
     xmax = -np.inf
@@ -138,4 +160,4 @@ def build_pairs(x, edges, edge_active, edge_tri, snodes, node_vertex, node_body,
             out_n[npair] = n
             out_e[npair] = e
             npair += 1
-    return out_n[:npair].copy(), out_e[:npair].copy()
+    return out_n[:npair].copy(), out_e[:npair].copy(), node_normal

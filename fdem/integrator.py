@@ -92,11 +92,13 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
     # Contact state
     snodes = surface_nodes(edges, edge_active, n)
     if use_contact:
-        pair_node, pair_edge = build_pairs(x, edges, edge_active, edge_tri, snodes, node_vertex,
-                                           node_body, node_tri, body_fracturable, buffer)
+        pair_node, pair_edge, node_normal = build_pairs(x, edges, edge_active, edge_tri, snodes,
+                                                        node_vertex, node_body, node_tri,
+                                                        body_fracturable, buffer)
     else:
         pair_node = np.zeros(0, np.int64)
         pair_edge = np.zeros(0, np.int64)
+        node_normal = np.zeros((n, 2))
     x_ref = x.copy()
     rebuilds = 0
     pending_faces = False
@@ -111,8 +113,8 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
     Us, Pd = triangle_forces(x, v, tri, dminv, vol0, lam, mu, eta, f)
     Psi, dis, nnew = joint_forces(x, jn, jarea, kn, kt, ft, fs, dn, dtm, tanphi, sa, sb, sc,
                                   Dmax, broken, f, newly)
-    Uc, Pf, pen = contact_forces(x, v, inv_mass, pair_node, pair_edge, pair_node.shape[0], edges,
-                                 edge_dlim, edge_thick, node_thick, node_body, p_c, mu_c, dt, f,
+    Uc, Pf, pen = contact_forces(x, v, inv_mass, pair_node, pair_edge, pair_node.shape[0],
+                                 node_normal, edges, edge_dlim, edge_thick, node_thick, node_body, p_c, mu_c, dt, f,
                                  bforce)
     P_ext = 0.0
     for k in range(tr_nodes.shape[0]):
@@ -153,9 +155,9 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
                         dmax2 = dd
                 if dmax2 > 0.25 * buffer * buffer or (pending_faces and steps_since >= 10):
                     snodes = surface_nodes(edges, edge_active, n)
-                    pair_node, pair_edge = build_pairs(x, edges, edge_active, edge_tri, snodes,
-                                                       node_vertex, node_body, node_tri,
-                                                       body_fracturable, buffer)
+                    pair_node, pair_edge, node_normal = build_pairs(
+                        x, edges, edge_active, edge_tri, snodes, node_vertex, node_body, node_tri,
+                        body_fracturable, buffer)
                     for i in range(n):
                         x_ref[i, 0] = x[i, 0]
                         x_ref[i, 1] = x[i, 1]
@@ -175,7 +177,7 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
                     edge_active[jedges[newly[k], 1]] = True
                 pending_faces = True
             Uc, Pf, pen = contact_forces(x, v, inv_mass, pair_node, pair_edge, pair_node.shape[0],
-                                         edges, edge_dlim, edge_thick, node_thick, node_body, p_c,
+                                         node_normal, edges, edge_dlim, edge_thick, node_thick, node_body, p_c,
                                          mu_c, dt, f, bforce)
             if pen > max_pen:
                 max_pen = pen

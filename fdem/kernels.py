@@ -258,16 +258,20 @@ def joint_forces(x, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax, b
 
 
 @njit(cache=True)
-def contact_forces(x, v, inv_mass, pair_node, pair_edge, n_pairs, edges, edge_dlim, edge_thick,
-                   node_thick, node_body, p_c, mu_c, dt, f, body_force):
+def contact_forces(x, v, inv_mass, pair_node, pair_edge, n_pairs, node_normal, edges, edge_dlim,
+                   edge_thick, node_thick, node_body, p_c, mu_c, dt, f, body_force):
     """Node-to-edge penalty contact with optional Coulomb friction.
 
     Edges are oriented counter-clockwise around their triangle, so the outward normal of edge p->q is
-    (t_y, -t_x). A node behind an edge by 0 < d <= edge_dlim (within the edge's span) is pushed out with
-    F_n = p_c w d, w the smaller of the two bodies' thicknesses (the real contact width), so equal and
-    opposite forces act on both sides and linear momentum is conserved exactly. Friction opposes the
-    relative tangential velocity with |F_t| <= mu_c F_n, and never more than the force that stops the
-    sliding within one step (stable regularisation of the stick state).
+    (t_y, -t_x). Each surface node is in contact with at most one edge: among its candidate edges,
+    the one it penetrates least (0 < d <= edge_dlim, projection within the edge span up to a small
+    tolerance). Choosing one edge keeps the force continuous when a node slides over the common
+    vertex of two edges. An edge whose outward normal does not oppose the node's own outward normal
+    is skipped: it is the side face seen from a corner node, not a contact. The node is pushed out with F_n = p_c w d, w the smaller of the two bodies'
+    thicknesses (the real contact width), and the opposite force goes to the edge's nodes, so linear
+    momentum is conserved exactly. Friction opposes the relative tangential velocity with
+    |F_t| <= mu_c F_n, and never more than the force that stops the sliding within one step (a stable
+    regularisation of sticking). Pairs must be grouped by node (build_pairs does so).
 
     Accumulates per-body contact force into body_force (n_bodies, 2).
     Returns (contact energy [J], friction power [W], maximum penetration [m]).
@@ -275,9 +279,39 @@ def contact_forces(x, v, inv_mass, pair_node, pair_edge, n_pairs, edges, edge_dl
     Uc = 0.0
     P_fric = 0.0
     max_pen = 0.0
-    for ip in range(n_pairs):
+    ip = 0
+    while ip < n_pairs:
         n = pair_node[ip]
-        ed = pair_edge[ip]
+        best = -1
+        best_d = 0.0
+        best_xi = 0.0
+        while ip < n_pairs and pair_node[ip] == n:
+            ed = pair_edge[ip]
+            ip += 1
+            p = edges[ed, 0]
+            q = edges[ed, 1]
+            ex = x[q, 0] - x[p, 0]
+            ey = x[q, 1] - x[p, 1]
+            L = math.sqrt(ex * ex + ey * ey)
+            rx = x[n, 0] - x[p, 0]
+            ry = x[n, 1] - x[p, 1]
+            xi = (rx * ex + ry * ey) / (L * L)
+            if xi < -1e-6 or xi > 1.0 + 1e-6:
+                continue
+            d = -(rx * ey - ry * ex) / L
+            if d <= 0.0 or d > edge_dlim[ed]:
+                continue
+            if node_normal[n, 0] * ey - node_normal[n, 1] * ex >= 0.0:
+                continue
+            if best < 0 or d < best_d:
+                best = ed
+                best_d = d
+                best_xi = min(max(xi, 0.0), 1.0)
+        if best < 0:
+            continue
+        ed = best
+        d = best_d
+        xi = best_xi
         p = edges[ed, 0]
         q = edges[ed, 1]
         ex = x[q, 0] - x[p, 0]
@@ -285,14 +319,6 @@ def contact_forces(x, v, inv_mass, pair_node, pair_edge, n_pairs, edges, edge_dl
         L = math.sqrt(ex * ex + ey * ey)
         tx = ex / L
         ty = ey / L
-        rx = x[n, 0] - x[p, 0]
-        ry = x[n, 1] - x[p, 1]
-        xi = (rx * tx + ry * ty) / L
-        if xi < 0.0 or xi > 1.0:
-            continue
-        d = -(rx * ty - ry * tx)
-        if d <= 0.0 or d > edge_dlim[ed]:
-            continue
         wth = node_thick[n] if node_thick[n] < edge_thick[ed] else edge_thick[ed]
         kc = p_c * wth
         Fn = kc * d
