@@ -232,8 +232,9 @@ class DenseError(ObservationError):
         c = np.array(matrix, dtype=float)
         if c.ndim != 2 or c.shape[0] != c.shape[1]:
             raise ValueError("covariance matrix must be square")
-        if not np.allclose(c, c.T, rtol=1e-12, atol=0.0):
+        if not np.allclose(c, c.T, rtol=1e-10, atol=1e-14 * np.abs(c).max()):
             raise ValueError("covariance matrix must be symmetric")
+        c = 0.5 * (c + c.T)  # remove round-off asymmetry
         self._matrix = c
         try:
             self._L = linalg.cholesky(c, lower=True, check_finite=True)

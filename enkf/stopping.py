@@ -10,7 +10,9 @@ prior ensemble), in this order:
 2. ``"tolerance"`` (converged): the user's tolerance on the normalised RMSE of the ensemble-mean
    response, ``nrmse <= nrmse_tol`` (the paper's ``|x_bar - y_o| < tol``); off by default.
 3. ``"collapse"`` (not converged): the spread of some parameter, in the unbounded space, fell below
-   ``collapse_fraction`` times its prior spread (default 1%); the ensemble can no longer move it.
+   ``collapse_fraction`` times its prior spread (default 1e-3); the ensemble can no longer move it.
+   (A sharp but legitimate posterior from a dense record can be ~0.5% of a wide prior box in the
+   logit space, so the default is well below that.)
 4. ``"max_iterations"`` (not converged): ``iteration >= max_iterations``.
 
 Otherwise ``"continue"``. ``allow_convergence=False`` suspends 1-2 (used for ES-MDA before its
@@ -33,7 +35,7 @@ class StopCriteria:
 
     chi2_target: float | None = None
     nrmse_tol: float | None = None
-    collapse_fraction: float = 0.01
+    collapse_fraction: float = 1e-3
     max_iterations: int = 5
 
     def __post_init__(self):
