@@ -1,0 +1,774 @@
+"""Readers for measured SHPB records and their specimen metadata.
+
+Every reader returns a :class:`RawRecord`: the time axis and the untouched gauge channels of the
+incident and the transmission bar (volts, or strain when the lab exported strain), together with the
+:class:`~shpb.reduction.BarSetup` that converts them (bar E, rho, diameter, gauge distances,
+volts-to-strain factors, sign of compression). The reduction itself lives in :mod:`shpb.reduction`.
+
+Formats read here (see the PROVENANCE.md of each folder under ``<shared>/data/measured``):
+
+* Freiburg (Rae et al. 2021) DAQ ASCII export, ``;``-delimited, 11 header lines, decimal separator
+  ``.`` or ``,``: :func:`read_freiburg_raw`; specimen spreadsheets ``Rae2021/<lith>.xlsx``:
+  :func:`read_freiburg_metadata`, :func:`freiburg_specimen`; rock properties
+  ``PetrophysicalProperties.xlsx``: :func:`read_petrophysical_properties`, :func:`rock_properties`.
+* LANL HopPyBar ``.raw`` (tab-delimited, metadata table + two waveform columns):
+  :func:`read_lanl_raw`.
+* LANL mini-Kolsky Tektronix CSVs (one file per channel) + ``*_Input.dat`` test sheet:
+  :func:`read_lanl_minikolsky`.
+* H. Yao SHPB processor exports (``.csv``/``.xls``/``.xlsx``, columns ``Time/s``,
+  ``incident_bar_signal/<unit>``, ``transmission_bar_signal/<unit>``): :func:`read_yao_record`.
+
+Units are SI everywhere in what these functions return (s, m, Pa, kg/m^3, strain, V).
+Malformed input raises :class:`ValueError` whose message names the file and the field expected.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .reduction import FREIBURG_BAR, BarSetup, bridge_strain_per_volt
+
+__all__ = [
+    "RawRecord",
+    "read_freiburg_raw",
+    "read_freiburg_metadata",
+    "freiburg_specimen",
+    "read_petrophysical_properties",
+    "rock_properties",
+    "read_lanl_raw",
+    "read_lanl_minikolsky",
+    "read_yao_record",
+    "LITHOLOGY_NAMES",
+]
+
+
+# --------------------------------------------------------------------------------------------------
+# The common record structure
+# --------------------------------------------------------------------------------------------------
+@dataclass
+class RawRecord:
+    """One measured SHPB record as read from the lab's files, before any reduction.
+
+    Attributes
+    ----------
+    name : str
+        Test name (file stem for the Freiburg records; it matches the spreadsheet ``Name``).
+    source : str
+        Path of the file (or folder) read.
+    time : ndarray, shape (n,)
+        DAQ time [s], uniform step ``1/sample_rate``; its origin is the lab's (arbitrary, may be < 0).
+    incident : ndarray, shape (n_gauges_incident, n)
+        Incident-bar gauge channels in ``unit`` (one row per gauge; opposite gauges are averaged
+        by the reduction to cancel bending).
+    transmitted : ndarray, shape (n_gauges_transmitted, n)
+        Transmission-bar gauge channels in ``unit``.
+    unit : str
+        ``"V"`` (convert with ``bar.strain_per_volt_*``) or ``"strain"`` (already strain, the
+        reduction uses a factor of 1).
+    sample_rate : float
+        Sampling frequency [Hz].
+    incident_channels, transmitted_channels : tuple of str
+        Channel names, in the row order of ``incident`` / ``transmitted``.
+    bar : BarSetup or None
+        The bars and measurement chain, when the file (or the lab's documentation) defines them.
+    specimen_length, specimen_diameter : float or None
+        Specimen dimensions [m] when the file holds them (Freiburg: see :func:`freiburg_specimen`).
+    header : dict
+        The file's header / metadata fields as read (strings), for traceability.
+    notes : list of str
+        Anything the reader had to decide (e.g. a rebuilt time axis).
+    """
+
+    name: str
+    source: str
+    time: np.ndarray
+    incident: np.ndarray
+    transmitted: np.ndarray
+    unit: str
+    sample_rate: float
+    incident_channels: tuple[str, ...]
+    transmitted_channels: tuple[str, ...]
+    bar: BarSetup | None = None
+    specimen_length: float | None = None
+    specimen_diameter: float | None = None
+    header: dict[str, str] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.time = np.asarray(self.time, dtype=float)
+        self.incident = np.atleast_2d(np.asarray(self.incident, dtype=float))
+        self.transmitted = np.atleast_2d(np.asarray(self.transmitted, dtype=float))
+        n = self.time.size
+        if self.incident.shape[1] != n or self.transmitted.shape[1] != n:
+            raise ValueError(
+                f"{self.source}: channel lengths {self.incident.shape}, {self.transmitted.shape} "
+                f"do not match the time axis ({n} samples)"
+            )
+        if self.unit not in ("V", "strain"):
+            raise ValueError(f"{self.source}: unit must be 'V' or 'strain', got {self.unit!r}")
+        if len(self.incident_channels) != self.incident.shape[0]:
+            raise ValueError(f"{self.source}: {len(self.incident_channels)} incident channel names "
+                             f"for {self.incident.shape[0]} channels")
+        if len(self.transmitted_channels) != self.transmitted.shape[0]:
+            raise ValueError(f"{self.source}: {len(self.transmitted_channels)} transmitted channel "
+                             f"names for {self.transmitted.shape[0]} channels")
+
+    @property
+    def dt(self) -> float:
+        """Sampling interval [s]."""
+        return 1.0 / self.sample_rate
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.time.size)
+
+
+def _check_uniform_time(time: np.ndarray, dt: float, path: Path, what: str) -> None:
+    """Raise if the time column departs from ``time[0] + i*dt`` by more than half a step."""
+    ideal = time[0] + dt * np.arange(time.size)
+    dev = float(np.max(np.abs(time - ideal))) if time.size else 0.0
+    if dev > 0.5 * dt:
+        raise ValueError(
+            f"{path}: time column is not uniform with the {what} step {dt:.6g} s "
+            f"(largest deviation {dev:.3g} s)"
+        )
+
+
+# --------------------------------------------------------------------------------------------------
+# Freiburg DAQ ASCII export
+# --------------------------------------------------------------------------------------------------
+_FREIBURG_HEADER_LINES = 11
+_FREIBURG_CHANNELS = ("A1", "A2", "A3", "A4")
+
+
+def _parse_number(text: str, decimal: str) -> float:
+    t = text.strip()
+    if decimal == ",":
+        t = t.replace(",", ".")
+    return float(t)
+
+
+def read_freiburg_raw(path: str | Path, bar: BarSetup | None = FREIBURG_BAR) -> RawRecord:
+    """Read one Freiburg DAQ record (``Rae2021/SHPBdata/<lith>/<name>.txt``).
+
+    Format: 11 header lines (``Starttime``, ``Triggertime``, ``TriggerSample``,
+    ``Samplerate;1250000 Hz``, ``Blocklength``, a blank line, channel names ``A1..A4``, signal kinds,
+    units ``s;V;V;V;V``, two blank lines), then one ``;``-delimited row per sample: time [s] and the
+    voltages of incident gauges 1, 2 (A1, A2) and transmission gauges 1, 2 (A3, A4). The decimal
+    separator is ``,`` (SeeSst files) or ``.`` (the others); it is detected from the data rows.
+
+    The sample rate comes from the header; the time column must agree with it (to half a step) and
+    the number of data rows must equal ``Blocklength``.
+
+    Parameters
+    ----------
+    path : path to the ``.txt`` file.
+    bar : the bar set-up attached to the record (default: the Freiburg titanium bars,
+        :data:`shpb.reduction.FREIBURG_BAR`).
+
+    Raises
+    ------
+    FileNotFoundError
+        If the file does not exist.
+    ValueError
+        If a header field is missing or malformed, a data row is not five numbers, the sample rate
+        disagrees with the time column, or the row count disagrees with ``Blocklength``. The message
+        names the file, the line and the field expected.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"Freiburg raw record not found: {path}")
+    text = path.read_bytes().decode("latin-1")
+    lines = text.splitlines()
+    if len(lines) <= _FREIBURG_HEADER_LINES:
+        raise ValueError(
+            f"{path}: expected {_FREIBURG_HEADER_LINES} header lines followed by data rows, "
+            f"found only {len(lines)} lines"
+        )
+
+    header: dict[str, str] = {}
+    for line in lines[:_FREIBURG_HEADER_LINES]:
+        if not line.strip():
+            continue
+        key, _, value = line.partition(";")
+        header[key.strip()] = value.strip()
+
+    if "Samplerate" not in header:
+        raise ValueError(
+            f"{path}: header field 'Samplerate' (e.g. 'Samplerate;1250000 Hz') not found in the "
+            f"first {_FREIBURG_HEADER_LINES} lines"
+        )
+    m = re.fullmatch(r"\s*([0-9.,eE+-]+)\s*(Hz)?\s*;?\s*", header["Samplerate"])
+    try:
+        if m is None:
+            raise ValueError
+        sample_rate = _parse_number(m.group(1), "," if "," in m.group(1) else ".")
+    except ValueError:
+        raise ValueError(
+            f"{path}: header field 'Samplerate' should be '<number> Hz', got {header['Samplerate']!r}"
+        ) from None
+    if not (sample_rate > 0 and math.isfinite(sample_rate)):
+        raise ValueError(f"{path}: header field 'Samplerate' must be positive, got {sample_rate}")
+
+    units = header.get("s")  # the units line reads 's;V;V;V;V;' -> key 's'
+    if units is not None and units.rstrip(";").split(";")[:4] != ["V"] * 4:
+        raise ValueError(f"{path}: header units line should be 's;V;V;V;V', got 's;{units}'")
+
+    data_lines = [(i, ln) for i, ln in enumerate(lines[_FREIBURG_HEADER_LINES:], start=_FREIBURG_HEADER_LINES + 1)
+                  if ln.strip()]
+    if not data_lines:
+        raise ValueError(f"{path}: no data rows after the {_FREIBURG_HEADER_LINES} header lines")
+    decimal = "," if "," in data_lines[0][1] else "."
+
+    values = np.empty((len(data_lines), 5))
+    for row, (lineno, ln) in enumerate(data_lines):
+        fields = [f for f in ln.strip().split(";") if f.strip() != ""]
+        if len(fields) != 5:
+            raise ValueError(
+                f"{path}: line {lineno}: expected 5 ';'-separated numbers (time [s], A1..A4 [V]), "
+                f"got {len(fields)} fields: {ln.strip()!r}"
+            )
+        try:
+            values[row] = [_parse_number(f, decimal) for f in fields]
+        except ValueError:
+            raise ValueError(
+                f"{path}: line {lineno}: expected numbers with decimal separator {decimal!r} "
+                f"(time [s], A1..A4 [V]), got {ln.strip()!r}"
+            ) from None
+
+    if "Blocklength" in header:
+        try:
+            block = int(header["Blocklength"].strip().rstrip(";"))
+        except ValueError:
+            raise ValueError(f"{path}: header field 'Blocklength' should be an integer, "
+                             f"got {header['Blocklength']!r}") from None
+        if block != values.shape[0]:
+            raise ValueError(
+                f"{path}: header 'Blocklength' says {block} samples but {values.shape[0]} data rows "
+                f"were found (truncated or padded file?)"
+            )
+
+    time = values[:, 0]
+    dt = 1.0 / sample_rate
+    _check_uniform_time(time, dt, path, "header 'Samplerate'")
+    record = RawRecord(
+        name=path.stem,
+        source=str(path),
+        time=time,
+        incident=values[:, 1:3].T,
+        transmitted=values[:, 3:5].T,
+        unit="V",
+        sample_rate=sample_rate,
+        incident_channels=_FREIBURG_CHANNELS[:2],
+        transmitted_channels=_FREIBURG_CHANNELS[2:],
+        bar=bar,
+        header=header,
+        notes=[f"decimal separator {decimal!r}"],
+    )
+    return record
+
+
+# --------------------------------------------------------------------------------------------------
+# Freiburg spreadsheets
+# --------------------------------------------------------------------------------------------------
+#: Lithology codes -> names used in ``PetrophysicalProperties.xlsx``.
+LITHOLOGY_NAMES = {
+    "CaMa": "Carrara Marble",
+    "SaLi": "Savonnieres Limestone",
+    "SeeSst": "Seeberger Sandstone",
+    "TaQu": "Taunus Quartzite",
+    "MaGr": "Malsburg Granite",
+    "MaGn": "Maggia Gneiss",
+}
+
+# spreadsheet header -> (output column, scale to SI); the column after a "mu" column holds sigma.
+_META_COLUMNS = {
+    "Name": ("name", None),
+    "Experiment Type": ("experiment_type", None),
+    "P (bar)": ("gas_pressure_Pa", 1.0e5),
+    "Sample Length (mm)": ("length_m", 1.0e-3),
+    "Sample Diameter (mm)": ("diameter_m", 1.0e-3),
+    "Failure?": ("failure", None),
+    "Strength (MPa)": ("strength_Pa", 1.0e6),
+    "Max. Stress (MPa)": ("max_stress_Pa", 1.0e6),
+    "Strain Rate (/s)": ("strain_rate_per_s", 1.0),
+    "Young's Modulus (GPa)": ("E_Pa", 1.0e9),
+    "Failure Strain": ("failure_strain", 1.0),
+    "Max Strain": ("max_strain", 1.0),
+    "E_abs": ("energy_absorbed_J", 1.0),
+    "E_del": ("energy_delivered_J", 1.0),
+    "E_trans": ("energy_transmitted_J", 1.0),
+    "Poi": ("poisson_ratio", 1.0),
+}
+_META_WITH_SIGMA = {"strength_Pa", "max_stress_Pa", "strain_rate_per_s", "E_Pa"}
+
+
+def read_freiburg_metadata(xlsx_path: str | Path) -> pd.DataFrame:
+    """Read a Freiburg specimen spreadsheet (``Rae2021/{CaMa,SaLi,SeeSst}.xlsx``), SI units.
+
+    One row per test (quasi-static ``UCS`` rows included; filter on ``experiment_type``). Columns:
+
+    ``name`` (raw-file stem for SHPB tests), ``lithology`` (the spreadsheet stem), ``experiment_type``
+    (``UCS``/``SHPB``), ``gas_pressure_Pa``, ``length_m``, ``diameter_m``, ``failure`` (``Y``, ``Yp``
+    partly failed, ``N`` intact), ``strength_Pa`` and ``strength_sd_Pa`` (failed samples),
+    ``max_stress_Pa`` and ``max_stress_sd_Pa`` (intact samples), ``strain_rate_per_s`` and
+    ``strain_rate_sd_per_s``, ``E_Pa`` and ``E_sd_Pa``, ``failure_strain``, ``max_strain``,
+    ``energy_absorbed_J``, ``energy_delivered_J``, ``energy_transmitted_J``, ``poisson_ratio``, and
+    ``reference_stress_Pa`` = ``strength_Pa`` where given, else ``max_stress_Pa`` (the value the
+    reduction check compares the measured peak stress with).
+
+    The header row is the row whose first cell is ``Name``; the row below it holds the
+    mean/standard-deviation sub-header; columns are located by their header text.
+    """
+    xlsx_path = Path(xlsx_path)
+    if not xlsx_path.is_file():
+        raise FileNotFoundError(f"Freiburg specimen spreadsheet not found: {xlsx_path}")
+    raw = pd.read_excel(xlsx_path, sheet_name=0, header=None)
+    first = raw.iloc[:, 0].astype(str).str.strip()
+    hits = np.flatnonzero(first.to_numpy() == "Name")
+    if hits.size == 0:
+        raise ValueError(f"{xlsx_path}: no header row with 'Name' in the first column")
+    hrow = int(hits[0])
+    headers = [str(h).strip() if isinstance(h, str) else None for h in raw.iloc[hrow]]
+    out: dict[str, object] = {}
+    body = raw.iloc[hrow + 2:].reset_index(drop=True)  # skip the mu/sigma sub-header
+    for col, head in enumerate(headers):
+        if head is None or head not in _META_COLUMNS:
+            continue
+        name, scale = _META_COLUMNS[head]
+        series = body.iloc[:, col]
+        if scale is None:
+            out[name] = series.map(lambda v: str(v).strip() if isinstance(v, str) or pd.notna(v) else None)
+        else:
+            out[name] = pd.to_numeric(series, errors="coerce") * scale
+        if name in _META_WITH_SIGMA and col + 1 < body.shape[1]:
+            out[name.replace("_Pa", "_sd_Pa").replace("_per_s", "_sd_per_s")] = (
+                pd.to_numeric(body.iloc[:, col + 1], errors="coerce") * scale
+            )
+    missing = [n for n in ("name", "length_m", "diameter_m") if n not in out]
+    if missing:
+        raise ValueError(f"{xlsx_path}: required columns not found in the header row: {missing}")
+    df = pd.DataFrame(out)
+    df = df[df["name"].notna() & (df["name"].astype(str).str.len() > 0)].reset_index(drop=True)
+    df.insert(1, "lithology", xlsx_path.stem)
+    strength = df["strength_Pa"] if "strength_Pa" in df else pd.Series(np.nan, index=df.index)
+    max_stress = df["max_stress_Pa"] if "max_stress_Pa" in df else pd.Series(np.nan, index=df.index)
+    df["reference_stress_Pa"] = strength.where(strength.notna(), max_stress)
+    return df
+
+
+@lru_cache(maxsize=16)
+def _metadata_cached(path: str, mtime: float) -> pd.DataFrame:
+    return read_freiburg_metadata(path)
+
+
+def freiburg_specimen(raw_path: str | Path) -> pd.Series:
+    """The spreadsheet row of a Freiburg raw record.
+
+    ``<root>/Rae2021/SHPBdata/<lith>/<name>.txt`` is looked up as ``Name == <name>`` in
+    ``<root>/Rae2021/<lith>.xlsx`` (read with :func:`read_freiburg_metadata`, SI units).
+
+    Raises
+    ------
+    FileNotFoundError
+        If the spreadsheet is missing.
+    KeyError
+        If the record's name is not in the spreadsheet.
+    """
+    raw_path = Path(raw_path)
+    lith = raw_path.parent.name
+    xlsx = raw_path.parent.parent.parent / f"{lith}.xlsx"
+    if not xlsx.is_file():
+        raise FileNotFoundError(
+            f"specimen spreadsheet for {raw_path.name} not found: expected {xlsx} "
+            f"(Rae2021/<lithology>.xlsx next to SHPBdata/)"
+        )
+    meta = _metadata_cached(str(xlsx.resolve()), xlsx.stat().st_mtime)
+    rows = meta[meta["name"] == raw_path.stem]
+    if rows.empty:
+        raise KeyError(f"{raw_path.stem!r} not found in the 'Name' column of {xlsx}")
+    return rows.iloc[0].copy()
+
+
+# --------------------------------------------------------------------------------------------------
+# Petrophysical properties
+# --------------------------------------------------------------------------------------------------
+def read_petrophysical_properties(xlsx_path: str | Path) -> pd.DataFrame:
+    """Rock properties from ``PetrophysicalProperties.xlsx`` (sheet ``Summary``), SI units.
+
+    Columns: ``lithology`` (full name, e.g. ``Carrara Marble``), ``code`` (``CaMa`` ...),
+    ``variant`` (``Parallel``/``Perpendicular`` for the gneiss, else empty), ``E_Pa``, ``E_sd_Pa``,
+    ``nu``, ``nu_sd``, ``rho_kg_m3``, ``rho_sd_kg_m3``, ``P_modulus_Pa``, ``Vp_m_s``, ``Vp_sd_m_s``,
+    ``porosity``, ``porosity_sd``, ``K_Ic_Pa_sqrt_m``, ``K_Ic_sd_Pa_sqrt_m``.
+    The sheet's units are GPa, g/cm^3, km/s and MPa m^0.5; each value is followed by its sigma.
+    """
+    xlsx_path = Path(xlsx_path)
+    if not xlsx_path.is_file():
+        raise FileNotFoundError(f"petrophysical-properties spreadsheet not found: {xlsx_path}")
+    raw = pd.read_excel(xlsx_path, sheet_name="Summary", header=None)
+    head = [str(h).strip() if isinstance(h, str) else "" for h in raw.iloc[0]]
+
+    def col(prefix: str) -> int:
+        for i, h in enumerate(head):
+            if h.startswith(prefix):
+                return i
+        raise ValueError(f"{xlsx_path}: sheet 'Summary' has no column starting with {prefix!r}")
+
+    spec = [  # (sheet header prefix, output name, scale, has sigma)
+        ("E (GPa)", "E_Pa", 1e9, True),
+        ("Poi", "nu", 1.0, True),
+        ("rho (g/cc)", "rho_kg_m3", 1e3, True),
+        ("P-Mod (GPa)", "P_modulus_Pa", 1e9, False),
+        ("Vp (km/s)", "Vp_m_s", 1e3, True),
+        ("phi", "porosity", 1.0, True),
+        ("K_Ic", "K_Ic_Pa_sqrt_m", 1e6, True),
+    ]
+    body = raw.iloc[1:].reset_index(drop=True)
+    names = body.iloc[:, 0].where(body.iloc[:, 0].map(lambda v: isinstance(v, str))).ffill()
+    out = pd.DataFrame({
+        "lithology": names,
+        "variant": body.iloc[:, 1].map(lambda v: v.strip() if isinstance(v, str) else ""),
+    })
+    for prefix, name, scale, has_sd in spec:
+        c = col(prefix)
+        out[name] = pd.to_numeric(body.iloc[:, c], errors="coerce") * scale
+        if has_sd:
+            sd_name = name.replace("_Pa", "_sd_Pa").replace("_kg_m3", "_sd_kg_m3").replace("_m_s", "_sd_m_s")
+            if sd_name == name:
+                sd_name = name + "_sd"
+            if name == "K_Ic_Pa_sqrt_m":
+                sd_name = "K_Ic_sd_Pa_sqrt_m"
+            out[sd_name] = pd.to_numeric(body.iloc[:, c + 1], errors="coerce") * scale
+    out = out[out["lithology"].notna() & out["E_Pa"].notna()].reset_index(drop=True)
+    codes = {v.lower(): k for k, v in LITHOLOGY_NAMES.items()}
+    out.insert(1, "code", out["lithology"].map(lambda s: codes.get(s.strip().lower(), "")))
+    return out
+
+
+def rock_properties(lithology: str, xlsx_path: str | Path | None = None, variant: str = "") -> dict[str, float]:
+    """E [Pa], nu [-], rho [kg/m^3] (and their sigmas) of one lithology.
+
+    ``lithology`` is a code (``CaMa``, ``SaLi``, ``SeeSst``, ...) or a name (``Carrara Marble``),
+    case-insensitive. ``xlsx_path`` defaults to the shared ``PetrophysicalProperties.xlsx``.
+    For the gneiss pass ``variant="Parallel"`` or ``"Perpendicular"``.
+
+    Raises
+    ------
+    KeyError
+        If the lithology (and variant) is not in the sheet.
+    """
+    if xlsx_path is None:
+        from .paths import freiburg_data_dir
+
+        xlsx_path = freiburg_data_dir() / "PetrophysicalProperties.xlsx"
+    table = read_petrophysical_properties(xlsx_path)
+    key = lithology.strip().lower()
+    sel = table[(table["code"].str.lower() == key) | (table["lithology"].str.strip().str.lower() == key)]
+    if variant:
+        sel = sel[sel["variant"].str.lower() == variant.lower()]
+    if sel.empty:
+        raise KeyError(f"lithology {lithology!r} (variant {variant!r}) not in {xlsx_path}; "
+                       f"known: {sorted(set(table['lithology']))}")
+    row = sel.iloc[0]
+    return {
+        "E": float(row["E_Pa"]), "E_sd": float(row["E_sd_Pa"]),
+        "nu": float(row["nu"]), "nu_sd": float(row["nu_sd"]),
+        "rho": float(row["rho_kg_m3"]), "rho_sd": float(row["rho_sd_kg_m3"]),
+    }
+
+
+# --------------------------------------------------------------------------------------------------
+# LANL HopPyBar formats
+# --------------------------------------------------------------------------------------------------
+def _norm_key(key: str) -> str:
+    """Metadata key without units/odd characters: 'Incident Bar Diameter(mm)' -> 'incidentbardiameter'."""
+    key = re.sub(r"\(.*?\)", "", key)
+    return re.sub(r"[^a-z0-9]", "", key.lower())
+
+
+def _meta_float(meta: dict[str, str], key: str, path: Path) -> float:
+    nk = _norm_key(key)
+    for k, v in meta.items():
+        if _norm_key(k) == nk:
+            try:
+                return float(str(v).strip())
+            except ValueError:
+                raise ValueError(f"{path}: metadata field {key!r} should be a number, got {v!r}") from None
+    raise ValueError(f"{path}: metadata field {key!r} not found")
+
+
+def _lanl_bar_setup(meta: dict[str, str], path: Path, compression_sign: int, name: str) -> BarSetup:
+    """Bar set-up from a HopPyBar metadata table (incident and transmitted bar must be alike).
+
+    Volts to strain (two active arms, HopPyBar's formula): eps = 2 U / (GF * gain * U_exc), with the
+    test-level gains ``Incident/Reflected Bar Gain`` and ``Transmitted Bar Gain``.
+    The density is written in g/cm^3 even where the label says kg/m^3; a value below 100 is read as
+    g/cm^3.
+    """
+    def bar(prefix: str) -> dict[str, float]:
+        rho = _meta_float(meta, f"{prefix} Bar Density", path)
+        return {
+            "E": _meta_float(meta, f"{prefix} Bar Young's Modulus", path) * 1e9,
+            "rho": rho * 1e3 if rho < 100.0 else rho,
+            "D": _meta_float(meta, f"{prefix} Bar Diameter", path) * 1e-3,
+            "x": _meta_float(meta, f"{prefix} Bar Strain Gage Location", path) * 1e-3,
+            "GF": _meta_float(meta, f"{prefix} Bar Calibrated Gage Factor", path),
+            "Uexc": _meta_float(meta, f"{prefix} Bar Excitation Voltage", path),
+        }
+
+    bi, bt = bar("Incident"), bar("Transmitted")
+    for q in ("E", "rho", "D"):
+        if not math.isclose(bi[q], bt[q], rel_tol=1e-3):
+            raise ValueError(f"{path}: incident and transmitted bars differ in {q} "
+                             f"({bi[q]} vs {bt[q]}); BarSetup assumes identical bars")
+    gain_i = _meta_float(meta, "Incident/Reflected Bar Gain", path)
+    gain_t = _meta_float(meta, "Transmitted Bar Gain", path)
+    return BarSetup(
+        E=bi["E"], rho=bi["rho"], diameter=bi["D"],
+        gauge_distance_incident=bi["x"], gauge_distance_transmitted=bt["x"],
+        strain_per_volt_incident=bridge_strain_per_volt(bi["Uexc"], gain_i, bi["GF"], active_arms=2),
+        strain_per_volt_transmitted=bridge_strain_per_volt(bt["Uexc"], gain_t, bt["GF"], active_arms=2),
+        compression_sign=compression_sign,
+        name=name,
+    )
+
+
+def read_lanl_raw(path: str | Path) -> RawRecord:
+    """Read a LANL HopPyBar ``.raw`` record (e.g. ``LANLstandard/Cu/20061201_1148HE_CuOFE_273K.raw``).
+
+    Tab-delimited, cp1252. Columns 1-2: the metadata table (label, value). Columns 3-4: the
+    ``Incident/Reflected Waveform`` and ``Transmitted Waveform`` [V]; in each, the first numeric row
+    is t0 [s], the second dt [s], then the voltages. One gauge signal per bar (the bridge already
+    sums the opposite gauges). Positive voltage is compression (``compression_sign=+1``).
+    Specimen diameter/length and the bar set-up are taken from the metadata.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"LANL .raw record not found: {path}")
+    lines = path.read_bytes().decode("cp1252").splitlines()
+    if not lines:
+        raise ValueError(f"{path}: empty file")
+    meta: dict[str, str] = {}
+    wave: list[tuple[float, float]] = []
+    first = lines[0].split("\t")
+    if len(first) < 4 or "incident" not in first[2].lower() or "transmitted" not in first[3].lower():
+        raise ValueError(f"{path}: expected columns 3-4 of line 1 to be 'Incident/Reflected Waveform' "
+                         f"and 'Transmitted Waveform', got {first[2:4]!r}")
+    meta[first[0].strip()] = first[1].strip()
+    for lineno, line in enumerate(lines[1:], start=2):
+        parts = line.split("\t")
+        if len(parts) < 4:
+            raise ValueError(f"{path}: line {lineno}: expected 4 tab-separated columns "
+                             f"(label, value, incident V, transmitted V), got {len(parts)}")
+        if parts[0].strip():
+            meta[parts[0].strip()] = parts[1].strip()
+        try:
+            wave.append((float(parts[2]), float(parts[3])))
+        except ValueError:
+            raise ValueError(f"{path}: line {lineno}: waveform columns 3-4 should be numbers, "
+                             f"got {parts[2:4]!r}") from None
+    arr = np.asarray(wave)
+    if arr.shape[0] < 3:
+        raise ValueError(f"{path}: waveform columns need t0, dt and samples; got {arr.shape[0]} rows")
+    t0, dt = float(arr[0, 0]), float(arr[1, 0])
+    if not (dt > 0) or not math.isclose(arr[1, 0], arr[1, 1]) or not math.isclose(arr[0, 0], arr[0, 1]):
+        raise ValueError(f"{path}: waveform t0/dt rows should be equal in both columns with dt > 0, "
+                         f"got t0={arr[0].tolist()}, dt={arr[1].tolist()}")
+    volts = arr[2:]
+    n = volts.shape[0]
+    bar = _lanl_bar_setup(meta, path, compression_sign=+1, name=f"LANL {meta.get('System ID', '')} bars")
+    return RawRecord(
+        name=path.stem,
+        source=str(path),
+        time=t0 + dt * np.arange(n),
+        incident=volts[:, 0][None, :],
+        transmitted=volts[:, 1][None, :],
+        unit="V",
+        sample_rate=1.0 / dt,
+        incident_channels=("incident",),
+        transmitted_channels=("transmitted",),
+        bar=bar,
+        specimen_length=_meta_float(meta, "Initial Sample Length", path) * 1e-3,
+        specimen_diameter=_meta_float(meta, "Initial Sample Diameter", path) * 1e-3,
+        header=meta,
+    )
+
+
+def _read_tektronix_csv(path: Path) -> tuple[np.ndarray, np.ndarray, float]:
+    """Time [s], voltage [V] and sample interval [s] of one Tektronix CSV channel file."""
+    interval = None
+    with path.open("r", encoding="latin-1") as fh:
+        for _, line in zip(range(10), fh):
+            parts = [p.strip().strip('"') for p in line.split(",")]
+            if parts and parts[0] == "Sample Interval":
+                interval = float(parts[1])
+    if interval is None:
+        raise ValueError(f"{path}: Tektronix header field 'Sample Interval' not found in the first rows")
+    try:
+        data = np.loadtxt(path, delimiter=",", usecols=(3, 4), encoding="latin-1")
+    except ValueError as exc:
+        raise ValueError(f"{path}: columns 4-5 should hold time [s] and voltage [V] on every row ({exc})") from None
+    return data[:, 0], data[:, 1], interval
+
+
+def read_lanl_minikolsky(input_dat: str | Path) -> RawRecord:
+    """Read a LANL mini-Kolsky test: ``<test>_Input.dat`` plus ``*_Ch1..Ch4.csv`` in the same folder.
+
+    Ch1/Ch2 are the incident-bar gauges and Ch3/Ch4 the transmitted-bar gauges (Tektronix CSV,
+    columns 4-5 = time [s], voltage [V]). On this set-up the first (compressive) incident pulse is
+    negative, so ``compression_sign=-1``. Bars and specimen come from the test sheet (square bars
+    and specimen enter through their equivalent diameters).
+    """
+    input_dat = Path(input_dat)
+    if not input_dat.is_file():
+        raise FileNotFoundError(f"mini-Kolsky test sheet not found: {input_dat}")
+    meta: dict[str, str] = {}
+    for line in input_dat.read_bytes().decode("cp1252").splitlines():
+        parts = line.split("\t")
+        if len(parts) >= 2 and parts[0].strip():
+            meta[parts[0].strip()] = parts[1].strip().strip('"')
+    chans = sorted(input_dat.parent.glob("*_Ch[1-4].csv"))
+    if len(chans) != 4:
+        raise ValueError(f"{input_dat.parent}: expected four channel files *_Ch1..Ch4.csv, found {len(chans)}")
+    reads = [_read_tektronix_csv(p) for p in chans]
+    t, _, dt = reads[0]
+    for p, (ti, _, dti) in zip(chans, reads):
+        if ti.size != t.size or not math.isclose(dti, dt) or not np.allclose(ti, t, atol=0.5 * dt, rtol=0):
+            raise ValueError(f"{p}: time axis differs from {chans[0].name}")
+    _check_uniform_time(t, dt, chans[0], "'Sample Interval'")
+    bar = _lanl_bar_setup(meta, input_dat, compression_sign=-1, name="LANL mini-Kolsky Al 7075-T6 bars")
+    return RawRecord(
+        name=input_dat.stem.replace("_Input", ""),
+        source=str(input_dat.parent),
+        time=t,
+        incident=np.vstack([reads[0][1], reads[1][1]]),
+        transmitted=np.vstack([reads[2][1], reads[3][1]]),
+        unit="V",
+        sample_rate=1.0 / dt,
+        incident_channels=("Ch1", "Ch2"),
+        transmitted_channels=("Ch3", "Ch4"),
+        bar=bar,
+        specimen_length=_meta_float(meta, "Initial Sample Length", input_dat) * 1e-3,
+        specimen_diameter=_meta_float(meta, "Initial Sample Diameter", input_dat) * 1e-3,
+        header=meta,
+    )
+
+
+# --------------------------------------------------------------------------------------------------
+# H. Yao SHPB/SHTB data-processor exports
+# --------------------------------------------------------------------------------------------------
+_YAO_UNIT_SCALE = {"voltage": ("V", 1.0), "v": ("V", 1.0), "strain": ("strain", 1.0), "ε": ("strain", 1.0),
+                   "με": ("strain", 1e-6), "µε": ("strain", 1e-6), "microstrain": ("strain", 1e-6)}
+
+
+def _yao_details(folder: Path) -> dict[str, float]:
+    """Bar and specimen numbers [SI] from ``experiment_details_en-US.txt`` in a material folder."""
+    path = folder / "experiment_details_en-US.txt"
+    if not path.is_file():
+        raise FileNotFoundError(f"Yao experiment details not found: {path}")
+    text = path.read_text(encoding="utf-8")
+    want = {
+        "Bar diameter": ("D", 1e-3), "Specimen length": ("L", 1e-3), "Specimen diameter": ("Ds", 1e-3),
+        "Bar elastic modulus": ("E", 1e9), "Bar density": ("rho", 1.0),
+        "Incident-bar strain gauge distance to specimen end face": ("xi", 1e-3),
+        "Transmitted-bar strain gauge distance to specimen end face": ("xt", 1e-3),
+    }
+    out: dict[str, float] = {}
+    for label, (key, scale) in want.items():
+        m = re.search(r"^- " + re.escape(label) + r":\s*`([0-9.eE+-]+)", text, flags=re.M)
+        if m is None:
+            raise ValueError(f"{path}: field {label!r} (e.g. '- {label}: `20 mm`') not found")
+        out[key] = float(m.group(1)) * scale
+    return out
+
+
+def read_yao_record(path: str | Path, strain_per_volt: float | None = None) -> RawRecord:
+    """Read one H. Yao SHPB export (``raw_voltage``/``raw_strain``/``raw_microstrain`` .csv/.xls/.xlsx,
+    or a steel batch input), with bars and specimen from the material folder's
+    ``experiment_details_en-US.txt`` (the first folder above the file that has one).
+
+    Columns: ``Time/s``, ``incident_bar_signal/<unit>``, ``transmission_bar_signal/<unit>`` with unit
+    ``voltage``, ``ε`` or ``με``. Microstrain is converted to strain. Voltage files need
+    ``strain_per_volt`` (PROVENANCE: 5.01e-4 for epoxy and AZ42M, 4.96e-4 for 945 steel).
+    Compression is negative in these files (``compression_sign=-1``). If the time column is not
+    uniform (rounded to 3 significant digits in the epoxy sample_01 CSVs), the time axis is rebuilt
+    as ``t0 + i*dt`` with ``dt = (t_end - t0)/(n - 1)``; the record's ``notes`` say so.
+    Caveat (PROVENANCE): ``epoxy_resin/sample_01/raw_strain.csv`` has the factor applied twice; use
+    its ``raw_voltage.csv``.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"Yao record not found: {path}")
+    suffix = path.suffix.lower()
+    if suffix == ".csv":
+        raw = path.read_bytes()
+        for enc in ("utf-8", "gbk", "latin-1"):
+            try:
+                text = raw.decode(enc)
+                break
+            except UnicodeDecodeError:
+                continue
+        header = text.splitlines()[0].split(",")
+        body = np.loadtxt(text.splitlines()[1:], delimiter=",")
+    elif suffix in (".xls", ".xlsx"):
+        df = pd.read_excel(path, header=None, engine="xlrd" if suffix == ".xls" else "openpyxl")
+        header = [str(h) for h in df.iloc[0]]
+        body = df.iloc[1:].apply(pd.to_numeric, errors="coerce").to_numpy(dtype=float)
+    else:
+        raise ValueError(f"{path}: expected a .csv, .xls or .xlsx file")
+    if len(header) < 3 or not header[0].strip().lower().startswith("time"):
+        raise ValueError(f"{path}: expected header 'Time/s, incident_bar_signal/<unit>, "
+                         f"transmission_bar_signal/<unit>', got {header!r}")
+    if body.ndim != 2 or body.shape[1] < 3 or np.isnan(body[:, :3]).any():
+        raise ValueError(f"{path}: expected three numeric columns (time, incident, transmitted) on every row")
+    unit_text = header[1].split("/")[-1].strip().lower()
+    if unit_text in _YAO_UNIT_SCALE:
+        unit, scale = _YAO_UNIT_SCALE[unit_text]
+    elif "micro" in path.stem.lower():  # garbled 'με' in a non-UTF-8 header
+        unit, scale = "strain", 1e-6
+    elif "strain" in path.stem.lower():
+        unit, scale = "strain", 1.0
+    else:
+        raise ValueError(f"{path}: unknown signal unit {unit_text!r} (expected voltage, ε or με)")
+    if unit == "V" and strain_per_volt is None:
+        raise ValueError(f"{path}: voltage record needs strain_per_volt (see the folder's PROVENANCE.md)")
+
+    time = body[:, 0]
+    n = time.size
+    notes = []
+    dt = (time[-1] - time[0]) / (n - 1)
+    if np.max(np.abs(np.diff(time) - dt)) > 0.01 * dt:
+        notes.append(f"time column not uniform (rounded); rebuilt as t0 + i*{dt:.6g} s")
+    time = time[0] + dt * np.arange(n)
+
+    folder = next((p for p in path.parents if (p / "experiment_details_en-US.txt").is_file()), None)
+    if folder is None:
+        raise FileNotFoundError(f"{path}: no experiment_details_en-US.txt in any parent folder")
+    d = _yao_details(folder)
+    spv = 1.0 if unit == "strain" else float(strain_per_volt)
+    bar = BarSetup(E=d["E"], rho=d["rho"], diameter=d["D"], gauge_distance_incident=d["xi"],
+                   gauge_distance_transmitted=d["xt"], strain_per_volt_incident=spv,
+                   strain_per_volt_transmitted=spv, compression_sign=-1, name="Yao steel bars")
+    return RawRecord(
+        name=f"{folder.name}/{path.relative_to(folder).with_suffix('')}",
+        source=str(path),
+        time=time,
+        incident=body[:, 1][None, :] * scale,
+        transmitted=body[:, 2][None, :] * scale,
+        unit=unit,
+        sample_rate=1.0 / dt,
+        incident_channels=("incident",),
+        transmitted_channels=("transmitted",),
+        bar=bar,
+        specimen_length=d["L"],
+        specimen_diameter=d["Ds"],
+        header={"columns": ",".join(header)},
+        notes=notes,
+    )
