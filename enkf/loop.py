@@ -43,6 +43,7 @@ class AssimilationResult:
     decision: StopDecision
     n_simulations: int
     names: list[str]
+    prior_spread: np.ndarray  # std of the initial ensemble in the unbounded space, per parameter
 
     @property
     def iterations(self) -> int:
@@ -119,7 +120,7 @@ def assimilate(forward: Callable[[np.ndarray], np.ndarray], params0, obs, obs_er
         history.append(jsonable({"iteration": k, "n_alive": int(alive.sum()), "misfit_mean": misfit,
                                  "posterior": posterior_dict(P, names, alive), "decision": decision.to_dict()}))
         if decision.stop:
-            return AssimilationResult(P, Y, alive, history, decision, n_sim, names)
+            return AssimilationResult(P, Y, alive, history, decision, n_sim, names, prior_spread)
         common = dict(rng=rng, transform=transform, localization=localization, inflation=infl,
                       prior_std=prior_spread, alive=alive, min_alive_fraction=min_alive_fraction,
                       truncation=trunc, names=names)
