@@ -308,7 +308,6 @@ def _analysis(method, params, responses, obs, obs_error, *, alpha, rng, transfor
     nrmse_members = np.full(N, np.nan)
     rmse_members[live] = rmse(Ya, d)
     nrmse_members[live] = nrmse(Ya, d)
-    live_new = np.ones(N, bool)
     diagnostics = {
         "method": method,
         "alpha": alpha,
@@ -326,7 +325,7 @@ def _analysis(method, params, responses, obs, obs_error, *, alpha, rng, transfor
         "inflation": {"spec": None if infl is None else infl.describe(), "lambda": dict(zip(names, lam))},
         "params": {
             name: {
-                "mean_before": float(P[live, j].mean()), "mean_after": float(P_new[live_new, j].mean()),
+                "mean_before": float(P[live, j].mean()), "mean_after": float(P_new[:, j].mean()),
                 "std_before": float(P[live, j].std(ddof=1)), "std_after": float(P_new[:, j].std(ddof=1)),
                 "std_unbounded_before": float(Za[:, j].std(ddof=1)),
                 "std_unbounded_after": float(Z_new[:, j].std(ddof=1)),

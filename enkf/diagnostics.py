@@ -39,12 +39,11 @@ def rmse(sim, obs):
 
 
 def nrmse(sim, obs):
-    """``rmse / (max(obs) - min(obs))``."""
+    """``rmse / (max(obs) - min(obs))``; NaN if the observations have zero range."""
     obs = np.asarray(obs, dtype=float)
     span = float(obs.max() - obs.min())
-    if span <= 0:
-        raise ValueError("observations have zero range; nrmse is undefined")
-    return rmse(sim, obs) / span
+    value = rmse(sim, obs)
+    return value / span if span > 0 else value * np.nan
 
 
 def chi2_per_obs(sim, obs, obs_error: ObservationError):

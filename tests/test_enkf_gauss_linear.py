@@ -129,3 +129,11 @@ def test_truncation_keeps_the_leading_singular_values_holding_the_requested_frac
     assert truncation_rank(s, 0.94) == 3
     assert truncation_rank(s, 0.5) == 1
     assert truncation_rank(np.zeros(3), 0.99) == 0
+
+
+def test_an_ensemble_whose_responses_do_not_vary_is_left_unchanged():
+    P = np.random.default_rng(0).normal(size=(6, 2))
+    res = esmda_update(P, np.ones((6, 10)), np.zeros(10), AR1Error(1.0, np.arange(10.0), 2.0), alpha=1.0, rng=0,
+                       localization=localization_mask(2, 10, {0: slice(0, 3)}))
+    assert res.rank == 0
+    assert np.array_equal(res.params, P)

@@ -13,7 +13,6 @@ prior box A in [20, 60] MPa, tau in [10, 100] us, 200 samples at 1 us, noise std
 import json
 
 import numpy as np
-import pytest
 
 from enkf import AR1Error, BoxTransform, DiagonalError, StopCriteria, assimilate, latin_hypercube
 
@@ -92,7 +91,8 @@ def test_the_whole_twin_loop_is_bit_identical_for_the_same_seed():
     summary = json.loads(json.dumps(a.to_dict(), allow_nan=False))
     assert summary["stop_reason"] in ("discrepancy", "max_iterations")
     assert summary["n_simulations"] == 25 * (summary["iterations"] + 1)
-    assert summary["posterior"]["tau"]["q05"] <= summary["posterior"]["tau"]["mean"] <= summary["posterior"]["tau"]["q95"]
+    tau = summary["posterior"]["tau"]
+    assert tau["q05"] <= tau["mean"] <= tau["q95"]
     assert a.misfit_table()["chi2_per_obs"].iloc[-1] < a.misfit_table()["chi2_per_obs"].iloc[0]
 
 
