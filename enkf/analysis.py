@@ -63,7 +63,7 @@ from scipy import linalg
 from ._rng import RngLike, as_generator
 from .covariance import ObservationError
 from .diagnostics import default_names, jsonable, nrmse, rmse
-from .inflation import as_inflation
+from .inflation import as_inflation, inflate
 from .transforms import BoxTransform, IdentityTransform
 
 
@@ -288,8 +288,7 @@ def _analysis(method, params, responses, obs, obs_error, *, alpha, rng, transfor
     if infl is not None:
         ref = prior_std if prior_std is not None else transform.prior_std()
         lam = infl.factors(Za_new, ref)
-        z_bar_new = Za_new.mean(axis=0)
-        Za_new = z_bar_new + lam * (Za_new - z_bar_new)
+        Za_new = inflate(Za_new, lam)
 
     Z_new = np.empty_like(Z)
     Y_new = np.full_like(Y, np.nan)
