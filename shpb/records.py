@@ -717,8 +717,15 @@ def read_yao_record(path: str | Path, strain_per_volt: float | None = None) -> R
                 continue
         header = text.splitlines()[0].split(",")
         body = np.loadtxt(text.splitlines()[1:], delimiter=",")
-    elif suffix in (".xls", ".xlsx"):
-        df = pd.read_excel(path, header=None, engine="xlrd" if suffix == ".xls" else "openpyxl")
+    elif suffix == ".xls":  # old BIFF format: xlrd directly (pandas' xlrd engine is deprecated)
+        import xlrd
+
+        sheet = xlrd.open_workbook(str(path)).sheet_by_index(0)
+        header = [str(v) for v in sheet.row_values(0)]
+        body = pd.DataFrame([sheet.row_values(r) for r in range(1, sheet.nrows)]).apply(
+            pd.to_numeric, errors="coerce").to_numpy(dtype=float)
+    elif suffix == ".xlsx":
+        df = pd.read_excel(path, header=None, engine="openpyxl")
         header = [str(h) for h in df.iloc[0]]
         body = df.iloc[1:].apply(pd.to_numeric, errors="coerce").to_numpy(dtype=float)
     else:

@@ -9,8 +9,8 @@ Steps (each one a function below, with its equation):
 1. Volts to strain, compression positive: :math:`\varepsilon_k(t) = s\,f\,U_k(t)` with the bridge
    factor :math:`f` [strain/V] (:func:`bridge_strain_per_volt`) and the sign :math:`s=\pm 1` of a
    compressive signal in the record.
-2. Provisional baseline and noise of every channel from the first samples: median and
-   :math:`\hat\sigma = 1.4826\,\mathrm{MAD}`; isolated spikes removed (:func:`despike`).
+2. Provisional noise of every channel from the first samples, :math:`\hat\sigma = 1.4826\,\mathrm{MAD}`;
+   isolated spikes removed (:func:`despike`); provisional baseline = mean of the first samples.
 3. Arrival of the incident wave at the incident gauge (:func:`detect_arrival`): first *sustained*
    exceedance of :math:`h = \max(k\,\hat\sigma, \phi\,\max\varepsilon)` by the smoothed signal, walked
    back to the last sample at noise level (the foot of the pulse).
@@ -204,7 +204,8 @@ def despike(x: np.ndarray, sigma: float, k_sigma: float = 8.0, k_slope: float = 
     :math:`d_i = x_i - \mathrm{med}_5(x)_i`, exceeds both :math:`k_\sigma \sigma` (noise) and
     :math:`k_s` times the local step size (median of :math:`|\Delta x|` over 11 samples), so steep
     but smooth pulse fronts and rounded peaks are kept (there :math:`|d|` is at most about one step).
-    A spike is replaced by the running median. Repeated ``passes`` times.
+    Spike samples are replaced by linear interpolation between the nearest clean samples.
+    Repeated ``passes`` times.
 
     Returns the cleaned copy and the number of samples replaced.
     """
@@ -220,7 +221,9 @@ def despike(x: np.ndarray, sigma: float, k_sigma: float = 8.0, k_slope: float = 
         spikes = np.flatnonzero((np.abs(d) > k_sigma * sigma) & (np.abs(d) > k_slope * local))
         if spikes.size == 0:
             break
-        y[spikes] = med[spikes]
+        good = np.ones(y.size, dtype=bool)
+        good[spikes] = False
+        y[spikes] = np.interp(spikes, np.flatnonzero(good), y[good])
         total += int(spikes.size)
     return y, total
 
@@ -343,7 +346,7 @@ def select_gauges(channels: np.ndarray, names: tuple[str, ...], baseline: np.nda
             if on is not None:
                 flagged.append(k)
                 notes.append(f"{names[k]}: saturated (stuck at {seg[on]:.4g} while its partner moves) "
-                             f"inside the analysed span; dropped")
+                             f"inside the analysed span, dropped")
         keep = [k for k in keep if k not in flagged]
     if len(keep) == 2:
         a, b = channels[keep[0], span], channels[keep[1], span]
@@ -355,13 +358,13 @@ def select_gauges(channels: np.ndarray, names: tuple[str, ...], baseline: np.nda
             bad = keep[int(np.argmax(rough))]
             keep.remove(bad)
             notes.append(f"{names[bad]}: disagrees with its partner (rms difference {mismatch:.0%} of peak) "
-                         f"and is {max(rough) / max(min(rough), 1e-300):.1f}x rougher; dropped as faulty")
+                         f"and is {max(rough) / max(min(rough), 1e-300):.1f}x rougher, dropped as faulty")
         elif mismatch > mismatch_tol:
             notes.append(f"{names[keep[0]]}/{names[keep[1]]}: gauges disagree (rms difference {mismatch:.0%} "
-                         f"of peak) with no clear faulty one; averaged, treat this bar's waves with care")
+                         f"of peak) with no clear faulty one, averaged: treat this bar's waves with care")
     if not keep:
         keep = list(range(n))
-        notes.append("every gauge flagged; all kept")
+        notes.append("every gauge flagged, all kept")
     return keep, notes
 
 
@@ -549,7 +552,6 @@ def reduce_record(raw: "RawRecord", bar: BarSetup | None = None, specimen_length
 
     # step 2: provisional baseline / noise from the first samples (robust), despiking
     n0 = int(min(max(50, n // 10), 200, n))
-    base0 = np.median(eps[:, :n0], axis=1)
     sig0 = np.array([robust_std(e[:n0]) for e in eps])
     sig0 = np.where(sig0 > 0, sig0, 1e-12)
     spikes: dict[str, int] = {}
@@ -558,6 +560,9 @@ def reduce_record(raw: "RawRecord", bar: BarSetup | None = None, specimen_length
             eps[k], spikes[names[k]] = despike(eps[k], sig0[k])
     else:
         spikes = {nm: 0 for nm in names}
+    # mean, not median, after despiking: the median of coarsely quantized noise is biased by up to
+    # half a quantum, which would hold a smoothed baseline-free signal above the foot level
+    base0 = eps[:, :n0].mean(axis=1)
     eps0 = eps - base0[:, None]
 
     # step 3: arrival at the incident gauge: the earliest channel arrival (garbage from a failing gauge
@@ -608,7 +613,7 @@ def reduce_record(raw: "RawRecord", bar: BarSetup | None = None, specimen_length
     tra = eps[n_i:][keep_t].mean(axis=0)
 
     # re-detect the arrival on the averaged incident signal (cleaner than any single gauge)
-    inc_b0 = inc - np.median(inc[:n0])
+    inc_b0 = inc - inc[:n0].mean()
     try:
         i_a2 = detect_arrival(inc_b0, max(robust_std(inc[:n0]), 1e-12), dt, k_sigma, threshold_fraction)
         if abs(i_a2 - i_a) * dt < 0.25 * T_w:
@@ -629,7 +634,7 @@ def reduce_record(raw: "RawRecord", bar: BarSetup | None = None, specimen_length
     sd_tra = float(np.std(tra[pre], ddof=1))
 
     # the incident pulse must end before the reflected wave reaches the gauge (2 x_I / c0 later)
-    n_g = min(int(round(2.0 * x_i / c0 / dt)), n - i_a)
+    n_g = min(int(math.floor(2.0 * x_i / c0 / dt + 1e-9)) + 1, n - i_a)
     seg = inc[i_a:i_a + n_g]
     j_pk = int(np.argmax(seg))
     h_end = max(k_sigma * sd_inc, threshold_fraction * float(seg[j_pk]))
