@@ -36,6 +36,7 @@ __all__ = [
     "summarize",
     "markdown_table",
     "readme_section",
+    "other_lab_checks",
     "update_readme",
     "main",
     "TOLERANCE",
@@ -160,9 +161,70 @@ def _summary_markdown(summary: pd.DataFrame) -> str:
     return "\n".join(lines)
 
 
-def readme_section(table: pd.DataFrame) -> str:
+def other_lab_checks() -> pd.DataFrame:
+    """The other labs' example records reduced by the same code (SI units).
+
+    Columns: ``record``, ``reader``, ``peak_stress_Pa``, ``expected_Pa`` (from the folder's
+    PROVENANCE.md numbers where they give one, else NaN), ``force_balance_at_peak``.
+    """
+    from .paths import measured_data_dir
+    from .records import read_lanl_minikolsky, read_lanl_raw, read_yao_record
+
+    root = measured_data_dir()
+    lanl = root / "lanl-hoppybar-examples"
+    yao = root / "yao-shpb-shtb-metals-epoxy" / "impact_compression"
+    cases = [
+        ("LANL Cu 20061201_1148HE (.raw)", "read_lanl_raw",
+         lambda: read_lanl_raw(lanl / "LANLstandard" / "Cu" / "20061201_1148HE_CuOFE_273K.raw"), 336e6),
+        ("LANL mini-Kolsky PMMA-13 (Tektronix CSV)", "read_lanl_minikolsky",
+         lambda: read_lanl_minikolsky(lanl / "mini-Kolsky" / "PMMA-13" / "PMMA_13_Input.dat"),
+         71.7e9 * (2.381 / 1.54) ** 2 * 1.0 * 9.52e-4),
+        ("Yao 945 steel sample_01 (.xls, volts)", "read_yao_record",
+         lambda: read_yao_record(yao / "steel_945" / "sample_01" / "raw_voltage.xls", strain_per_volt=4.96e-4),
+         float("nan")),
+        ("Yao epoxy sample_02 (.xlsx, volts)", "read_yao_record",
+         lambda: read_yao_record(yao / "epoxy_resin" / "sample_02" / "raw_voltage.xlsx", strain_per_volt=5.01e-4),
+         float("nan")),
+    ]
+    rows = []
+    for label, reader, read, expected in cases:
+        red = reduce_record(read())
+        rows.append({"record": label, "reader": reader, "peak_stress_Pa": red.peak_stress,
+                     "expected_Pa": expected, "force_balance_at_peak": red.force_balance_at_peak})
+    return pd.DataFrame(rows)
+
+
+def _misses_markdown(table: pd.DataFrame) -> str:
+    miss = table[table["lithology"].isin(["CaMa", "SeeSst"]) & ~table["within_tolerance"]]
+    if miss.empty:
+        return "All CaMa and SeeSst records are within 5 %."
+    lines = ["CaMa/SeeSst records outside 5 %:"]
+    for r in miss.itertuples(index=False):
+        why = _short_note(r.notes) or "no quality flag"
+        lines.append(f"- {r.name.split('_Ti')[0]}: {100 * r.rel_error:+.1f}% (σ_mean {100 * r.rel_error_mean:+.1f}%, "
+                     f"R at peak {r.force_balance_at_peak:.2f}; {why}).")
+    return "\n".join(lines)
+
+
+def _other_labs_markdown(other: pd.DataFrame) -> str:
+    lines = ["| record | reader | peak σ₂ (MPa) | expected from PROVENANCE numbers (MPa) | R at peak |",
+             "|---|---|---|---|---|"]
+    for r in other.itertuples(index=False):
+        exp = "-" if np.isnan(r.expected_Pa) else f"{r.expected_Pa / 1e6:.0f}"
+        lines.append(f"| {r.record} | `{r.reader}` | {r.peak_stress_Pa / 1e6:.1f} | {exp} | "
+                     f"{r.force_balance_at_peak:.2f} |")
+    return "\n".join(lines)
+
+
+def readme_section(table: pd.DataFrame, other: pd.DataFrame | None = None) -> str:
     """The full README section (title, explanation, summary, table), markers included."""
     summary = summarize(table)
+    other_block = ""
+    if other is not None:
+        other_block = ("\nOther labs' records, read into the same `RawRecord` and reduced by the same "
+                       "code (format check only; metals and polymer). The LANL Cu peak lies at the end of "
+                       "the pulse, where the front force has already dropped, hence its R; no dispersion "
+                       "correction or fine alignment is applied.\n\n" + _other_labs_markdown(other) + "\n")
     text = f"""{README_TITLE}
 
 {BEGIN}
@@ -178,8 +240,17 @@ the peak (the spreadsheet's definition). R = 2|F₁−F₂|/(F₁+F₂). Regener
 
 {_summary_markdown(summary)}
 
+{_misses_markdown(table)}
+
+Gauge faults are handled, not hidden: a gauge stuck at the DAQ rail while its partner moves, or much
+rougher than a partner it disagrees with, is dropped and the other gauge of the pair used alone; a pair
+that disagrees with no clear culprit is averaged and flagged; an incident pulse longer than 2x_I/c0
+(incident and reflected waves overlapping at the gauge) is flagged. Two facts differ from the folder's
+PROVENANCE.md: the folder holds 51 records (SeeSst 24, not 22), and only SeeSst_001-015 use `,` as
+decimal separator (SeeSst_018 and 022-029 use `.`); the reader detects the separator per file.
+
 {markdown_table(table)}
-{END}
+{other_block}{END}
 """
     return text
 
@@ -235,7 +306,7 @@ def main(argv: list[str] | None = None) -> int:
         path.parent.mkdir(parents=True, exist_ok=True)
         _atomic_write(path, table.to_csv(index=False))
     if args.write_readme:
-        update_readme(args.write_readme, readme_section(table))
+        update_readme(args.write_readme, readme_section(table, other_lab_checks()))
         print(f"\nREADME section updated: {args.write_readme}", file=sys.stderr)
     return 0
 
