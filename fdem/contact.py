@@ -28,6 +28,8 @@ def surface_nodes(edges, edge_active, n_nodes):
 def _excluded(n, p, q, node_vertex, node_body, node_tri, e_tri, body_fracturable):
     if node_tri[n] == e_tri:
         return True
+    # Copies of one mesh vertex: the node sits on the edge's end, where the node-to-edge projection
+    # is ambiguous; the faces of a broken joint are kept apart by the joint's compressive branch.
     if node_vertex[n] == node_vertex[p] or node_vertex[n] == node_vertex[q]:
         return True
     b = node_body[n]
@@ -40,8 +42,8 @@ def _excluded(n, p, q, node_vertex, node_body, node_tri, e_tri, body_fracturable
 def build_pairs(x, edges, edge_active, edge_tri, snodes, node_vertex, node_body, node_tri,
                 body_fracturable, buffer):
     """All (node, edge) pairs with node-to-segment distance <= buffer, excluding a node against an
-    edge of its own triangle, an edge sharing its mesh vertex, and pairs inside a body that cannot
-    fracture.
+    edge of its own triangle, an edge ending at a copy of the node's own mesh vertex, and pairs
+    inside a body that cannot fracture.
 
     Also returns the outward unit normal of every surface node (mean of its active edges' normals),
     which the contact kernel uses to reject an edge facing the same way (node-to-segment corner

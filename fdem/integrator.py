@@ -68,7 +68,7 @@ def _apply_velocity_bc(v, mass, vel_nodes, vel_dir, vel_hist, hv):
 @njit(cache=True)
 def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
              jn, jarea, kn, kt, ft, fs, dn, dtm, tanphi, jedges, sa, sb, sc, Dmax, broken,
-             edges, edge_tri, edge_active, edge_dlim, edge_thick,
+             edges, edge_tri, edge_active, edge_dlim, edge_thick, tri_edges,
              node_body, node_vertex, node_tri, node_thick, body_fracturable, n_bodies,
              p_c, mu_c, buffer, use_contact,
              vel_nodes, vel_dir, vel_hist, tr_nodes, tr_dir, tr_area, tr_imp, tr_hist,
@@ -87,6 +87,7 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
     cursor = np.zeros(max(nh, 1), np.int64)
     hv = np.zeros(max(nh, 1))
     newly = np.empty(max(jn.shape[0], 1), np.int64)
+    newly_dam = np.empty(max(jn.shape[0], 1), np.int64)
     bforce = np.zeros((n_bodies, 2))
     E = np.zeros(8)
     # Contact state
@@ -111,8 +112,8 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
         _hist_eval(hist_ptr, hist_t, hist_v, cursor, 0.0, hv)
         E[7] += _apply_velocity_bc(v, mass, vel_nodes, vel_dir, vel_hist, hv)
     Us, Pd = triangle_forces(x, v, tri, dminv, vol0, lam, mu, eta, f)
-    Psi, dis, nnew = joint_forces(x, jn, jarea, kn, kt, ft, fs, dn, dtm, tanphi, sa, sb, sc,
-                                  Dmax, broken, f, newly)
+    Psi, dis, nnew, ndam = joint_forces(x, jn, jarea, kn, kt, ft, fs, dn, dtm, tanphi, sa, sb,
+                                        sc, Dmax, broken, f, newly, newly_dam)
     Uc, Pf, pen = contact_forces(x, v, inv_mass, pair_node, pair_edge, pair_node.shape[0],
                                  node_normal, edges, edge_dlim, edge_thick, node_thick, node_body, p_c, mu_c, dt, f,
                                  bforce)
@@ -153,7 +154,7 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
                     dd = ddx * ddx + ddy * ddy
                     if dd > dmax2:
                         dmax2 = dd
-                if dmax2 > 0.25 * buffer * buffer or (pending_faces and steps_since >= 10):
+                if dmax2 > 0.25 * buffer * buffer or (pending_faces and steps_since >= 5):
                     snodes = surface_nodes(edges, edge_active, n)
                     pair_node, pair_edge, node_normal = build_pairs(
                         x, edges, edge_active, edge_tri, snodes, node_vertex, node_body, node_tri,
@@ -168,14 +169,25 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
             f[:, :] = 0.0
             bforce[:, :] = 0.0
             Us, Pd = triangle_forces(x, v, tri, dminv, vol0, lam, mu, eta, f)
-            Psi, dis, nnew = joint_forces(x, jn, jarea, kn, kt, ft, fs, dn, dtm, tanphi, sa, sb,
-                                          sc, Dmax, broken, f, newly)
+            Psi, dis, nnew, ndam = joint_forces(x, jn, jarea, kn, kt, ft, fs, dn, dtm, tanphi, sa,
+                                                sb, sc, Dmax, broken, f, newly, newly_dam)
             E[4] += dis
-            if nnew > 0:
-                for k in range(nnew):
-                    edge_active[jedges[newly[k], 0]] = True
-                    edge_active[jedges[newly[k], 1]] = True
-                pending_faces = True
+            # A joint that starts to soften exposes all edges of its two triangles to contact while
+            # they still fit together, so no overlap can build up unseen before the faces part.
+            for k in range(ndam):
+                for side in range(2):
+                    t_ = edge_tri[jedges[newly_dam[k], side]]
+                    for le in range(3):
+                        ed = tri_edges[t_, le]
+                        if ed >= 0 and not edge_active[ed]:
+                            edge_active[ed] = True
+                            pending_faces = True
+            for k in range(nnew):
+                for side in range(2):
+                    ed = jedges[newly[k], side]
+                    if not edge_active[ed]:
+                        edge_active[ed] = True
+                        pending_faces = True
             Uc, Pf, pen = contact_forces(x, v, inv_mass, pair_node, pair_edge, pair_node.shape[0],
                                          node_normal, edges, edge_dlim, edge_thick, node_thick, node_body, p_c,
                                          mu_c, dt, f, bforce)

@@ -140,7 +140,8 @@ def _psi_branch(u, k, fmax):
 
 
 @njit(cache=True)
-def joint_forces(x, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax, broken, f, newly_broken):
+def joint_forces(x, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax, broken, f, newly_broken,
+                 newly_damaged):
     """Cohesive 4-node joints (Munjiza's combined single and smeared crack, paper Appendix A).
 
     Nodes (a1, a2, b1, b2): a1->a2 is the edge of triangle A in its counter-clockwise order, b1/b2 the
@@ -156,16 +157,20 @@ def joint_forces(x, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax, b
       (eq. A3) scales both modes, so unloading and reloading never restores strength.
     The energy released when Dmax grows at fixed gap is the dissipated energy (psi(zeta_old) -
     psi(zeta_new)); a monotonic pull dissipates E + sigma_max o_p / 2 per unit area. A joint whose
-    two Gauss points reach D >= 1 is broken: it carries nothing more and its faces join the contact.
+    two Gauss points reach D >= 1 is broken: it carries no tension or shear any more, its faces join
+    the contact, and it keeps only the compressive penalty while its two faces still overlap.
 
-    Returns (stored joint energy [J], dissipated energy this call [J], number newly broken).
+    Joints whose damage first becomes positive are listed in newly_damaged, so that the integrator
+    can expose their triangles to contact before the faces separate.
+
+    Returns (stored joint energy [J], dissipated energy this call [J], number newly broken,
+    number newly damaged).
     """
     Psi = 0.0
     dissipated = 0.0
     nnew = 0
+    ndam = 0
     for jj in range(jn.shape[0]):
-        if broken[jj]:
-            continue
         a1 = jn[jj, 0]
         a2 = jn[jj, 1]
         b1 = jn[jj, 2]
@@ -201,6 +206,26 @@ def joint_forces(x, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax, b
             o = gx * nx + gy * ny
             s = gx * tx + gy * ty
             sig_c = k_n * o if o < 0.0 else 0.0
+            if broken[jj]:
+                # A broken joint keeps only its compressive branch while its faces still overlap
+                # along the joint (|slip| < half its length): they cannot pass through each other.
+                if sig_c < 0.0 and abs(s) < 0.5 * L:
+                    psi = w * 0.5 * sig_c * o
+                    Tx = w * sig_c * nx
+                    Ty = w * sig_c * ny
+                else:
+                    psi = 0.0
+                    Tx = 0.0
+                    Ty = 0.0
+                if gp == 0:
+                    psi_gp0 = psi
+                    T0x = Tx
+                    T0y = Ty
+                else:
+                    psi_gp1 = psi
+                    T1x = Tx
+                    T1y = Ty
+                continue
             f_s = fs[jj] - tanphi[jj] * sig_c
             o_pos = o if o > 0.0 else 0.0
             ex_o = o_pos - f_t / k_n
@@ -213,6 +238,9 @@ def joint_forces(x, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax, b
             dm = Dmax[jj, gp]
             zeta = 1.0 if dm <= 0.0 else z(dm, a, b, c)
             if D > dm:
+                if dm <= 0.0 and Dmax[jj, 1 - gp] <= 0.0:
+                    newly_damaged[ndam] = jj
+                    ndam += 1
                 zeta_new = z(D, a, b, c)
                 dissipated += w * (zeta - zeta_new) * psi_pos
                 Dmax[jj, gp] = D
@@ -234,13 +262,34 @@ def joint_forces(x, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax, b
                 psi_gp1 = psi
                 T1x = Tx
                 T1y = Ty
-        if n_broken_gp == 2:
-            # Breaking releases what the joint still stores (its compressive part, if any).
-            dissipated += psi_gp0 + psi_gp1
+        if n_broken_gp == 2 and not broken[jj]:
+            # Breaking releases the cohesive energy still stored; the compressive part stays.
+            comp = 0.0
+            for gp in range(2):
+                xi = _G0 if gp == 0 else _G1
+                o = ((1.0 - xi) * g1x + xi * g2x) * nx + ((1.0 - xi) * g1y + xi * g2y) * ny
+                if o < 0.0:
+                    comp += w * 0.5 * k_n * o * o
+            dissipated += psi_gp0 + psi_gp1 - comp
+            psi_gp0 = 0.0
+            psi_gp1 = comp
             broken[jj] = True
             newly_broken[nnew] = jj
             nnew += 1
-            continue
+            T0x = 0.0
+            T0y = 0.0
+            T1x = 0.0
+            T1y = 0.0
+            for gp in range(2):
+                xi = _G0 if gp == 0 else _G1
+                o = ((1.0 - xi) * g1x + xi * g2x) * nx + ((1.0 - xi) * g1y + xi * g2y) * ny
+                if o < 0.0:
+                    if gp == 0:
+                        T0x = w * k_n * o * nx
+                        T0y = w * k_n * o * ny
+                    else:
+                        T1x = w * k_n * o * nx
+                        T1y = w * k_n * o * ny
         Psi += psi_gp0 + psi_gp1
         fa1x = (1.0 - _G0) * T0x + (1.0 - _G1) * T1x
         fa1y = (1.0 - _G0) * T0y + (1.0 - _G1) * T1y
@@ -254,7 +303,7 @@ def joint_forces(x, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax, b
         f[b1, 1] -= fa1y
         f[b2, 0] -= fa2x
         f[b2, 1] -= fa2y
-    return Psi, dissipated, nnew
+    return Psi, dissipated, nnew, ndam
 
 
 @njit(cache=True)

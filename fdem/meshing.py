@@ -49,5 +49,5 @@ def disc(radius: float, h: float, center=(0.0, 0.0), quality: float = 30.0, extr
     if extra_points is not None:
         pts = np.vstack([pts, np.asarray(extra_points, float)])
     max_area = np.sqrt(3) / 4 * h**2
-    out = tr.triangulate({"vertices": pts, "segments": seg}, f"pq{quality:g}a{max_area:.12g}Q")
+    out = tr.triangulate({"vertices": pts, "segments": seg}, f"pq{quality:g}a{max_area:.15f}Q")
     return np.asarray(out["vertices"]), np.asarray(out["triangles"], np.int64)

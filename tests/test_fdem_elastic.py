@@ -24,9 +24,9 @@ def _forces(model, x):
                            model.eta, f)
     Dmax = np.zeros((model.n_joints, 2))
     broken = np.zeros(model.n_joints, np.bool_)
-    Psi, dis, _ = joint_forces(x, model.jn, model.jarea, model.kn, model.kt, model.ft, model.fs,
+    Psi, dis, _, _ = joint_forces(x, model.jn, model.jarea, model.kn, model.kt, model.ft, model.fs,
                                model.dn, model.dt, model.tanphi, *model.softening, Dmax, broken,
-                               f, np.zeros(model.n_joints, np.int64))
+                               f, np.zeros(model.n_joints, np.int64), np.zeros(model.n_joints, np.int64))
     return f, U, Psi
 
 

@@ -92,7 +92,7 @@ class _Joint:
         f = np.zeros_like(x)
         joint_forces(x, self.m.jn, self.m.jarea, self.m.kn, self.m.kt, self.m.ft, self.m.fs,
                      self.m.dn, self.m.dt, self.m.tanphi, *self.m.softening, self.Dmax,
-                     self.broken, f, np.zeros(1, np.int64))
+                     self.broken, f, np.zeros(1, np.int64), np.zeros(1, np.int64))
         F = -f[self.nB].sum(axis=0) / self.m.jarea[0]
         return float(F @ n), float(F @ t)
 
