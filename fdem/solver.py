@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .integrator import ENERGY_NAMES, STATUS_ENERGY, STATUS_NONFINITE, STATUS_OK, run_loop
-from .model import Model, stable_time_step
+from .model import DEFAULT_SAFETY, Model, stable_time_step
 
 
 @dataclass
@@ -121,7 +121,7 @@ def _resolve(sets, probes, kind):
     return out
 
 
-def run(model: Model, t_end: float, *, dt: float | None = None, safety: float = 0.8,
+def run(model: Model, t_end: float, *, dt: float | None = None, safety: float = DEFAULT_SAFETY,
         sample_dt: float | None = None, velocity_bcs=(), traction_bcs=(), stress_probes=(),
         node_probes=(), x_init=None, v_init=None, energy_guard: float = 10.0) -> Result:
     """Run an explicit dynamic simulation from t = 0 to t_end [s].
