@@ -36,3 +36,16 @@ __all__ = [
     "member_table", "misfit_table", "nrmse", "observation_error", "parameter_summary", "posterior_dict",
     "rmse", "stratum_index", "truncation_rank",
 ]
+
+# Diagnosis of the calibrated model's residual and choice of model extensions (issue 8).
+from .diagnosis import (CalibrationResult, Candidate, accept_effect, bic, covariate_trends, curve_errors,
+                        default_windows, diagnose_loop, effective_sample_size, ensemble_sensitivity,
+                        finite_difference_sensitivity, rank_candidates, report_to_json, score_test,
+                        structure_tests, whitened_residual, write_report)
+
+__all__ += [
+    "CalibrationResult", "Candidate", "accept_effect", "bic", "covariate_trends", "curve_errors",
+    "default_windows", "diagnose_loop", "effective_sample_size", "ensemble_sensitivity",
+    "finite_difference_sensitivity", "rank_candidates", "report_to_json", "score_test", "structure_tests",
+    "whitened_residual", "write_report",
+]

@@ -1,0 +1,351 @@
+"""Effect catalogue: switchable model extensions for the discrepancy loop (DESIGN section 4, issue 8).
+
+The base model declares none of these. Each effect is a named entry with its parameters (named
+``<effect>.<param>``, SI units), a prior box, a null value (the value at which the effect is off and
+the model is the base model) and a one-line description with its equation. Two kinds:
+
+* **measurement** effects act on a simulated specimen-stress curve ``s(t)`` in the measurement chain
+  and cost no new FDEM run. Applied in this order (all are linear in ``s``; shift, low-pass and gain
+  commute, the baseline is added after the gain so the gain does not scale it)::
+
+      y(t) = g * LP_tau[s](t - dt) + offset + drift * (t - t_0)          t_0 = time_s[0]
+
+  ``trigger_shift.dt_s``            dt [s]: a positive dt delays the curve, s(t - dt) by linear
+                                    interpolation (held at the first/last value outside the record).
+  ``gauge_gain.g``                  g [-]: gauge factor / bridge calibration error, multiplicative.
+  ``baseline.offset_Pa``            offset [Pa] and
+  ``baseline.drift_Pa_per_s``       drift [Pa/s]: a zero-level error and a linear drift from t_0.
+  ``lowpass.tau_s``                 tau = 1 / (2 pi f_c) [s]: a one-pole (RC) amplifier low-pass,
+                                    tau y' + y = x, applied causally. Parametrised by tau rather than
+                                    f_c so the null (no filter, f_c = infinity) is the finite tau = 0.
+
+  The low-pass is discretised exactly for an input that is linear between samples (first-order hold)
+  on a uniform grid of step h, with a = exp(-h / tau)::
+
+      y_k = a y_{k-1} + b0 x_k + b1 x_{k-1},   b0 = 1 - (tau/h)(1 - a),   b1 = (tau/h)(1 - a) - a
+
+  (``scipy.signal.lfilter``; b0 + b1 = 1 - a, so a constant passes unchanged; tau -> 0 gives
+  y = x.) The filter starts in steady state at the first sample. Its step response is
+  ``1 - exp(-t / tau)``: 63.2% at t = tau. To first order in tau it is a delay by tau
+  (``LP_tau[s] ~ s - tau s'``), the same first-order signature as a trigger shift; the two separate
+  at second order (the low-pass also rounds the peak), which is why the diagnosis loop
+  (:func:`enkf.diagnosis.diagnose_loop`) re-calibrates near-tied candidates before choosing.
+
+* **physical** effects live in the FDEM engine and need a new simulation. They are declared here
+  (name, parameters, box, null, meaning) and passed to the simulator as extra
+  ``--param <effect>.<param>=value``; the nulls are the base model's settings:
+
+  ``rate_strength.k``               dynamic increase factor on both joint strengths,
+                                    sigma_n,t(rate) = sigma_n,t * DIF, DIF = max(1, 1 + k log10(rate/rate0)),
+                                    rate0 = :data:`RATE0_PER_S` = 1 /s (quasi-static; no weakening below it),
+                                    rate = the joint's local strain rate, opening (normal) or sliding
+                                    (tangential) rate divided by the joint's element size h. k = 0.42
+                                    gives DIF = 1.85 at 100 /s, the cap of one published tensile law
+                                    (notes/reference-values.md), hence the box [0, 0.6].
+  ``damping.beta``                  element viscous damping as a fraction of critical,
+                                    eta = 2 h beta sqrt(E rho) (Y lineage; fdem.model.build_model's
+                                    damping_beta). Null 0 (the base model is undamped).
+  ``interface_friction.mu``         Coulomb friction coefficient of the bar-specimen contact
+                                    (fdem.model.ContactParams.friction). Null 0 (frictionless faces).
+  ``seating.compliance_m_per_Pa``   seating compliance C of the loaded faces: an extra face closure
+                                    delta = C sigma_n in series with the contact penalty, i.e. the
+                                    face's normal stiffness per unit area 1 / (1/k_contact + C).
+                                    Null 0 (perfect seating). A granite specimen's own compliance L/E
+                                    is ~1e-12 m/Pa (50 mm / 35 GPa), a 50 um asperity closure at
+                                    50 MPa is 1e-12 m/Pa; box [0, 2e-12].
+
+Public helpers: :func:`get_effect`, :func:`effects`, :func:`effect_of`, :func:`split_params`,
+:func:`apply_measurement`, :func:`bounds`, :func:`null_values`, :func:`candidates`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import signal
+
+#: Reference strain rate of the rate-strength law [1/s]: DIF = 1 at and below it.
+RATE0_PER_S = 1.0
+
+KINDS = ("physical", "measurement")
+
+
+@dataclass(frozen=True)
+class EffectParam:
+    """One parameter of an effect: short name (``dt_s``), prior box, null value, unit."""
+
+    name: str
+    lower: float
+    upper: float
+    null: float
+    unit: str
+
+    def __post_init__(self):
+        if not (math.isfinite(self.lower) and math.isfinite(self.upper) and self.lower < self.upper):
+            raise ValueError(f"parameter {self.name!r}: need finite lower < upper")
+        if not self.lower <= self.null <= self.upper:
+            raise ValueError(f"parameter {self.name!r}: null {self.null} outside [{self.lower}, {self.upper}]")
+
+
+@dataclass(frozen=True)
+class Effect:
+    """A switchable model extension.
+
+    ``apply`` (measurement effects only) maps ``(time_s, stress_Pa, **short_params) -> stress_Pa``.
+    ``fdem`` says, for physical effects, what the engine does with the parameters.
+    The attributes ``name``, ``param_names``, ``nulls``, ``lower``, ``upper`` are what
+    :func:`enkf.diagnosis.diagnose_loop` reads from a candidate.
+    """
+
+    name: str
+    kind: str
+    params: tuple[EffectParam, ...]
+    description: str
+    fdem: str = ""
+    apply: Callable[..., np.ndarray] | None = field(default=None, repr=False, compare=False)
+
+    def __post_init__(self):
+        if self.kind not in KINDS:
+            raise ValueError(f"effect {self.name!r}: kind must be one of {KINDS}")
+        if (self.kind == "measurement") != (self.apply is not None):
+            raise ValueError(f"effect {self.name!r}: measurement effects (only) need an apply function")
+
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        """Full parameter names, ``<effect>.<param>``."""
+        return tuple(f"{self.name}.{p.name}" for p in self.params)
+
+    @property
+    def nulls(self) -> tuple[float, ...]:
+        return tuple(p.null for p in self.params)
+
+    @property
+    def lower(self) -> tuple[float, ...]:
+        return tuple(p.lower for p in self.params)
+
+    @property
+    def upper(self) -> tuple[float, ...]:
+        return tuple(p.upper for p in self.params)
+
+    def null_params(self) -> dict[str, float]:
+        """``{<effect>.<param>: null}``."""
+        return dict(zip(self.param_names, self.nulls))
+
+    def to_dict(self) -> dict:
+        """JSON-ready description."""
+        return {"name": self.name, "kind": self.kind, "description": self.description, "fdem": self.fdem,
+                "params": {f"{self.name}.{p.name}": {"lower": p.lower, "upper": p.upper, "null": p.null,
+                                                      "unit": p.unit} for p in self.params}}
+
+
+# ----------------------------------------------------------------------------------------------
+# Measurement-chain operators: (time_s, stress_Pa, parameter) -> stress_Pa
+# ----------------------------------------------------------------------------------------------
+
+def _as_curve(time_s, stress_Pa) -> tuple[np.ndarray, np.ndarray]:
+    t = np.asarray(time_s, dtype=float)
+    s = np.asarray(stress_Pa, dtype=float)
+    if t.ndim != 1 or s.shape != t.shape or t.size < 2:
+        raise ValueError(f"time_s and stress_Pa must be 1-D arrays of equal length >= 2, got {t.shape}, {s.shape}")
+    if np.any(np.diff(t) <= 0):
+        raise ValueError("time_s must be strictly increasing")
+    return t, s
+
+
+def uniform_step(time_s) -> float:
+    """The sampling step of a uniform time grid; ValueError if the steps differ by more than 1e-6."""
+    t = np.asarray(time_s, dtype=float)
+    steps = np.diff(t)
+    h = float(np.mean(steps))
+    if np.max(np.abs(steps - h)) > 1e-6 * h:
+        raise ValueError("the low-pass filter needs a uniform time grid (resample the curve first)")
+    return h
+
+
+def time_shift(time_s, stress_Pa, dt_s: float) -> np.ndarray:
+    """``s(t - dt)`` by linear interpolation; a positive ``dt_s`` delays the curve. Outside the record the
+    first (before) and last (after) values are held."""
+    t, s = _as_curve(time_s, stress_Pa)
+    return np.interp(t - float(dt_s), t, s, left=s[0], right=s[-1])
+
+
+def gain(time_s, stress_Pa, g: float) -> np.ndarray:
+    """``g s(t)``."""
+    _, s = _as_curve(time_s, stress_Pa)
+    return float(g) * s
+
+
+def baseline(time_s, stress_Pa, offset_Pa: float = 0.0, drift_Pa_per_s: float = 0.0) -> np.ndarray:
+    """``s(t) + offset + drift (t - t_0)``, ``t_0`` the first sample time."""
+    t, s = _as_curve(time_s, stress_Pa)
+    return s + float(offset_Pa) + float(drift_Pa_per_s) * (t - t[0])
+
+
+def lowpass_coefficients(h: float, tau_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(b, a)`` of the first-order-hold discretisation of ``tau y' + y = x`` with step ``h``."""
+    if not (math.isfinite(tau_s) and tau_s >= 0):
+        raise ValueError(f"lowpass.tau_s must be finite and >= 0, got {tau_s}")
+    if tau_s == 0.0:
+        return np.array([1.0, 0.0]), np.array([1.0, 0.0])
+    a = math.exp(-h / tau_s)
+    c = (tau_s / h) * (-math.expm1(-h / tau_s))  # (tau/h)(1 - a), accurate for small h/tau
+    return np.array([1.0 - c, c - a]), np.array([1.0, -a])
+
+
+def lowpass(time_s, stress_Pa, tau_s: float) -> np.ndarray:
+    """One-pole amplifier low-pass ``tau y' + y = x`` (cutoff ``f_c = 1/(2 pi tau)``), causal, starting in
+    steady state at the first sample; ``tau_s = 0`` returns the curve unchanged. Uniform grid only."""
+    t, s = _as_curve(time_s, stress_Pa)
+    if float(tau_s) == 0.0:
+        return s.copy()
+    b, a = lowpass_coefficients(uniform_step(t), float(tau_s))
+    zi = signal.lfilter_zi(b, a) * s[0]
+    y, _ = signal.lfilter(b, a, s, zi=zi)
+    return y
+
+
+def cutoff_hz(tau_s: float) -> float:
+    """``f_c = 1 / (2 pi tau)`` [Hz]; infinite for ``tau = 0``."""
+    return math.inf if tau_s == 0 else 1.0 / (2.0 * math.pi * tau_s)
+
+
+# ----------------------------------------------------------------------------------------------
+# The catalogue
+# ----------------------------------------------------------------------------------------------
+
+_P = EffectParam
+
+CATALOGUE: dict[str, Effect] = {e.name: e for e in (
+    # measurement chain (order of application: MEASUREMENT_ORDER)
+    Effect("trigger_shift", "measurement", (_P("dt_s", -10e-6, 10e-6, 0.0, "s"),),
+           "trigger time shift: y(t) = s(t - dt) (linear interpolation; dt > 0 delays)",
+           apply=lambda t, s, dt_s=0.0: time_shift(t, s, dt_s)),
+    Effect("lowpass", "measurement", (_P("tau_s", 0.0, 5e-6, 0.0, "s"),),
+           "one-pole amplifier low-pass: tau y' + y = s, tau = 1/(2 pi f_c) (null 0 = no filter; "
+           "tau <= 5 us is f_c >= 32 kHz)",
+           apply=lambda t, s, tau_s=0.0: lowpass(t, s, tau_s)),
+    Effect("gauge_gain", "measurement", (_P("g", 0.8, 1.2, 1.0, "-"),),
+           "gauge gain: y(t) = g s(t)",
+           apply=lambda t, s, g=1.0: gain(t, s, g)),
+    Effect("baseline", "measurement",
+           (_P("offset_Pa", -5e6, 5e6, 0.0, "Pa"), _P("drift_Pa_per_s", -1e10, 1e10, 0.0, "Pa/s")),
+           "baseline offset and drift: y(t) = s(t) + offset + drift (t - t_0)",
+           apply=lambda t, s, offset_Pa=0.0, drift_Pa_per_s=0.0: baseline(t, s, offset_Pa, drift_Pa_per_s)),
+    # physical (FDEM engine)
+    Effect("rate_strength", "physical", (_P("k", 0.0, 0.6, 0.0, "-"),),
+           "strain-rate-dependent joint strength: sigma_n,t * DIF, DIF = max(1, 1 + k log10(rate/rate0)), "
+           "rate0 = 1 /s",
+           fdem="multiplies the tensile (sigma_n) and shear (sigma_t) strength of each joint by the DIF of "
+                "the joint's local strain rate (opening or sliding rate / element size h), rate0 = "
+                "RATE0_PER_S"),
+    Effect("damping", "physical", (_P("beta", 0.0, 1.0, 0.0, "-"),),
+           "element viscous damping: eta = 2 h beta sqrt(E rho), beta a fraction of critical",
+           fdem="fdem.model.build_model(damping_beta=beta); the stable time step shrinks by "
+                "sqrt(1 + beta^2) - beta"),
+    Effect("interface_friction", "physical", (_P("mu", 0.0, 0.6, 0.0, "-"),),
+           "bar-specimen Coulomb friction: |tau| <= mu sigma_n at the loaded faces",
+           fdem="fdem.model.ContactParams(friction=mu) on the bar-specimen contact pairs"),
+    Effect("seating", "physical", (_P("compliance_m_per_Pa", 0.0, 2e-12, 0.0, "m/Pa"),),
+           "contact seating: extra face closure delta = C sigma_n at the loaded faces",
+           fdem="normal stiffness per unit area of the bar-specimen contact 1/(1/k_contact + C), "
+                "C = compliance_m_per_Pa, in series with the contact penalty"),
+)}
+
+#: Order in which :func:`apply_measurement` applies the measurement effects.
+MEASUREMENT_ORDER = ("trigger_shift", "lowpass", "gauge_gain", "baseline")
+
+_PARAM_INDEX: dict[str, tuple[Effect, EffectParam]] = {
+    f"{e.name}.{p.name}": (e, p) for e in CATALOGUE.values() for p in e.params
+}
+
+
+def get_effect(name: str) -> Effect:
+    """The catalogue entry ``name``; KeyError naming the known effects otherwise."""
+    try:
+        return CATALOGUE[name]
+    except KeyError:
+        raise KeyError(f"unknown effect {name!r}; the catalogue has {sorted(CATALOGUE)}") from None
+
+
+def effects(kind: str | None = None) -> list[Effect]:
+    """Catalogue entries, all or of one ``kind`` ("physical" | "measurement")."""
+    if kind is not None and kind not in KINDS:
+        raise ValueError(f"kind must be one of {KINDS} or None")
+    return [e for e in CATALOGUE.values() if kind is None or e.kind == kind]
+
+
+def effect_of(param_name: str) -> Effect | None:
+    """The effect a parameter belongs to; ``None`` for a base parameter (no dot). A dotted name that
+    is not in the catalogue raises KeyError (typos should not pass silently as base parameters)."""
+    if "." not in param_name:
+        return None
+    try:
+        return _PARAM_INDEX[param_name][0]
+    except KeyError:
+        raise KeyError(f"unknown effect parameter {param_name!r}; known: {sorted(_PARAM_INDEX)}") from None
+
+
+def split_params(params: Mapping[str, float]) -> tuple[dict, dict, dict]:
+    """Split a parameter mapping into ``(base, physical, measurement)`` dicts (order kept).
+
+    Physical parameters go to the simulator together with the base ones; measurement ones to
+    :func:`apply_measurement`.
+    """
+    base, physical, measurement = {}, {}, {}
+    for name, value in params.items():
+        e = effect_of(name)
+        (base if e is None else physical if e.kind == "physical" else measurement)[name] = value
+    return base, physical, measurement
+
+
+def apply_measurement(curve_time, curve_stress, params: Mapping[str, float]) -> np.ndarray:
+    """Apply the measurement chain to a simulated curve: ``y = g LP_tau[s](t - dt) + offset + drift (t - t_0)``.
+
+    ``params`` may hold any parameters (base and physical ones are ignored); missing measurement
+    parameters take their null values, so ``apply_measurement(t, s, {})`` returns ``s`` unchanged.
+    """
+    t, s = _as_curve(curve_time, curve_stress)
+    _, _, meas = split_params(params)
+    by_effect: dict[str, dict[str, float]] = {}
+    for name, value in meas.items():
+        effect, p = _PARAM_INDEX[name]
+        v = float(value)
+        if not math.isfinite(v):
+            raise ValueError(f"{name} = {value!r} is not finite")
+        by_effect.setdefault(effect.name, {})[p.name] = v
+    y = s.copy()
+    for name in MEASUREMENT_ORDER:
+        if name in by_effect:
+            y = CATALOGUE[name].apply(t, y, **by_effect[name])
+    return y
+
+
+def bounds(param_names: Iterable[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Prior box ``(lower, upper)`` of the named effect parameters."""
+    names = list(param_names)
+    for n in names:
+        effect_of(n) or _raise_base(n)
+    return (np.array([_PARAM_INDEX[n][1].lower for n in names]),
+            np.array([_PARAM_INDEX[n][1].upper for n in names]))
+
+
+def null_values(param_names: Iterable[str] | None = None) -> dict[str, float]:
+    """``{param: null}`` for the named effect parameters (all of the catalogue by default)."""
+    names = list(_PARAM_INDEX) if param_names is None else list(param_names)
+    for n in names:
+        effect_of(n) or _raise_base(n)
+    return {n: _PARAM_INDEX[n][1].null for n in names}
+
+
+def candidates(names: Iterable[str] | None = None, kind: str | None = None) -> list[Effect]:
+    """The effects to offer the diagnosis loop: the named ones, or all (of a ``kind``)."""
+    if names is not None:
+        return [get_effect(n) for n in names]
+    return effects(kind)
+
+
+def _raise_base(name: str):
+    raise KeyError(f"{name!r} is a base parameter, not an effect parameter")
