@@ -1,8 +1,55 @@
-# Entry point of the calibration workflow.
-# The checkpoint loop (LHS -> member simulations -> analysis -> forecast) lands with the workflow
-# issue; until then the default target only reports that, so the install command is testable.
+# Calibration workflow: LHS ensemble -> one FDEM simulation per member (and record) -> curves on the
+# observation grid -> checkpoint analysis (ES-MDA / paper EnKF) -> next iteration or stop -> forecast
+# with the posterior mean -> plots, tables, summary.json. See README.md, "Running the workflow".
+#
+# The config is validated (config/schema.yaml + shpb.workflow_io.validate_config) and the measured
+# observation files are read and reduced before any job runs; a bad key, value or file stops here with
+# a message naming it.
+from pathlib import Path
+
+from snakemake.exceptions import WorkflowError
+from snakemake.utils import min_version
+
+from shpb.observations import ObservationFileError, check_record
+from shpb.workflow_io import ConfigError, validate_config
+
+min_version("9.0")
+
+
+configfile: "config/config.yaml"
+
+
+try:
+    _validated = validate_config(config, Path(workflow.basedir) / "config" / "schema.yaml", base_dir=".")
+except ConfigError as exc:
+    raise WorkflowError(str(exc)) from None
+config.clear()
+config.update(_validated)
+
+if workflow.is_main_process:
+    for _name, _exp in config["experiments"].items():
+        _paths = list(_exp["observations"].get("records") or [])
+        if _exp["observations"].get("incident_record"):
+            _paths.append(_exp["observations"]["incident_record"])
+        for _path in _paths:
+            try:
+                check_record(_path, _exp["observations"]["t_end"] if _exp["kind"] == "measured" else None)
+            except ObservationFileError as exc:
+                raise WorkflowError(f"experiment {_name!r}: {exc}") from None
+
+report: "report/workflow.rst"
+
+
+include: "rules/common.smk"
+include: "rules/observations.smk"
+include: "rules/ensemble.smk"
+include: "rules/assimilate.smk"
+include: "rules/forecast.smk"
+include: "rules/report.smk"
+
 
 rule all:
-    shell:
-        "echo 'workflow not built yet: the FDEM engine, SHPB models and EnKF library are installed; "
-        "see README.md for what runs today.'"
+    input:
+        expand("results/{exp}/summary.json", exp=RUN),
+        expand("results/{exp}/plots/{plot}.png", exp=RUN, plot=PLOTS),
+    default_target: True

@@ -1,0 +1,38 @@
+# Curves on the observation grid, then the checkpoint analysis of iteration k (misfit, failed
+# members, stop decision, analysis ensemble for k + 1).
+
+
+def member_files(wc, name):
+    return expand("results/{exp}/iter_{it}/members/{member}/{record}/{name}", exp=wc.exp, it=wc.it,
+                  member=member_ids(EXPERIMENTS[wc.exp]["ensemble_size"]), record=list(records(wc.exp)),
+                  name=name)
+
+
+rule aggregate:
+    input:
+        params="results/{exp}/iter_{it}/params.csv",
+        obs="results/{exp}/observations/obs.csv",
+        obs_meta="results/{exp}/observations/obs.json",
+        curves=lambda wc: member_files(wc, "curve.csv"),
+        runs=lambda wc: member_files(wc, "run.json"),
+    output:
+        responses="results/{exp}/iter_{it}/responses.csv",
+    params:
+        records=lambda wc: list(records(wc.exp)),
+    script:
+        "../scripts/aggregate.py"
+
+
+checkpoint analysis:
+    input:
+        params="results/{exp}/iter_{it}/params.csv",
+        prior="results/{exp}/iter_0/params.csv",
+        responses="results/{exp}/iter_{it}/responses.csv",
+        obs="results/{exp}/observations/obs.csv",
+        obs_meta="results/{exp}/observations/obs.json",
+    output:
+        analysis="results/{exp}/iter_{it}/analysis.json",
+    params:
+        inference=lambda wc: inference_settings(wc.exp),
+    script:
+        "../scripts/analysis.py"

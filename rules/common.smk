@@ -1,0 +1,63 @@
+# Shared names and the input functions that walk the checkpoint loop. No science here: the stop
+# decision is shpb.calibration.final_iteration, re-taken from the stored analyses with the current
+# stopping rule, so that changing a tolerance never invalidates finished iterations (re-run the final
+# targets with `-R summary forecast_params plots` to apply it).
+from shpb.calibration import ExperimentSpec
+from shpb.calibration import final_iteration as _final_iteration
+from shpb.workflow_io import experiment_records, member_ids, read_json
+
+EXPERIMENTS = config["experiments"]
+RUN = config["run"] or list(EXPERIMENTS)
+PLOTS = ["parameters", "ensemble_curves", "forecast", "misfit", "sensitivity"]
+
+wildcard_constraints:
+    exp="[A-Za-z][A-Za-z0-9_-]*",
+    it="[0-9]+",
+    member="[0-9]+",
+    record="[A-Za-z0-9][A-Za-z0-9_.-]*",
+
+localrules: lhs, propose, observations, aggregate, analysis, forecast_params, plots, summary
+
+
+def records(exp):
+    """{record name: raw file} ("synthetic" for a twin)."""
+    return experiment_records(EXPERIMENTS[exp])
+
+
+def spec(exp):
+    return ExperimentSpec.from_config(exp, EXPERIMENTS[exp])
+
+
+def final_k(exp):
+    """Walk the checkpoints k = 0, 1, ... until the (current) stop rule says stop; return that k."""
+    analyses = []
+    k = 0
+    while True:
+        path = checkpoints.analysis.get(exp=exp, it=k).output.analysis
+        analyses.append(read_json(path))
+        K, decision = _final_iteration(spec(exp), analyses)
+        if decision is not None:
+            return K
+        k += 1
+
+
+def iteration_files(exp, name):
+    """`name` of every iteration 0..K of the final loop."""
+    return [f"results/{exp}/iter_{k}/{name}" for k in range(final_k(exp) + 1)]
+
+
+def sim_settings(exp, preset=None):
+    """What a simulation of this experiment needs besides its parameters (also the params that make
+    Snakemake re-run a member when they change)."""
+    e = EXPERIMENTS[exp]
+    return {"geometry": e["geometry"], "preset": preset or e["preset"], "fixed": e["fixed"],
+            "t_end": e["simulation"]["t_end"], "sample_dt": e["simulation"]["sample_dt"],
+            "command": config["simulator"]}
+
+
+def inference_settings(exp):
+    """Config entries an analysis depends on (a change re-runs the analyses)."""
+    e = EXPERIMENTS[exp]
+    keys = ("method", "esmda", "max_iterations", "parameters", "transform", "inflation", "truncation",
+            "min_alive_fraction", "localization", "seed", "ensemble_size")
+    return {k: e[k] for k in keys}

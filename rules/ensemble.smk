@@ -1,0 +1,50 @@
+# The ensemble: the LHS prior (iteration 0), the analysis ensemble of the previous iteration
+# (iterations >= 1), and one simulation job per member and record.
+
+
+rule lhs:
+    output:
+        params="results/{exp}/iter_0/params.csv",
+    params:
+        inference=lambda wc: inference_settings(wc.exp),
+    script:
+        "../scripts/lhs.py"
+
+
+rule propose:
+    input:
+        analysis=lambda wc: f"results/{wc.exp}/iter_{int(wc.it) - 1}/analysis.json",
+    output:
+        params="results/{exp}/iter_{it}/params.csv",
+    wildcard_constraints:
+        it="[1-9][0-9]*",
+    script:
+        "../scripts/propose.py"
+
+
+def member_inputs(wc):
+    rec = records(wc.exp)[wc.record]
+    return {"params": f"results/{wc.exp}/iter_{wc.it}/params.csv", "record": [rec] if rec else []}
+
+
+rule member:
+    """One FDEM simulation. A numerical failure (exit code 3) or rejected parameters (2) leave a
+    failed run.json and an empty curve (the analysis drops the member with that reason); a crash is
+    retried (`member_retries`) and recorded as failed on the last attempt."""
+    input:
+        unpack(member_inputs),
+    output:
+        curve="results/{exp}/iter_{it}/members/{member}/{record}/curve.csv",
+        run="results/{exp}/iter_{it}/members/{member}/{record}/run.json",
+    log:
+        "results/{exp}/iter_{it}/members/{member}/{record}/simulate.log",
+    params:
+        sim=lambda wc: sim_settings(wc.exp),
+        record_file=lambda wc: records(wc.exp)[wc.record],
+        max_attempts=config["member_retries"] + 1,
+    threads: 1
+    retries: config["member_retries"]
+    resources:
+        attempt=lambda wc, attempt: attempt,
+    script:
+        "../scripts/member.py"

@@ -1,0 +1,32 @@
+# The forecast (best-estimate) simulation with the posterior-mean parameters of the final iteration.
+
+
+rule forecast_params:
+    input:
+        analyses=lambda wc: iteration_files(wc.exp, "analysis.json"),
+        params=lambda wc: iteration_files(wc.exp, "params.csv")[-1],
+    output:
+        params="results/{exp}/forecast/params.json",
+    script:
+        "../scripts/forecast_params.py"
+
+
+rule forecast:
+    input:
+        unpack(lambda wc: {"params": f"results/{wc.exp}/forecast/params.json",
+                           "record": [p for p in [records(wc.exp)[wc.record]] if p]}),
+    output:
+        curve="results/{exp}/forecast/{record}/curve.csv",
+        run="results/{exp}/forecast/{record}/run.json",
+    log:
+        "results/{exp}/forecast/{record}/simulate.log",
+    params:
+        sim=lambda wc: sim_settings(wc.exp),
+        record_file=lambda wc: records(wc.exp)[wc.record],
+        max_attempts=config["member_retries"] + 1,
+    threads: 1
+    retries: config["member_retries"]
+    resources:
+        attempt=lambda wc, attempt: attempt,
+    script:
+        "../scripts/forecast.py"

@@ -1,0 +1,14 @@
+"""iter_<k>/analysis.json: misfit, failed members, stop decision and the next ensemble (checkpoint)."""
+import pandas as pd
+
+from shpb.calibration import ExperimentSpec, analysis_step
+from shpb.observations import read_observations
+from shpb.workflow_io import atomic_write_json, read_responses
+
+exp = snakemake.wildcards.exp
+spec = ExperimentSpec.from_config(exp, snakemake.config["experiments"][exp])
+status, Y = read_responses(snakemake.input.responses)
+obs = read_observations(snakemake.input.obs, snakemake.input.obs_meta)
+result = analysis_step(spec, int(snakemake.wildcards.it), pd.read_csv(snakemake.input.params), Y, status, obs,
+                       pd.read_csv(snakemake.input.prior))
+atomic_write_json(snakemake.output.analysis, result)

@@ -1,0 +1,26 @@
+"""plots/*.png of a finished experiment (shpb.plots)."""
+import numpy as np
+import pandas as pd
+
+from shpb import plots
+from shpb.calibration import ExperimentSpec
+from shpb.observations import read_curve, read_observations
+from shpb.workflow_io import read_json, read_responses
+
+inp, out, exp = snakemake.input, snakemake.output, snakemake.wildcards.exp
+spec = ExperimentSpec.from_config(exp, snakemake.params.exp)
+obs = read_observations(inp.obs, inp.obs_meta)
+params = [pd.read_csv(p) for p in inp.params]
+analyses = [read_json(p) for p in inp.analyses]
+Ys = [read_responses(p)[1] for p in inp.responses]
+alive = [np.asarray(a["alive"], bool) for a in analyses]
+title = f"{exp} ({snakemake.params.exp['kind']}, {spec.method}, N = {spec.ensemble_size})"
+plots.plot_parameters(out.parameters, params, alive, spec.names, spec.lower, spec.upper, spec.truth, title)
+plots.plot_ensemble_curves(out.ensemble_curves, obs, Ys, title)
+forecast = {r: read_curve(p) for r, p in zip(obs.records, inp.forecast_curves)}
+plots.plot_forecast(out.forecast, obs, np.nanmean(Ys[0][alive[0]], axis=0), forecast, title,
+                    posterior_mean=np.nanmean(Ys[-1][alive[-1]], axis=0))
+plots.plot_misfit(out.misfit, [{"iteration": a["iteration"], **a["misfit"]} for a in analyses],
+                  [a["misfit_per_record"] for a in analyses], spec.criteria.target(obs.m), title)
+chi2 = np.array([m["chi2_per_obs"] if m["chi2_per_obs"] is not None else np.nan for m in analyses[0]["members"]])
+plots.plot_sensitivity(out.sensitivity, obs, params[0], Ys[0], spec.names, chi2, spec.truth, title)

@@ -1,0 +1,431 @@
+"""One calibration experiment as the workflow runs it: prior ensemble, per-iteration analysis, summary.
+
+The cycle of the paper (section 4: initialization, simulation, assimilation, cycle) split into the
+steps the Snakemake checkpoint loop runs as separate jobs, each a pure function of files:
+
+1. :func:`initial_ensemble` -- Latin hypercube sample of the prior box (``iter_0/params.csv``).
+2. (the simulations, one job per member and record; :func:`shpb.workflow_io.run_member`)
+3. :func:`analysis_step` -- for iteration ``k``: misfit of the ensemble and of its mean, failed members
+   and their reasons, spreads, the stop decision (:func:`decide`), and the analysis ensemble for
+   iteration ``k + 1`` (ES-MDA step ``alpha_k`` or the paper's EnKF, :mod:`enkf.analysis`). Written
+   as ``iter_<k>/analysis.json``. The analysis ensemble is computed whenever one can be (the ES-MDA
+   schedule is not exhausted), even if the decision is to stop: the decision is re-taken by the
+   workflow from the stored numbers with the *current* stopping rule (:func:`decide`), so that
+   changing a tolerance or the iteration budget never invalidates finished iterations.
+4. :func:`summary` -- ``summary.json`` (DESIGN section 6) from all iterations and the forecast.
+
+Randomness: one integer seed per experiment. Every draw uses its own generator
+``default_rng(SeedSequence(seed, spawn_key=(purpose, k)))`` (:func:`rng_for`): the LHS design, the
+twin's observation noise and the perturbations of each analysis ``k`` are independent streams, and a
+re-run reproduces every file bit for bit.
+
+Parameter posterior = the ensemble of the last simulated iteration (alive members): the analysis
+ensemble of the last analysis, which is the one the stop decision was taken on.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from enkf import (BoxTransform, EnsembleFailure, StopCriteria, check_stop, enkf_update, esmda_alphas,
+                  esmda_update, jsonable, latin_hypercube, localization_mask, mean_misfit, misfit_table,
+                  posterior_dict)
+
+from .observations import Observations
+
+__all__ = ["PURPOSES", "rng_for", "ExperimentSpec", "initial_ensemble", "analysis_step", "decide",
+           "final_iteration", "linear_sensitivity", "record_misfits", "summary"]
+
+#: Independent random streams of an experiment (the ``spawn_key`` of :func:`rng_for`).
+PURPOSES = {"lhs": 1, "noise": 2, "analysis": 3}
+
+
+def rng_for(seed: int, purpose: str, k: int = 0) -> np.random.Generator:
+    """The generator of one random stream: ``SeedSequence(seed, spawn_key=(PURPOSES[purpose], k))``."""
+    return np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(PURPOSES[purpose], int(k))))
+
+
+@dataclass(frozen=True)
+class ExperimentSpec:
+    """The inference settings of one experiment (a validated ``experiments.<name>`` config block)."""
+
+    name: str
+    names: tuple[str, ...]
+    lower: np.ndarray
+    upper: np.ndarray
+    ensemble_size: int
+    seed: int
+    method: str = "esmda"
+    alphas: tuple[float, ...] = ()
+    max_iterations: int = 3
+    transform_kind: str = "logit"
+    criteria: StopCriteria = field(default_factory=StopCriteria)
+    inflation: object = "default"
+    truncation: float | None = None
+    min_alive_fraction: float = 0.5
+    unrelated: Mapping[str, Sequence[Sequence[float]]] = field(default_factory=dict)
+    truth: Mapping[str, float] | None = None
+
+    @classmethod
+    def from_config(cls, name: str, exp: Mapping) -> "ExperimentSpec":
+        params = exp["parameters"]
+        names = tuple(params)
+        method = exp["method"]
+        if method == "esmda":
+            es = exp.get("esmda", {})
+            alphas = tuple(float(a) for a in (es.get("alphas") or esmda_alphas(int(es.get("steps", 3)))))
+            max_it = len(alphas)
+        else:
+            alphas = ()
+            max_it = int(exp["max_iterations"])
+        stop = exp.get("stopping", {})
+        criteria = StopCriteria(chi2_target=stop.get("chi2_target"), nrmse_tol=stop.get("nrmse_tol"),
+                                collapse_fraction=float(stop.get("collapse_fraction", 1e-3)), max_iterations=max_it)
+        truth = exp.get("observations", {}).get("truth")
+        return cls(name=name, names=names, lower=np.array([params[p][0] for p in names], float),
+                   upper=np.array([params[p][1] for p in names], float), ensemble_size=int(exp["ensemble_size"]),
+                   seed=int(exp["seed"]), method=method, alphas=alphas, max_iterations=max_it,
+                   transform_kind=exp.get("transform", "logit"), criteria=criteria,
+                   inflation=None if exp.get("inflation") == "none" else exp.get("inflation", "default"), truncation=exp.get("truncation"),
+                   min_alive_fraction=float(exp.get("min_alive_fraction", 0.5)),
+                   unrelated=dict(exp.get("localization") or {}),
+                   truth=None if truth is None else {p: float(truth[p]) for p in truth})
+
+    @property
+    def transform(self) -> BoxTransform:
+        return BoxTransform(self.lower, self.upper, kind=self.transform_kind)
+
+    def localization(self, obs: Observations) -> np.ndarray | None:
+        """The paper's localization mask ``M`` (n x m): zero for the declared unrelated time windows."""
+        if not self.unrelated:
+            return None
+        unrelated = {}
+        t = obs.time
+        for p, windows in self.unrelated.items():
+            sel = np.zeros(t.size, bool)
+            for t0, t1 in windows:
+                sel |= (t >= t0) & (t <= t1)
+            unrelated[self.names.index(p)] = sel
+        return localization_mask(len(self.names), obs.m, unrelated)
+
+
+def initial_ensemble(spec: ExperimentSpec) -> pd.DataFrame:
+    """``iter_0/params.csv``: LHS of the prior box, one row per member (``member`` + parameter columns)."""
+    P = latin_hypercube(spec.lower, spec.upper, spec.ensemble_size, rng_for(spec.seed, "lhs"))
+    return params_frame(P, spec.names)
+
+
+def params_frame(P: np.ndarray, names: Sequence[str]) -> pd.DataFrame:
+    df = pd.DataFrame(np.asarray(P, float), columns=list(names))
+    df.insert(0, "member", np.arange(len(df)))
+    return df
+
+
+def _spread(spec: ExperimentSpec, P: np.ndarray, alive: np.ndarray) -> np.ndarray | None:
+    if alive.sum() < 2:
+        return None
+    return spec.transform.to_unbounded(P[alive]).std(axis=0, ddof=1)
+
+
+def decide(spec: ExperimentSpec, k: int, misfit: Mapping, n_obs: int, spread, prior_spread) -> dict:
+    """The stop decision after ``k`` analyses (:func:`enkf.check_stop` with the experiment's rule).
+
+    ES-MDA: the convergence tests are taken only once its ``alpha`` schedule is complete (its posterior
+    is defined only there) and the schedule is the iteration budget. EnKF: every iteration.
+    """
+    allow = spec.method == "enkf" or k >= len(spec.alphas)
+    d = check_stop(k, chi2_per_obs=_nan(misfit.get("chi2_per_obs")), nrmse=_nan(misfit.get("nrmse")),
+                   n_obs=n_obs, spread=spread, prior_spread=prior_spread, criteria=spec.criteria,
+                   allow_convergence=allow)
+    return d.to_dict()
+
+
+def _nan(v) -> float:
+    return math.nan if v is None else float(v)
+
+
+def analysis_step(spec: ExperimentSpec, k: int, params: pd.DataFrame, responses: np.ndarray,
+                  member_status: pd.DataFrame, obs: Observations, prior_params: pd.DataFrame) -> dict:
+    """The ``iter_<k>/analysis.json`` dict: misfits, failures, spread, decision, analysis ensemble.
+
+    Parameters
+    ----------
+    params : ``iter_<k>/params.csv`` (``member`` + parameter columns).
+    responses : (N, m) member curves on the observation grid (NaN rows/blocks = failed).
+    member_status : one row per member: ``member, status ("ok"/"failed"), reason``.
+    prior_params : ``iter_0/params.csv`` (the reference spread of the collapse guard and inflation).
+
+    Raises
+    ------
+    EnsembleFailure
+        If fewer than ``min_alive_fraction`` of the members survived (the message lists why they failed).
+    """
+    names = list(spec.names)
+    P = params[names].to_numpy(float)
+    Y = np.asarray(responses, float)
+    N = P.shape[0]
+    if Y.shape != (N, obs.m):
+        raise ValueError(f"responses have shape {Y.shape}, expected ({N}, {obs.m})")
+    status_ok = member_status["status"].to_numpy(str) == "ok"
+    alive = status_ok & np.all(np.isfinite(Y), axis=1)
+    failed = []
+    for i in np.flatnonzero(~alive):
+        row = member_status.iloc[i]
+        reason = str(row.get("reason") or "")
+        if status_ok[i]:
+            reason = "simulated curve does not cover the observation grid (NaN on the grid)"
+        failed.append({"member": int(row["member"]), "reason": reason})
+
+    err = obs.error_model()
+    d = obs.values
+    transform = spec.transform
+    prior_spread = transform.to_unbounded(prior_params[names].to_numpy(float)).std(axis=0, ddof=1)
+    needed = max(2, math.ceil(spec.min_alive_fraction * N - 1e-12))
+    if alive.sum() < needed:
+        lines = "\n".join(f"  member {f['member']}: {f['reason']}" for f in failed)
+        raise EnsembleFailure(f"{spec.name}, iteration {k}: only {int(alive.sum())} of {N} members succeeded "
+                              f"(need {needed}, min_alive_fraction={spec.min_alive_fraction}). Failures:\n{lines}")
+
+    misfit = mean_misfit(Y, d, err, alive)
+    misfit_out = {"rmse_Pa": misfit["rmse"], "nrmse": misfit["nrmse"], "chi2_per_obs": misfit["chi2_per_obs"]}
+    spread = _spread(spec, P, alive)
+    decision = decide(spec, k, misfit, obs.m, spread, prior_spread)
+    members = misfit_table(Y, d, err, alive).rename(columns={"rmse": "rmse_Pa"})
+    members["member"] = params["member"].to_numpy(int)
+
+    update = None
+    next_params = None
+    alpha = None
+    if spec.method == "esmda" and k < len(spec.alphas):
+        alpha = spec.alphas[k]
+    elif spec.method == "enkf":
+        alpha = 1.0
+    if alpha is not None:
+        common = dict(rng=rng_for(spec.seed, "analysis", k), transform=transform,
+                      localization=spec.localization(obs), prior_std=prior_spread, alive=alive,
+                      min_alive_fraction=spec.min_alive_fraction, names=names)
+        if spec.method == "esmda":
+            infl = None if spec.inflation == "default" else spec.inflation
+            res = esmda_update(P, Y, d, err, alpha=alpha, inflation=infl,
+                               truncation=0.99 if spec.truncation is None else spec.truncation, **common)
+        else:
+            infl = "paper" if spec.inflation == "default" else spec.inflation
+            res = enkf_update(P, Y, d, err, inflation=infl,
+                              truncation=1.0 if spec.truncation is None else spec.truncation, **common)
+        update = res.to_dict()
+        update.pop("misfit_members", None)  # the same numbers are in "members" below
+        next_params = res.params.tolist()
+
+    return jsonable({
+        "experiment": spec.name,
+        "iteration": k,
+        "method": spec.method,
+        "alpha_next": alpha,
+        "n_members": N,
+        "n_alive": int(alive.sum()),
+        "alive": alive.tolist(),
+        "failed_members": failed,
+        "n_obs": obs.m,
+        "obs_error": err.describe(),
+        "misfit": misfit_out,
+        "misfit_per_record": record_misfits(Y, obs, alive),
+        "members": members.to_dict(orient="records"),
+        "posterior": posterior_dict(P, names, alive),
+        "spread_unbounded": None if spread is None else dict(zip(names, spread.tolist())),
+        "prior_spread_unbounded": dict(zip(names, prior_spread.tolist())),
+        "decision": decision,
+        "stop_criteria": spec.criteria.to_dict(),
+        "update": update,
+        "next_params": None if next_params is None else {"names": names, "values": next_params},
+    })
+
+
+def record_misfits(Y: np.ndarray, obs: Observations, alive=None) -> dict:
+    """Misfit of the ensemble-mean response per record: ``{record: {rmse_Pa, nrmse, chi2_per_obs}}``."""
+    Y = np.atleast_2d(np.asarray(Y, float))
+    alive = np.all(np.isfinite(Y), axis=1) if alive is None else np.asarray(alive, bool) & np.all(np.isfinite(Y), axis=1)
+    out = {}
+    for rec in obs.records:
+        sl = obs.record_slice(rec)
+        sub = Observations(obs.frame.iloc[sl].reset_index(drop=True), obs.error_kind, obs.corr_time)
+        m = mean_misfit(Y[:, sl], sub.values, sub.error_model(), alive)
+        out[rec] = {"rmse_Pa": m["rmse"], "nrmse": m["nrmse"], "chi2_per_obs": m["chi2_per_obs"]}
+    return out
+
+
+def final_iteration(spec: ExperimentSpec, analyses: Sequence[Mapping]) -> tuple[int, dict]:
+    """Re-take the stop decision over the stored iterations with the current rule: ``(K, decision)`` for
+    the first ``K`` that stops, or ``(len(analyses), None)`` if all of them continue (run another)."""
+    for a in analyses:
+        k = int(a["iteration"])
+        spread = a.get("spread_unbounded")
+        spread = None if spread is None else np.array([spread[p] for p in spec.names])
+        prior = np.array([a["prior_spread_unbounded"][p] for p in spec.names])
+        d = decide(spec, k, _misfit_for_decide(a["misfit"]), int(a["n_obs"]), spread, prior)
+        if d["stop"]:
+            return k, d
+        if a.get("next_params") is None:
+            return k, {**d, "stop": True, "reason": "no_update",
+                       "message": "the stored analysis has no update to continue from; re-run the analysis"}
+    return len(analyses), None
+
+
+def _misfit_for_decide(m: Mapping) -> dict:
+    return {"rmse": m.get("rmse_Pa"), "nrmse": m.get("nrmse"), "chi2_per_obs": m.get("chi2_per_obs")}
+
+
+def linear_sensitivity(params: pd.DataFrame, names: Sequence[str], lower, upper, responses: np.ndarray,
+                       obs: Observations, alive=None) -> dict:
+    """How strongly, and how separably, the curve constrains each parameter, from an ensemble.
+
+    Least-squares fit of the whitened responses on the parameters scaled to the box,
+    ``L^{-1} y_i ~ a + G u_i`` with ``u = (p - lower)/(upper - lower)``. Column ``j`` of ``G`` is the
+    change of the curve, in noise standard deviations, when parameter ``j`` crosses its whole box.
+    The linearised Fisher information is ``F = G^T G`` (white whitened noise), so
+    ``sqrt((F^-1)_jj) * (upper - lower)`` is the Cramer-Rao bound of the parameter's std [its units]
+    from this observation vector, *with the other parameters unknown*; ``1/sqrt(F_jj)`` is the bound
+    if they were known. A ratio ``crlb_joint / crlb_alone`` much larger than 1 means the parameters
+    trade off (identifiability, not sensitivity, is the problem). Valid where the response is close to
+    linear over the ensemble: use a narrow (late-iteration) ensemble for local numbers.
+    """
+    names = list(names)
+    P = params[names].to_numpy(float)
+    Y = np.asarray(responses, float)
+    alive = np.all(np.isfinite(Y), axis=1) if alive is None else np.asarray(alive, bool) & np.all(np.isfinite(Y), axis=1)
+    lo, hi = np.asarray(lower, float), np.asarray(upper, float)
+    U = (P[alive] - lo) / (hi - lo)
+    W = obs.error_model().whiten((Y[alive] - obs.values).T).T  # (Na, m)
+    n = len(names)
+    if U.shape[0] < n + 2:
+        return {"n_members": int(U.shape[0]), "note": "too few members for a regression"}
+    X = np.hstack([np.ones((U.shape[0], 1)), U - U.mean(axis=0)])
+    coef, *_ = np.linalg.lstsq(X, W, rcond=None)
+    G = coef[1:].T  # (m, n)
+    resid = W - X @ coef
+    F = G.T @ G
+    out = {"n_members": int(U.shape[0]), "fit_r2": float(1.0 - np.sum(resid ** 2) / max(np.sum((W - W.mean(0)) ** 2), 1e-300)),
+           "params": {}}
+    try:
+        Finv = np.linalg.inv(F)
+    except np.linalg.LinAlgError:
+        Finv = np.full_like(F, np.inf)
+    for j, p in enumerate(names):
+        width = hi[j] - lo[j]
+        joint = math.sqrt(max(Finv[j, j], 0.0)) * width if np.isfinite(Finv[j, j]) else math.inf
+        alone = width / math.sqrt(F[j, j]) if F[j, j] > 0 else math.inf
+        out["params"][p] = {"curve_change_over_box_noise_std": float(math.sqrt(F[j, j])),
+                            "crlb_std_joint": joint, "crlb_std_alone": alone,
+                            "tradeoff_ratio": joint / alone if alone > 0 and math.isfinite(alone) else None,
+                            "box_mean": float(P[alive, j].mean())}
+    if n >= 2:
+        d = np.sqrt(np.diag(F))
+        corr = F / np.outer(d, d) if np.all(d > 0) else np.full_like(F, np.nan)
+        out["information_correlation"] = corr.tolist()
+    return jsonable(out)
+
+
+def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], decision: Mapping,
+            final_params: pd.DataFrame, final_alive, forecast_misfit: Mapping, n_simulations: int,
+            wall_s: float | None, simulation_wall_s: float, sensitivity: Mapping | None = None) -> dict:
+    """``summary.json`` (DESIGN section 6): experiment, iterations, converged, stop_reason,
+    n_simulations, posterior, truth (twins), misfit per iteration, wall_s, and per-record before/after
+    misfits (before = prior ensemble mean, after = forecast with the posterior mean)."""
+    names = list(spec.names)
+    K = int(decision["iteration"])
+    P = final_params[names].to_numpy(float)
+    post = posterior_dict(P, names, np.asarray(final_alive, bool))
+    out = {
+        "experiment": spec.name,
+        "kind": exp["kind"],
+        "geometry": exp["geometry"],
+        "preset": exp["preset"],
+        "method": spec.method,
+        "alphas": list(spec.alphas) if spec.method == "esmda" else None,
+        "ensemble_size": spec.ensemble_size,
+        "seed": spec.seed,
+        "iterations": K,
+        "converged": bool(decision["converged"]),
+        "stop_reason": decision["reason"],
+        "stop_message": decision["message"],
+        "n_simulations": int(n_simulations),
+        "posterior": post,
+        "prior": {p: {"lower": float(spec.lower[j]), "upper": float(spec.upper[j])} for j, p in enumerate(names)},
+        "misfit": [{"iteration": int(a["iteration"]), "n_alive": int(a["n_alive"]), **a["misfit"]}
+                   for a in analyses[:K + 1]],
+        "failed_members": {str(a["iteration"]): a["failed_members"] for a in analyses[:K + 1] if a["failed_members"]},
+        "misfit_per_record": {
+            rec: {"before": analyses[0]["misfit_per_record"][rec],
+                  "posterior_ensemble_mean": analyses[K]["misfit_per_record"][rec],
+                  "after": forecast_misfit.get(rec)}
+            for rec in analyses[0]["misfit_per_record"]
+        },
+        "spread_ratio": {p: _ratio(analyses[K], p) for p in names},
+        "wall_s": wall_s,
+        "simulation_wall_s": simulation_wall_s,
+    }
+    if spec.truth is not None:
+        out["truth"] = {p: spec.truth[p] for p in names}
+        out["accuracy"] = {
+            p: {"rel_error": post[p]["mean"] / spec.truth[p] - 1.0,
+                "in_90_interval": bool(post[p]["q05"] <= spec.truth[p] <= post[p]["q95"])}
+            for p in names
+        }
+    if sensitivity is not None:
+        out["sensitivity"] = sensitivity
+    return jsonable(out)
+
+
+def _ratio(a: Mapping, p: str):
+    s = a.get("spread_unbounded")
+    if s is None:
+        return None
+    return s[p] / a["prior_spread_unbounded"][p]
+
+
+def experiment_outcome(*, name: str, exp: Mapping, params: Sequence[pd.DataFrame], responses: Sequence[np.ndarray],
+                       analyses: Sequence[Mapping], obs: Observations, forecast_curves: Mapping[str, pd.DataFrame],
+                       forecast_runs: Mapping[str, Mapping], n_records: int, started: float | None,
+                       finished: float | None, member_wall_s: float = 0.0,
+                       extra_runs: Sequence[Mapping] = ()) -> tuple[dict, pd.DataFrame]:
+    """``(summary.json dict, posterior.csv frame)`` of a finished experiment.
+
+    ``params``, ``responses``, ``analyses``: iterations 0..K of the final loop. The decision is
+    re-taken with the current stopping rule (:func:`final_iteration`). ``forecast_curves``: the
+    forecast run per record. ``started``/``finished``: epoch seconds for ``wall_s`` (the experiment's
+    elapsed time from its prior ensemble to its summary). ``extra_runs``: run.json of other
+    simulations (the twin's reference) counted in ``n_simulations``; ``member_wall_s``: the members'
+    summed simulation wall time (``simulation_wall_s`` adds the forecast and extra runs).
+    """
+    from enkf import member_table
+
+    from .observations import response_matrix
+
+    spec = ExperimentSpec.from_config(name, exp)
+    K, decision = final_iteration(spec, analyses)
+    if decision is None:
+        raise ValueError(f"{name}: the stored iterations never stop under the current rule; run the loop further")
+    analyses, params, responses = list(analyses[:K + 1]), list(params[:K + 1]), list(responses[:K + 1])
+    alive = np.asarray(analyses[K]["alive"], bool)
+    Yf = response_matrix([forecast_curves], obs)
+    ok_fc = {rec: forecast_runs[rec].get("status") == "ok" for rec in obs.records}
+    fc_misfit = {rec: (v if ok_fc[rec] else None) for rec, v in record_misfits(Yf, obs, np.ones(1, bool)).items()}
+    sim_wall = member_wall_s + sum(float(r.get("wall_s") or 0.0) for r in extra_runs) + sum(
+        float(r.get("wall_s") or 0.0) for r in forecast_runs.values())
+    sens = {"initial_ensemble": linear_sensitivity(params[0], spec.names, spec.lower, spec.upper, responses[0], obs,
+                                                   np.asarray(analyses[0]["alive"], bool))}
+    if K > 0:
+        sens["final_ensemble"] = linear_sensitivity(params[K], spec.names, spec.lower, spec.upper, responses[K], obs,
+                                                    alive)
+    out = summary(spec=spec, exp=exp, analyses=analyses, decision=decision, final_params=params[K],
+                  final_alive=alive, forecast_misfit=fc_misfit,
+                  n_simulations=(K + 1) * spec.ensemble_size * n_records + len(forecast_runs) + len(extra_runs),
+                  wall_s=None if started is None or finished is None else finished - started,
+                  simulation_wall_s=sim_wall, sensitivity=sens)
+    table = member_table(params[K][list(spec.names)].to_numpy(float), list(spec.names), responses=responses[K],
+                         obs=obs.values, obs_error=obs.error_model(), alive=alive)
+    return out, table

@@ -1,0 +1,344 @@
+"""Observations of a calibration: the observed specimen stress on a time grid, with its error model.
+
+Two sources (DESIGN section 1, steps 3 and 6):
+
+* **Twin experiments** (paper section 5.2): a reference simulation with known parameters gives the
+  "truth" curve; it is sampled on the observation grid and noise drawn from the declared error model is
+  added (:func:`twin_observations`). The noise level is a fraction of the truth's peak stress or an
+  absolute value in Pa.
+* **Measured records**: a Freiburg raw record is reduced (:func:`shpb.reduction.reduce_record`) to the
+  back-face specimen stress ``sigma = F_back / A_s`` on the face time axis (0 = incident wave at the
+  front face, the simulator's axis too) and sampled on the grid (:func:`measured_observations`). The
+  observation error is the record's own noise: ``sigma`` = the pre-trigger standard deviation of the
+  stress (``ReducedRecord.noise_std_Pa['stress']``, times a configurable factor), and the AR(1)
+  correlation time is estimated from the same pre-trigger samples (:func:`enkf.estimate_noise`).
+
+Several records are concatenated in one observation vector (record by record, in the config's order);
+their errors are independent (``groups`` of :mod:`enkf.covariance`).
+
+Files (``results/<experiment>/observations/``): ``obs.csv`` with columns ``record, time_s, stress_Pa,
+sigma_Pa`` (+ ``truth_stress_Pa`` for twins: the noise-free reference), one row per observation in
+vector order, and ``obs.json`` with the error model and per-record metadata. :func:`read_observations`
+checks both and raises :class:`ObservationFileError` naming the file and the problem.
+
+Member curves are put on the grid by :func:`curve_on_grid` (linear interpolation; NaN where the curve
+does not cover the grid, which marks the member as failed) and stacked by :func:`response_matrix`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from enkf import estimate_noise, observation_error
+from enkf.covariance import ObservationError
+
+__all__ = [
+    "OBS_COLUMNS", "ObservationFileError", "Observations", "observation_grid", "curve_on_grid", "read_curve",
+    "twin_observations", "reduce_measured_record", "measured_observations", "check_record",
+    "read_observations", "response_matrix",
+]
+
+#: Columns of ``obs.csv`` (SI units).
+OBS_COLUMNS = ("record", "time_s", "stress_Pa", "sigma_Pa")
+
+
+class ObservationFileError(ValueError):
+    """An observation source or file is malformed; the message names the file and the problem."""
+
+
+# --------------------------------------------------------------------------------------------------
+# Grids and curves
+# --------------------------------------------------------------------------------------------------
+def observation_grid(t_start: float, t_end: float, dt: float) -> np.ndarray:
+    """Uniform grid ``t_start, t_start + dt, ...`` up to ``t_end`` (inclusive within 1e-9 dt) [s]."""
+    if not (dt > 0 and t_end > t_start):
+        raise ValueError(f"observation grid needs dt > 0 and t_end > t_start, got {t_start}, {t_end}, {dt}")
+    n = int(math.floor((t_end - t_start) / dt + 1e-9)) + 1
+    return t_start + dt * np.arange(n)
+
+
+def curve_on_grid(time: np.ndarray, values: np.ndarray, grid: np.ndarray) -> np.ndarray:
+    """Linear interpolation of a curve onto ``grid``; NaN outside the curve's time span (half a sample
+    of slack at each end) and wherever the curve is not finite."""
+    t = np.asarray(time, float)
+    v = np.asarray(values, float)
+    g = np.asarray(grid, float)
+    out = np.full(g.shape, np.nan)
+    ok = np.isfinite(t) & np.isfinite(v)
+    if ok.sum() < 2 or not np.all(np.isfinite(v)):
+        return out
+    t, v = t[ok], v[ok]
+    if np.any(np.diff(t) <= 0):
+        raise ValueError("curve time axis must be strictly increasing")
+    slack = 0.5 * float(np.median(np.diff(t)))
+    inside = (g >= t[0] - slack) & (g <= t[-1] + slack)
+    out[inside] = np.interp(g[inside], t, v)
+    return out
+
+
+def read_curve(path: str | Path, column: str = "stress_Pa") -> pd.DataFrame:
+    """A simulated curve (``time_s`` and ``column``); an empty frame for a failed member's curve file."""
+    path = Path(path)
+    try:
+        df = pd.read_csv(path)
+    except pd.errors.EmptyDataError:
+        return pd.DataFrame({"time_s": [], column: []})
+    for c in ("time_s", column):
+        if c not in df.columns:
+            raise ObservationFileError(f"{path}: curve file has no column {c!r} (columns: {list(df.columns)})")
+    return df
+
+
+# --------------------------------------------------------------------------------------------------
+# The observation vector
+# --------------------------------------------------------------------------------------------------
+@dataclass
+class Observations:
+    """Observation vector ``y_o`` (record by record) with its error model.
+
+    ``frame``: one row per observation, columns :data:`OBS_COLUMNS` (+ ``truth_stress_Pa`` for twins).
+    ``error_kind``: ``"diagonal"`` or ``"ar1"``; ``corr_time``: AR(1) correlation time [s] per record.
+    ``meta``: JSON-ready description (source files, noise estimates, reduction notes).
+    """
+
+    frame: pd.DataFrame
+    error_kind: str = "diagonal"
+    corr_time: dict[str, float] = field(default_factory=dict)
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def records(self) -> list[str]:
+        return list(dict.fromkeys(self.frame["record"].astype(str)))
+
+    @property
+    def time(self) -> np.ndarray:
+        return self.frame["time_s"].to_numpy(float)
+
+    @property
+    def values(self) -> np.ndarray:
+        return self.frame["stress_Pa"].to_numpy(float)
+
+    @property
+    def sigma(self) -> np.ndarray:
+        return self.frame["sigma_Pa"].to_numpy(float)
+
+    @property
+    def groups(self) -> np.ndarray:
+        order = {r: i for i, r in enumerate(self.records)}
+        return self.frame["record"].astype(str).map(order).to_numpy(int)
+
+    @property
+    def m(self) -> int:
+        return len(self.frame)
+
+    def record_slice(self, record: str) -> slice:
+        idx = np.flatnonzero(self.frame["record"].astype(str).to_numpy() == record)
+        return slice(int(idx[0]), int(idx[-1]) + 1)
+
+    def grid(self, record: str) -> np.ndarray:
+        return self.time[self.record_slice(record)]
+
+    def error_model(self) -> ObservationError:
+        """The :class:`enkf.covariance.ObservationError` ``R`` of the whole vector (records independent).
+
+        enkf's AR(1) model takes one correlation time; with several records the mean of theirs is used.
+        """
+        tau = float(np.mean([self.corr_time.get(r, 0.0) for r in self.records])) if self.corr_time else 0.0
+        kind = self.error_kind if (self.error_kind != "ar1" or tau > 0) else "diagonal"
+        return observation_error(kind, self.sigma, times=self.time, corr_time=tau, groups=self.groups)
+
+    def to_meta(self) -> dict:
+        return {"error_kind": self.error_kind, "corr_time_s": dict(self.corr_time), "records": self.records,
+                "n_obs": self.m, **self.meta}
+
+    def write(self, csv_path: str | Path, json_path: str | Path) -> None:
+        from .workflow_io import atomic_write_csv, atomic_write_json
+
+        atomic_write_csv(self.frame, csv_path)
+        atomic_write_json(json_path, _jsonable(self.to_meta()))
+
+
+def read_observations(csv_path: str | Path, json_path: str | Path) -> Observations:
+    """Read ``obs.csv`` + ``obs.json``; :class:`ObservationFileError` names the file and the problem."""
+    csv_path, json_path = Path(csv_path), Path(json_path)
+    import json
+
+    try:
+        df = pd.read_csv(csv_path)
+    except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        raise ObservationFileError(f"observation file {csv_path}: cannot be read as CSV ({exc})") from exc
+    missing = [c for c in OBS_COLUMNS if c not in df.columns]
+    if missing:
+        raise ObservationFileError(f"observation file {csv_path}: missing column(s) {missing}; "
+                                   f"expected {list(OBS_COLUMNS)}")
+    if df.empty:
+        raise ObservationFileError(f"observation file {csv_path}: no observations")
+    for c in ("time_s", "stress_Pa", "sigma_Pa"):
+        v = pd.to_numeric(df[c], errors="coerce")
+        bad = np.flatnonzero(~np.isfinite(v.to_numpy(float)))
+        if bad.size:
+            raise ObservationFileError(f"observation file {csv_path}: column {c!r} is not a finite number "
+                                       f"in data row(s) {(bad + 1).tolist()[:5]}")
+        df[c] = v.astype(float)
+    if np.any(df["sigma_Pa"].to_numpy() <= 0):
+        raise ObservationFileError(f"observation file {csv_path}: sigma_Pa must be positive")
+    df["record"] = df["record"].astype(str)
+    for rec, sub in df.groupby("record", sort=False):
+        if np.any(np.diff(sub["time_s"].to_numpy()) <= 0):
+            raise ObservationFileError(f"observation file {csv_path}: times of record {rec!r} are not "
+                                       f"strictly increasing")
+    try:
+        with open(json_path) as fh:
+            meta = json.load(fh)
+    except (OSError, ValueError) as exc:
+        raise ObservationFileError(f"observation metadata {json_path}: cannot be read as JSON ({exc})") from exc
+    kind = meta.get("error_kind", "diagonal")
+    if kind not in ("diagonal", "ar1"):
+        raise ObservationFileError(f"observation metadata {json_path}: error_kind {kind!r} is not "
+                                   f"'diagonal' or 'ar1'")
+    corr = {str(k): float(v) for k, v in (meta.get("corr_time_s") or {}).items()}
+    extra = {k: v for k, v in meta.items() if k not in ("error_kind", "corr_time_s", "records", "n_obs")}
+    return Observations(df, kind, corr, extra)
+
+
+# --------------------------------------------------------------------------------------------------
+# Twin experiments
+# --------------------------------------------------------------------------------------------------
+def twin_observations(truth_curve: pd.DataFrame, grid: np.ndarray, *, rng: np.random.Generator,
+                      relative_sigma: float | None = 0.01, sigma_Pa: float | None = None,
+                      corr_time: float = 0.0, record: str = "synthetic", meta: Mapping | None = None) -> Observations:
+    """Synthetic observations: the reference curve on ``grid`` plus noise.
+
+    The noise std is ``sigma_Pa`` if given, else ``relative_sigma`` times the peak ``|stress|`` of the
+    reference on the grid. ``corr_time > 0`` draws AR(1)-correlated noise (and declares it), else white.
+    The draw is ``L e``, ``e ~ N(0, I)`` from ``rng`` (one call, so a seed fixes it).
+    """
+    truth = curve_on_grid(truth_curve["time_s"], truth_curve["stress_Pa"], grid)
+    if not np.all(np.isfinite(truth)):
+        raise ValueError(f"the reference simulation covers {truth_curve['time_s'].min():.3g}-"
+                         f"{truth_curve['time_s'].max():.3g} s, not the observation grid "
+                         f"{grid[0]:.3g}-{grid[-1]:.3g} s (raise simulation.t_end or lower observations.t_end)")
+    if sigma_Pa is None:
+        if relative_sigma is None or relative_sigma <= 0:
+            raise ValueError("give observations.noise.sigma_Pa or a positive relative_sigma")
+        sigma_Pa = float(relative_sigma) * float(np.max(np.abs(truth)))
+    kind = "ar1" if corr_time > 0 else "diagonal"
+    err = observation_error(kind, sigma_Pa, times=grid, corr_time=corr_time)
+    noise = err.sample(rng, 1)[0]
+    frame = pd.DataFrame({"record": record, "time_s": grid, "stress_Pa": truth + noise,
+                          "sigma_Pa": np.full(grid.size, float(sigma_Pa)), "truth_stress_Pa": truth})
+    info = {"source": "twin", "sigma_Pa": float(sigma_Pa), "relative_sigma": relative_sigma,
+            "peak_truth_Pa": float(np.max(np.abs(truth))), **(meta or {})}
+    return Observations(frame, kind, {record: float(corr_time)}, info)
+
+
+# --------------------------------------------------------------------------------------------------
+# Measured records
+# --------------------------------------------------------------------------------------------------
+def reduce_measured_record(path: str | Path):
+    """Read and reduce a Freiburg raw record with its spreadsheet row and the Freiburg bars.
+
+    Returns ``(ReducedRecord, spreadsheet row, NoiseEstimate of the stress)``. The noise estimate is
+    taken from the pre-trigger part of the averaged transmitted-bar signal (the one the specimen stress
+    is made of), converted to Pa with ``E_b A_b / A_s``.
+    """
+    from .records import freiburg_specimen, read_freiburg_raw
+    from .reduction import FREIBURG_BAR, reduce_record
+
+    path = Path(path)
+    raw = read_freiburg_raw(path, bar=FREIBURG_BAR)
+    spec = freiburg_specimen(path)
+    red = reduce_record(raw, FREIBURG_BAR, float(spec["length_m"]), float(spec["diameter_m"]))
+    bar = red.bar
+    k_pa = bar.E * bar.area / (math.pi * red.specimen_diameter ** 2 / 4.0)
+    used = [raw.transmitted_channels.index(c) for c in red.channels_used["transmitted"]]
+    tra = bar.compression_sign * bar.strain_per_volt_transmitted * raw.transmitted[used].mean(axis=0)
+    i_a = int(np.searchsorted(raw.time, red.arrival_time_gauge))
+    i_pre = i_a - max(1, int(round(10.0e-6 / raw.dt)))
+    noise = estimate_noise(k_pa * tra[:i_pre], raw.dt, model="ar1")
+    return red, spec, noise
+
+
+def check_record(path: str | Path, t_end: float | None = None) -> None:
+    """Read, look up and reduce a measured record; :class:`ObservationFileError` names the file and the
+    problem (unreadable or malformed file, no spreadsheet row, no pulse, window shorter than ``t_end``)."""
+    path = Path(path)
+    try:
+        red, _, _ = reduce_measured_record(path)
+    except (OSError, ValueError, KeyError) as exc:
+        msg = str(exc).strip("'\"")
+        raise ObservationFileError(f"observation file {path}: {msg}") from exc
+    if not np.all(np.isfinite(red.stress)):
+        raise ObservationFileError(f"observation file {path}: the reduced specimen stress has non-finite values")
+    if t_end is not None and red.time[-1] < t_end - 1e-12:
+        raise ObservationFileError(f"observation file {path}: the reduced record ends at {red.time[-1]:.4g} s, "
+                                   f"before the observation window's end {t_end:.4g} s")
+
+
+def measured_observations(records: Mapping[str, str | Path], *, t_start: float, t_end: float, dt: float | None,
+                          error_kind: str = "ar1", sigma_scale: float = 1.0) -> tuple[Observations, dict]:
+    """Observations from measured records (``{name: raw file}``), concatenated in the given order.
+
+    The grid of each record is ``t_start..t_end`` with step ``dt`` (default: the record's sample
+    interval). Returns the observations and ``{name: ReducedRecord}`` (for plots and the summary).
+    """
+    frames, corr, info, reduced = [], {}, {}, {}
+    for name, path in records.items():
+        check_record(path, t_end)
+        red, spec, noise = reduce_measured_record(path)
+        grid = observation_grid(t_start, t_end, dt if dt is not None else red.dt)
+        values = curve_on_grid(red.time, red.stress, grid)
+        sigma = sigma_scale * red.noise_std_Pa["stress"]
+        frames.append(pd.DataFrame({"record": name, "time_s": grid, "stress_Pa": values,
+                                    "sigma_Pa": np.full(grid.size, sigma)}))
+        corr[name] = noise.corr_time
+        reduced[name] = red
+        info[name] = {"source": str(path), "sigma_Pa": sigma, "noise_std_Pa": red.noise_std_Pa["stress"],
+                      "noise_estimate": noise.to_dict(), "peak_stress_Pa": red.peak_stress,
+                      "peak_time_s": red.peak_time, "strain_rate_at_peak_per_s": red.strain_rate_at_peak,
+                      "force_balance_at_peak": red.force_balance_at_peak, "notes": list(red.notes),
+                      "specimen_length_m": red.specimen_length, "specimen_diameter_m": red.specimen_diameter,
+                      "spreadsheet_strength_Pa": _float_or_none(spec.get("reference_stress_Pa"))}
+    obs = Observations(pd.concat(frames, ignore_index=True), error_kind, corr,
+                       {"source": "measured", "sigma_scale": sigma_scale, "record_info": info})
+    return obs, reduced
+
+
+# --------------------------------------------------------------------------------------------------
+# Member responses
+# --------------------------------------------------------------------------------------------------
+def response_matrix(curves: Sequence[Mapping[str, pd.DataFrame]], obs: Observations,
+                    column: str = "stress_Pa") -> np.ndarray:
+    """Stack member curves on the observation grid: ``curves[i][record]`` -> row ``i`` of ``(N, m)``.
+
+    A record's block is NaN when the member's curve for it is empty (failed) or does not cover the grid.
+    """
+    Y = np.full((len(curves), obs.m), np.nan)
+    for i, member in enumerate(curves):
+        for rec in obs.records:
+            sl = obs.record_slice(rec)
+            df = member.get(rec)
+            if df is None or len(df) < 2:
+                continue
+            Y[i, sl] = curve_on_grid(df["time_s"].to_numpy(float), df[column].to_numpy(float), obs.time[sl])
+    return Y
+
+
+def _float_or_none(v):
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        return None
+    return f if math.isfinite(f) else None
+
+
+def _jsonable(obj):
+    from enkf import jsonable
+
+    return jsonable(obj)
