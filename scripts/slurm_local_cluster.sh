@@ -177,12 +177,13 @@ EOF
     log "cluster up in $((SECONDS - t0)) s: $(sinfo -h -o '%P %D %c cpus %m MB %t') (SLURM_CONF=$SLURM_CONF)"
 }
 
-# Is PID alive and running the program NAME? (guards against PID reuse)
+# Is PID alive (not a zombie) and running the program NAME? (guards against PID reuse)
 pid_is() {
-    local pid="$1" name="$2" comm
-    [[ -r "/proc/$pid/comm" ]] || return 1
+    local pid="$1" name="$2" comm state
+    [[ "$pid" =~ ^[0-9]+$ && -r "/proc/$pid/comm" ]] || return 1
     comm="$(cat "/proc/$pid/comm" 2>/dev/null)" || return 1
-    [[ "$comm" == "$name"* ]]
+    state="$(awk '/^State:/ {print $2}' "/proc/$pid/status" 2>/dev/null)" || return 1
+    [[ "$comm" == "$name"* && "$state" != Z ]]
 }
 
 cmd_down() {
