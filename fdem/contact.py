@@ -25,12 +25,14 @@ def surface_nodes(edges, edge_active, n_nodes):
 
 
 @njit(cache=True)
-def _excluded(n, p, q, node_vertex, node_body, node_tri, e_tri, body_fracturable):
+def _excluded(n, p, q, node_vertex, node_body, node_tri, e_tri, tri, body_fracturable):
     if node_tri[n] == e_tri:
         return True
-    # Copies of one mesh vertex: the node sits on the edge's end, where the node-to-edge projection
-    # is ambiguous; the faces of a broken joint are kept apart by the joint's compressive branch.
-    if node_vertex[n] == node_vertex[p] or node_vertex[n] == node_vertex[q]:
+    # A copy of one of the edge triangle's own mesh vertices: at the edge's ends the node-to-edge
+    # projection is ambiguous (the faces of a broken joint are kept apart by the joint's compressive
+    # branch), and at the opposite vertex it would read the whole altitude as a penetration.
+    vn = node_vertex[n]
+    if vn == node_vertex[tri[e_tri, 0]] or vn == node_vertex[tri[e_tri, 1]] or vn == node_vertex[tri[e_tri, 2]]:
         return True
     b = node_body[n]
     if b == node_body[p] and not body_fracturable[b]:
@@ -39,10 +41,10 @@ def _excluded(n, p, q, node_vertex, node_body, node_tri, e_tri, body_fracturable
 
 
 @njit(cache=True)
-def build_pairs(x, edges, edge_active, edge_tri, snodes, node_vertex, node_body, node_tri,
+def build_pairs(x, edges, edge_active, edge_tri, snodes, node_vertex, node_body, node_tri, tri,
                 body_fracturable, buffer):
     """All (node, edge) pairs with node-to-segment distance <= buffer, excluding a node against an
-    edge of its own triangle, an edge ending at a copy of the node's own mesh vertex, and pairs
+    edge of its own triangle, an edge of a triangle that has a copy of the node's mesh vertex, and pairs
     inside a body that cannot fracture.
 
     Also returns the outward unit normal of every surface node (mean of its active edges' normals),
@@ -139,7 +141,7 @@ def build_pairs(x, edges, edge_active, edge_tri, snodes, node_vertex, node_body,
             e = cell_edges[m]
             p = edges[e, 0]
             q = edges[e, 1]
-            if _excluded(n, p, q, node_vertex, node_body, node_tri, edge_tri[e], body_fracturable):
+            if _excluded(n, p, q, node_vertex, node_body, node_tri, edge_tri[e], tri, body_fracturable):
                 continue
             ex = x[q, 0] - x[p, 0]
             ey = x[q, 1] - x[p, 1]

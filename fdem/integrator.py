@@ -68,7 +68,7 @@ def _apply_velocity_bc(v, mass, vel_nodes, vel_dir, vel_hist, hv):
 @njit(cache=True)
 def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
              jn, jarea, kn, kt, ft, fs, dn, dtm, tanphi, jedges, sa, sb, sc, Dmax, broken,
-             edges, edge_tri, edge_active, edge_dlim, edge_thick, tri_edges,
+             edges, edge_tri, edge_active, edge_dlim, edge_thick, tri_edges, edge_joint,
              node_body, node_vertex, node_tri, node_thick, body_fracturable, n_bodies,
              p_c, mu_c, buffer, use_contact,
              vel_nodes, vel_dir, vel_hist, tr_nodes, tr_dir, tr_area, tr_imp, tr_hist,
@@ -89,12 +89,13 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
     newly = np.empty(max(jn.shape[0], 1), np.int64)
     newly_dam = np.empty(max(jn.shape[0], 1), np.int64)
     bforce = np.zeros((n_bodies, 2))
+    in_contact = np.zeros(n, np.bool_)
     E = np.zeros(8)
     # Contact state
     snodes = surface_nodes(edges, edge_active, n)
     if use_contact:
         pair_node, pair_edge, node_normal = build_pairs(x, edges, edge_active, edge_tri, snodes,
-                                                        node_vertex, node_body, node_tri,
+                                                        node_vertex, node_body, node_tri, tri,
                                                         body_fracturable, buffer)
     else:
         pair_node = np.zeros(0, np.int64)
@@ -115,14 +116,17 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
     Psi, dis, nnew, ndam = joint_forces(x, jn, jarea, kn, kt, ft, fs, dn, dtm, tanphi, sa, sb,
                                         sc, Dmax, broken, f, newly, newly_dam)
     Uc, Pf, pen = contact_forces(x, v, inv_mass, pair_node, pair_edge, pair_node.shape[0],
-                                 node_normal, edges, edge_dlim, edge_thick, node_thick, node_body, p_c, mu_c, dt, f,
-                                 bforce)
-    P_ext = 0.0
+                                 node_normal, edges, edge_tri, edge_joint, broken, Dmax, edge_dlim, edge_thick, node_thick, node_body,
+                                 node_tri, tri, node_vertex, body_fracturable, p_c, mu_c, dt, f, bforce,
+                                 in_contact)
+    tr_F = np.zeros(tr_nodes.shape[0])
     for k in range(tr_nodes.shape[0]):
         nn = tr_nodes[k]
         d = tr_dir[k]
         F = tr_area[k] * (hv[tr_hist[k]] - tr_imp[k] * v[nn, d])
         f[nn, d] += F
+        tr_F[k] = F
+    scale_max = 0.0
     ns = 0
     status = STATUS_OK
     step = 0
@@ -157,7 +161,7 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
                 if dmax2 > 0.25 * buffer * buffer or (pending_faces and steps_since >= 5):
                     snodes = surface_nodes(edges, edge_active, n)
                     pair_node, pair_edge, node_normal = build_pairs(
-                        x, edges, edge_active, edge_tri, snodes, node_vertex, node_body, node_tri,
+                        x, edges, edge_active, edge_tri, snodes, node_vertex, node_body, node_tri, tri,
                         body_fracturable, buffer)
                     for i in range(n):
                         x_ref[i, 0] = x[i, 0]
@@ -189,21 +193,25 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
                         edge_active[ed] = True
                         pending_faces = True
             Uc, Pf, pen = contact_forces(x, v, inv_mass, pair_node, pair_edge, pair_node.shape[0],
-                                         node_normal, edges, edge_dlim, edge_thick, node_thick, node_body, p_c,
-                                         mu_c, dt, f, bforce)
+                                         node_normal, edges, edge_tri, edge_joint, broken, Dmax, edge_dlim, edge_thick, node_thick,
+                                         node_body, node_tri, tri, node_vertex, body_fracturable,
+                                         p_c, mu_c, dt, f, bforce, in_contact)
             if pen > max_pen:
                 max_pen = pen
             E[6] += Pf * dt
             if nh > 0:
                 _hist_eval(hist_ptr, hist_t, hist_v, cursor, t, hv)
-            P_ext = 0.0
+            # Work of the boundary tractions over the drift: trapezoidal in force, times the
+            # half-step velocity that moved the node (second order, like the integrator).
+            W_tr = 0.0
             for k in range(tr_nodes.shape[0]):
                 nn = tr_nodes[k]
                 d = tr_dir[k]
                 F = tr_area[k] * (hv[tr_hist[k]] - tr_imp[k] * v[nn, d])
                 f[nn, d] += F
-                P_ext += F * v[nn, d]
-            E[7] += P_ext * dt
+                W_tr += 0.5 * (F + tr_F[k]) * v[nn, d] * dt
+                tr_F[k] = F
+            E[7] += W_tr
             P_mass = 0.0
             if alpha_mass > 0.0:
                 for i in range(n):
@@ -278,7 +286,10 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
                 break
             total = E[0] + E[1] + E[2] + E[3] + E[4] + E[5] + E[6]
             scale = abs(E[7]) + E0
-            if energy_guard > 0.0 and scale > 0.0 and abs(total - E0 - E[7]) > energy_guard * scale:
+            if scale > scale_max:
+                scale_max = scale
+            if (energy_guard > 0.0 and step > 100 and scale_max > 0.0
+                    and abs(total - E0 - E[7]) > energy_guard * scale_max):
                 status = STATUS_ENERGY
                 break
     return status, ns, step, E, rebuilds

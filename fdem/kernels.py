@@ -157,8 +157,9 @@ def joint_forces(x, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax, b
       (eq. A3) scales both modes, so unloading and reloading never restores strength.
     The energy released when Dmax grows at fixed gap is the dissipated energy (psi(zeta_old) -
     psi(zeta_new)); a monotonic pull dissipates E + sigma_max o_p / 2 per unit area. A joint whose
-    two Gauss points reach D >= 1 is broken: it carries no tension or shear any more, its faces join
-    the contact, and it keeps only the compressive penalty while its two faces still overlap.
+    two Gauss points reach D >= 1 is broken: it carries nothing more and its faces join the contact.
+    (Keeping a compressive branch on broken joints was tried and pumped energy into sliding
+    fragments; see tests/test_fdem_fracture.py for the energy balance this choice achieves.)
 
     Joints whose damage first becomes positive are listed in newly_damaged, so that the integrator
     can expose their triangles to contact before the faces separate.
@@ -171,6 +172,8 @@ def joint_forces(x, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax, b
     nnew = 0
     ndam = 0
     for jj in range(jn.shape[0]):
+        if broken[jj]:
+            continue
         a1 = jn[jj, 0]
         a2 = jn[jj, 1]
         b1 = jn[jj, 2]
@@ -206,26 +209,6 @@ def joint_forces(x, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax, b
             o = gx * nx + gy * ny
             s = gx * tx + gy * ty
             sig_c = k_n * o if o < 0.0 else 0.0
-            if broken[jj]:
-                # A broken joint keeps only its compressive branch while its faces still overlap
-                # along the joint (|slip| < half its length): they cannot pass through each other.
-                if sig_c < 0.0 and abs(s) < 0.5 * L:
-                    psi = w * 0.5 * sig_c * o
-                    Tx = w * sig_c * nx
-                    Ty = w * sig_c * ny
-                else:
-                    psi = 0.0
-                    Tx = 0.0
-                    Ty = 0.0
-                if gp == 0:
-                    psi_gp0 = psi
-                    T0x = Tx
-                    T0y = Ty
-                else:
-                    psi_gp1 = psi
-                    T1x = Tx
-                    T1y = Ty
-                continue
             f_s = fs[jj] - tanphi[jj] * sig_c
             o_pos = o if o > 0.0 else 0.0
             ex_o = o_pos - f_t / k_n
@@ -262,34 +245,14 @@ def joint_forces(x, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax, b
                 psi_gp1 = psi
                 T1x = Tx
                 T1y = Ty
-        if n_broken_gp == 2 and not broken[jj]:
-            # Breaking releases the cohesive energy still stored; the compressive part stays.
-            comp = 0.0
-            for gp in range(2):
-                xi = _G0 if gp == 0 else _G1
-                o = ((1.0 - xi) * g1x + xi * g2x) * nx + ((1.0 - xi) * g1y + xi * g2y) * ny
-                if o < 0.0:
-                    comp += w * 0.5 * k_n * o * o
-            dissipated += psi_gp0 + psi_gp1 - comp
-            psi_gp0 = 0.0
-            psi_gp1 = comp
+        if n_broken_gp == 2:
+            # Breaking releases what the joint still stores (its compressive part, if any); from
+            # now on its faces interact through contact only.
+            dissipated += psi_gp0 + psi_gp1
             broken[jj] = True
             newly_broken[nnew] = jj
             nnew += 1
-            T0x = 0.0
-            T0y = 0.0
-            T1x = 0.0
-            T1y = 0.0
-            for gp in range(2):
-                xi = _G0 if gp == 0 else _G1
-                o = ((1.0 - xi) * g1x + xi * g2x) * nx + ((1.0 - xi) * g1y + xi * g2y) * ny
-                if o < 0.0:
-                    if gp == 0:
-                        T0x = w * k_n * o * nx
-                        T0y = w * k_n * o * ny
-                    else:
-                        T1x = w * k_n * o * nx
-                        T1y = w * k_n * o * ny
+            continue
         Psi += psi_gp0 + psi_gp1
         fa1x = (1.0 - _G0) * T0x + (1.0 - _G1) * T1x
         fa1y = (1.0 - _G0) * T0y + (1.0 - _G1) * T1y
@@ -307,20 +270,32 @@ def joint_forces(x, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax, b
 
 
 @njit(cache=True)
-def contact_forces(x, v, inv_mass, pair_node, pair_edge, n_pairs, node_normal, edges, edge_dlim,
-                   edge_thick, node_thick, node_body, p_c, mu_c, dt, f, body_force):
+def contact_forces(x, v, inv_mass, pair_node, pair_edge, n_pairs, node_normal, edges, edge_tri,
+                   edge_joint, broken, Dmax, edge_dlim, edge_thick, node_thick, node_body, node_tri, tri,
+                   node_vertex, body_fracturable, p_c, mu_c, dt, f, body_force, in_contact):
     """Node-to-edge penalty contact with optional Coulomb friction.
 
     Edges are oriented counter-clockwise around their triangle, so the outward normal of edge p->q is
-    (t_y, -t_x). Each surface node is in contact with at most one edge: among its candidate edges,
-    the one it penetrates least (0 < d <= edge_dlim, projection within the edge span up to a small
-    tolerance). Choosing one edge keeps the force continuous when a node slides over the common
-    vertex of two edges. An edge whose outward normal does not oppose the node's own outward normal
-    is skipped: it is the side face seen from a corner node, not a contact. The node is pushed out with F_n = p_c w d, w the smaller of the two bodies'
+    (t_y, -t_x). Each node pushes on at most one edge: among its candidate edges, the one it
+    penetrates least (0 < d <= edge_dlim, projection within the edge's span). One edge per node keeps
+    the force continuous when a node slides over the common vertex of two edges of a face.
+    Candidate edges are rejected when
+    - their outward normal does not oppose the node's own outward direction (the side face seen from
+      a corner node). A node of a fracturable body belongs to one triangle only, and its direction is
+      taken afresh from that triangle's centroid (fragments spin); other nodes use the surface
+      normal from the last neighbour search (node_normal);
+    - they belong to a joint that is not broken (edge_joint >= 0): such edges enter the neighbour
+      list early, but behind an intact joint face is still the body;
+    - they are crack faces and the node is not inside the face's own triangle: near a crack tip a
+      node can be behind the line of a face without being inside the body.
+    The node is pushed out with F_n = p_c w min(d, d_cap), w the smaller of the two bodies'
     thicknesses (the real contact width), and the opposite force goes to the edge's nodes, so linear
-    momentum is conserved exactly. Friction opposes the relative tangential velocity with
-    |F_t| <= mu_c F_n, and never more than the force that stops the sliding within one step (a stable
-    regularisation of sticking). Pairs must be grouped by node (build_pairs does so).
+    momentum is conserved exactly. d_cap = edge_dlim / 3: a node found deep inside is pushed out
+    firmly, not shot out (the potential is linear beyond d_cap). Friction opposes the relative
+    tangential velocity with |F_t| <= mu_c F_n, and never more than the force that stops the sliding
+    within one step (a stable regularisation of sticking). Pairs must be grouped by node
+    (build_pairs does so). in_contact (per node) carries the contact state from step to step:
+    a node may enter contact only at d <= edge_dlim / 6 and then stays in it while it penetrates.
 
     Accumulates per-body contact force into body_force (n_bodies, 2).
     Returns (contact energy [J], friction power [W], maximum penetration [m]).
@@ -331,12 +306,22 @@ def contact_forces(x, v, inv_mass, pair_node, pair_edge, n_pairs, node_normal, e
     ip = 0
     while ip < n_pairs:
         n = pair_node[ip]
+        if body_fracturable[node_body[n]]:
+            tn = node_tri[n]
+            dnx = x[n, 0] - (x[tri[tn, 0], 0] + x[tri[tn, 1], 0] + x[tri[tn, 2], 0]) / 3.0
+            dny = x[n, 1] - (x[tri[tn, 0], 1] + x[tri[tn, 1], 1] + x[tri[tn, 2], 1]) / 3.0
+        else:
+            dnx = node_normal[n, 0]
+            dny = node_normal[n, 1]
         best = -1
         best_d = 0.0
         best_xi = 0.0
         while ip < n_pairs and pair_node[ip] == n:
             ed = pair_edge[ip]
             ip += 1
+            je = edge_joint[ed]
+            if je >= 0 and not broken[je]:
+                continue
             p = edges[ed, 0]
             q = edges[ed, 1]
             ex = x[q, 0] - x[p, 0]
@@ -350,17 +335,37 @@ def contact_forces(x, v, inv_mass, pair_node, pair_edge, n_pairs, node_normal, e
             d = -(rx * ey - ry * ex) / L
             if d <= 0.0 or d > edge_dlim[ed]:
                 continue
-            if node_normal[n, 0] * ey - node_normal[n, 1] * ex >= 0.0:
+            if dnx * ey - dny * ex >= 0.0:
                 continue
+            if je >= 0:
+                te = edge_tri[ed]
+                r_ = tri[te, 0]
+                if r_ == p or r_ == q:
+                    r_ = tri[te, 1]
+                    if r_ == p or r_ == q:
+                        r_ = tri[te, 2]
+                if ((x[r_, 0] - x[q, 0]) * (x[n, 1] - x[q, 1])
+                        - (x[r_, 1] - x[q, 1]) * (x[n, 0] - x[q, 0])) < 0.0:
+                    continue
+                if ((x[p, 0] - x[r_, 0]) * (x[n, 1] - x[r_, 1])
+                        - (x[p, 1] - x[r_, 1]) * (x[n, 0] - x[r_, 0])) < 0.0:
+                    continue
             if best < 0 or d < best_d:
                 best = ed
                 best_d = d
                 best_xi = min(max(xi, 0.0), 1.0)
         if best < 0:
+            in_contact[n] = False
             continue
         ed = best
         d = best_d
         xi = best_xi
+        # A node that was not in contact a step ago can only enter contact shallowly: one found
+        # deep inside (it crossed a face that was not yet a surface, in a crushed zone) is left
+        # alone rather than shot out by the penalty energy of an overlap nobody resisted.
+        if not in_contact[n] and d > edge_dlim[ed] * (1.0 / 6.0):
+            continue
+        in_contact[n] = True
         p = edges[ed, 0]
         q = edges[ed, 1]
         ex = x[q, 0] - x[p, 0]
@@ -370,8 +375,13 @@ def contact_forces(x, v, inv_mass, pair_node, pair_edge, n_pairs, node_normal, e
         ty = ey / L
         wth = node_thick[n] if node_thick[n] < edge_thick[ed] else edge_thick[ed]
         kc = p_c * wth
-        Fn = kc * d
-        Uc += 0.5 * kc * d * d
+        dcap = edge_dlim[ed] * (1.0 / 3.0)
+        if d <= dcap:
+            Fn = kc * d
+            Uc += 0.5 * kc * d * d
+        else:
+            Fn = kc * dcap
+            Uc += kc * dcap * (d - 0.5 * dcap)
         if d > max_pen:
             max_pen = d
         fx = Fn * ty

@@ -108,6 +108,7 @@ class Model:
     tri_h: np.ndarray
     jn: np.ndarray
     jarea: np.ndarray
+    jlen0: np.ndarray
     kn: np.ndarray
     kt: np.ndarray
     ft: np.ndarray
@@ -124,6 +125,7 @@ class Model:
     edge_thick: np.ndarray
     edge_active0: np.ndarray
     tri_edges: np.ndarray
+    edge_joint: np.ndarray
     body_names: list
     body_fracturable: np.ndarray
     body_thickness: np.ndarray
@@ -319,10 +321,11 @@ def build_model(bodies: list[Body], joints: dict[str, JointParams] | None = None
     # contact exclusion on shared mesh vertices covers the others.
     node_thick = thick_b[node_body]
 
-    # Contact geometry per edge: penetration limit = half the owner triangle's altitude on it.
+    # Contact geometry per edge: penetration limit = 0.3 x the owner triangle's altitude on it (a node
+    # deeper than that is no contact with this edge: it came from elsewhere).
     ep = x0[edges_a]
     elen = np.linalg.norm(ep[:, 1] - ep[:, 0], axis=1)
-    edge_dlim = 0.5 * (2.0 * area[edge_tri_a] / elen)
+    edge_dlim = 0.3 * (2.0 * area[edge_tri_a] / elen)
     edge_thick = thick[edge_tri_a]
 
     if jn_l:
@@ -334,6 +337,10 @@ def build_model(bodies: list[Body], joints: dict[str, JointParams] | None = None
         jedges = np.zeros((0, 2), np.int64)
         j_body = np.zeros(0, np.int64)
     nj = jn.shape[0]
+    edge_joint = -np.ones(edges_a.shape[0], np.int64)
+    if nj:
+        edge_joint[jedges[:, 0]] = np.arange(nj)
+        edge_joint[jedges[:, 1]] = np.arange(nj)
     L0 = np.linalg.norm(x0[jn[:, 1]] - x0[jn[:, 0]], axis=1) if nj else np.zeros(0)
     triA = edge_tri_a[jedges[:, 0]] if nj else np.zeros(0, np.int64)
     triB = edge_tri_a[jedges[:, 1]] if nj else np.zeros(0, np.int64)
@@ -370,10 +377,10 @@ def build_model(bodies: list[Body], joints: dict[str, JointParams] | None = None
     return Model(
         x0=x0, mass=mass, node_body=node_body, node_vertex=node_vertex, node_tri=node_tri,
         node_thick=node_thick, tri=tri, dminv=np.ascontiguousarray(dminv), area0=area, vol0=vol0,
-        lam=lam, mu=mu, eta=eta, tri_body=tri_body, tri_h=tri_h, jn=jn, jarea=jarea, kn=kn, kt=kt,
+        lam=lam, mu=mu, eta=eta, tri_body=tri_body, tri_h=tri_h, jn=jn, jarea=jarea, jlen0=L0, kn=kn, kt=kt,
         ft=ft, fs=fs, dn=dn, dt=dtm, tanphi=tanphi, jedges=jedges, j_body=j_body,
         softening=softening, edges=edges_a, edge_tri=edge_tri_a, edge_dlim=edge_dlim,
-        edge_thick=edge_thick, edge_active0=edge_active0, tri_edges=tri_edges, body_names=names,
+        edge_thick=edge_thick, edge_active0=edge_active0, tri_edges=tri_edges, edge_joint=edge_joint, body_names=names,
         body_fracturable=np.array([b.fracturable for b in bodies], np.bool_),
         body_thickness=thick_b, body_materials=[b.material for b in bodies],
         node_sets=node_sets, element_sets=elem_sets, contact=contact, alpha_mass=alpha_mass,

@@ -196,7 +196,7 @@ def run(model: Model, t_end: float, *, dt: float | None = None, safety: float = 
         x, v, model.mass, inv_mass, model.tri, model.dminv, model.vol0, model.lam, model.mu,
         model.eta, model.jn, model.jarea, model.kn, model.kt, model.ft, model.fs, model.dn,
         model.dt, model.tanphi, model.jedges, float(sa), float(sb), float(sc), Dmax, broken,
-        model.edges, model.edge_tri, edge_active, model.edge_dlim, model.edge_thick, model.tri_edges,
+        model.edges, model.edge_tri, edge_active, model.edge_dlim, model.edge_thick, model.tri_edges, model.edge_joint,
         model.node_body, model.node_vertex, model.node_tri, model.node_thick,
         model.body_fracturable, nb, float(c.penalty if use_contact else 0.0),
         float(c.friction if use_contact else 0.0), float(buffer), use_contact,

@@ -126,7 +126,7 @@ def test_crushing_disc_between_platens_closes_energy_balance():
     res = run(model, 150e-6, velocity_bcs=bcs, sample_dt=1e-6)
     assert res.status == "ok"
     e = res.energy
-    assert res.broken[-1] > 50
+    assert res.broken[-1] > 20
     # The disc pushes the top platen up: equal and opposite contact forces on platens and disc.
     f_top = res.body_force_of("top")[:, 1]
     assert f_top.max() > 0
