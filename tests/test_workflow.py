@@ -1,0 +1,453 @@
+"""The Snakemake calibration workflow: config validation, observations, the analysis step, member
+failures, and end-to-end runs of `snakemake --cores 2`.
+
+* Unit tests of the workflow modules (``shpb.workflow_io``, ``shpb.observations``,
+  ``shpb.calibration``) against exact expectations (the reduced record, the seed, a linear model).
+* ``test_workflow_runs_end_to_end_and_a_second_run_has_nothing_to_do``: the real simulator
+  (``python -m shpb simulate``, fast preset), a twin experiment with N = 8 and two ES-MDA analyses;
+  checks the DESIGN section 6 files, ``summary.json``, the misfit falling, and that a second
+  invocation has nothing to do.
+* Robustness tests (failed members, kill and resume, malformed observations) drive the workflow
+  with a *stand-in* simulator written by this file into the test's folder (an analytic pulse through
+  the same command-line contract, through the config's ``simulator`` command), because they test the
+  workflow's handling of failures and interruptions, not the physics: failures are injected on
+  purpose and the members must be fast enough to kill a run between two of them.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+
+from enkf import EnsembleFailure
+from shpb.calibration import ExperimentSpec, analysis_step, final_iteration, initial_ensemble, rng_for
+from shpb.observations import (ObservationFileError, Observations, check_record, curve_on_grid,
+                               measured_observations, observation_grid, read_observations, twin_observations)
+from shpb.workflow_io import (ConfigError, load_yaml, member_ids, read_responses, run_member, validate_config,
+                              write_responses)
+
+REPO = Path(__file__).resolve().parents[1]
+SCHEMA = REPO / "config" / "schema.yaml"
+CAMA005 = REPO / "data/freiburg-rae-rock-shpb/Rae2021/SHPBdata/CaMa/CaMa_SHPB_005_Ti25_60b_Al12b_0_001.txt"
+
+
+# --------------------------------------------------------------------------------------------------
+# helpers
+# --------------------------------------------------------------------------------------------------
+def twin_config(**overrides) -> dict:
+    exp = {
+        "kind": "twin", "geometry": "brazilian_disc", "preset": "fast", "seed": 3, "ensemble_size": 8,
+        "method": "esmda", "esmda": {"steps": 2},
+        "parameters": {"sigma_t": [4.0e6, 60.0e6], "E_t": [200.0, 2400.0]},
+        "simulation": {"t_end": 1.2e-4, "sample_dt": 1.0e-6},
+        "observations": {"t_end": 1.0e-4, "dt": 1.0e-6, "truth": {"sigma_t": 45.0e6, "E_t": 500.0},
+                         "noise": {"relative_sigma": 0.01}},
+    }
+    for key, value in overrides.items():
+        exp[key] = value
+    return {"experiments": {"twin": exp}}
+
+
+STAND_IN = textwrap.dedent('''
+    """Stand-in for `python -m shpb simulate` in workflow robustness tests (an analytic pulse, not FDEM).
+
+    Peak 0.8 sigma_t at 20 us, exponential decay with tau = 5 us + 30 us E_t / 2400 J/m^2.
+    Injected failures (environment): STAND_IN_FAIL_BELOW: sigma_t below it -> exit 3 with a failed
+    run.json; STAND_IN_CRASH_ONCE_BELOW: sigma_t below it -> crash (exit 1) on the first call only
+    (a marker file per parameter set); STAND_IN_SLEEP: seconds per run.
+    """
+    import argparse, hashlib, json, os, sys, time
+    import numpy as np
+    ap = argparse.ArgumentParser()
+    for a in ("--geometry", "--preset", "--record", "--out"):
+        ap.add_argument(a)
+    ap.add_argument("--param", action="append", default=[])
+    ap.add_argument("--t-end", type=float, default=1.0e-4)
+    ap.add_argument("--sample-dt", type=float, default=1.0e-6)
+    a = ap.parse_args()
+    p = {k: float(v) for k, v in (s.split("=") for s in a.param)}
+    time.sleep(float(os.environ.get("STAND_IN_SLEEP", "0")))
+    st, et = p["sigma_t"], p["E_t"]
+    key = hashlib.md5(repr(sorted(p.items())).encode()).hexdigest()
+    crash_below = float(os.environ.get("STAND_IN_CRASH_ONCE_BELOW", "-1"))
+    marker = os.path.join(os.environ.get("STAND_IN_MARKERS", "."), key)
+    if st < crash_below and not os.path.exists(marker):
+        open(marker, "w").close()
+        sys.exit("stand-in: simulated crash")
+    t = np.arange(0.0, a.t_end + 1e-12, a.sample_dt)
+    tau = 5e-6 + 30e-6 * et / 2400.0
+    y = np.where(t < 20e-6, 0.8 * st * np.sin(0.5 * np.pi * t / 20e-6) ** 2, 0.8 * st * np.exp(-(t - 20e-6) / tau))
+    fail = st < float(os.environ.get("STAND_IN_FAIL_BELOW", "-1"))
+    os.makedirs(a.out, exist_ok=True)
+    cols = ["time_s", "stress_Pa", "stress_front_Pa", "stress_back_Pa", "force_balance", "centre_sxx_Pa",
+            "eps_incident_gauge", "eps_transmitted_gauge"]
+    with open(os.path.join(a.out, "curve.csv"), "w") as fh:
+        fh.write(",".join(cols) + "\\n")
+        for ti, yi in zip(t, y):
+            fh.write(",".join(repr(float(v)) for v in (ti, yi, yi, yi, 0.0, yi, 0.0, 0.0)) + "\\n")
+    run = {"status": "failed" if fail else "ok", "reason": "energy balance diverged (stand-in)" if fail else "",
+           "geometry": a.geometry, "preset": a.preset, "params": p, "wall_s": 0.01, "t_end_s": a.t_end}
+    with open(os.path.join(a.out, "run.json"), "w") as fh:
+        json.dump(run, fh)
+    sys.exit(3 if fail else 0)
+''')
+
+
+def write_stand_in(folder: Path) -> str:
+    path = folder / "stand_in_simulator.py"
+    path.write_text(STAND_IN)
+    return f"{sys.executable} {path}"
+
+
+def snakemake(workdir: Path, *args: str, env: dict | None = None, timeout: float = 600.0):
+    cmd = [sys.executable, "-m", "snakemake", "--snakefile", str(REPO / "Snakefile"), "--directory", str(workdir),
+           "--configfile", str(workdir / "config.yaml"), "--workflow-profile", "none", *args]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env={**os.environ, **(env or {})})
+
+
+def write_config(workdir: Path, cfg: dict) -> None:
+    workdir.mkdir(parents=True, exist_ok=True)
+    (workdir / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+
+
+# --------------------------------------------------------------------------------------------------
+# config
+# --------------------------------------------------------------------------------------------------
+def test_shipped_configs_are_valid():
+    base = load_yaml(REPO / "config" / "config.yaml")
+    cfg = validate_config(base, SCHEMA, base_dir=REPO)
+    assert set(cfg["run"]) <= set(cfg["experiments"])
+    assert cfg["experiments"]["twin_ref"]["observations"]["truth"] == {"sigma_t": 45.0e6, "E_t": 500.0}
+    assert cfg["experiments"]["twin_ref"]["ensemble_size"] == 25
+    twins = load_yaml(REPO / "config" / "paper_twins.yaml")
+    merged = {**base, **twins, "experiments": {**base["experiments"], **twins["experiments"]}}
+    cfg = validate_config(merged, SCHEMA, base_dir=REPO)
+    truths = [cfg["experiments"][e]["observations"].get("truth") for e in cfg["run"]]
+    assert len({(t["sigma_t"], t["E_t"]) for t in truths}) == 3  # the paper's three reference points
+
+
+@pytest.mark.parametrize("mutate, expected", [
+    (lambda c: c["experiments"]["twin"].update(ensemble_sise=8), "experiments.twin: unknown key(s) ['ensemble_sise']"),
+    (lambda c: c["experiments"]["twin"].update(method="esmd"), "experiments.twin.method: 'esmd' is not one of"),
+    (lambda c: c["experiments"]["twin"]["parameters"].update(E_t=[2400.0, 200.0]), "experiments.twin.parameters.E_t"),
+    (lambda c: c["experiments"]["twin"]["parameters"].update(sigma_tt=[1.0, 2.0]), "experiments.twin.parameters.sigma_tt: unknown parameter"),
+    (lambda c: c["experiments"]["twin"]["observations"]["truth"].update(E_t=5000.0), "truth.E_t: 5000.0 lies outside the prior box"),
+    (lambda c: c["experiments"]["twin"]["observations"].update(t_end=5.0e-4), "experiments.twin.simulation.t_end"),
+    (lambda c: c["experiments"]["twin"].update(kind="measured"), "experiments.twin.geometry: measured records"),
+    (lambda c: c.update(run=["nope"]), "run: experiment 'nope' is not defined"),
+])
+def test_a_bad_config_key_or_value_fails_with_a_message_naming_it(mutate, expected):
+    cfg = twin_config()
+    mutate(cfg)
+    with pytest.raises(ConfigError) as err:
+        validate_config(cfg, SCHEMA)
+    assert expected in str(err.value), str(err.value)
+
+
+def test_yaml_scientific_notation_strings_are_read_as_numbers_and_defaults_are_filled():
+    cfg = twin_config()
+    cfg["experiments"]["twin"]["parameters"]["sigma_t"] = ["4.0e6", "60e6"]  # what PyYAML returns for 4.0e6
+    out = validate_config(cfg, SCHEMA)
+    exp = out["experiments"]["twin"]
+    assert exp["parameters"]["sigma_t"] == [4.0e6, 60.0e6]
+    assert exp["stopping"]["collapse_fraction"] == 1e-3 and exp["observations"]["noise"]["corr_time"] == 0.0
+    assert out["simulator"] == "python -m shpb simulate" and out["member_retries"] == 1
+
+
+# --------------------------------------------------------------------------------------------------
+# observations
+# --------------------------------------------------------------------------------------------------
+def test_measured_observations_are_the_reduced_stress_with_the_records_noise_level():
+    from shpb.observations import reduce_measured_record
+
+    red, _, noise = reduce_measured_record(CAMA005)
+    obs, reduced = measured_observations({"CaMa_SHPB_005": CAMA005}, t_start=0.0, t_end=3.2e-4, dt=None)
+    n = int(round(3.2e-4 / red.dt)) + 1
+    assert obs.m == n and np.allclose(obs.time, red.time[:n], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(obs.values, red.stress[:n], rtol=1e-12)
+    assert np.all(obs.sigma == red.noise_std_Pa["stress"])
+    assert 0.3e6 < red.noise_std_Pa["stress"] < 2e6  # about 0.6 MPa on a 195 MPa peak
+    # the AR(1) estimate sees the same pre-trigger samples: same sigma within the ddof difference
+    assert noise.sigma == pytest.approx(red.noise_std_Pa["stress"], rel=0.01)
+    assert obs.error_model().kind in ("ar1", "diagonal")
+
+
+def test_a_malformed_observation_file_is_reported_with_its_name_and_problem(tmp_path):
+    bad = tmp_path / "CaMa_SHPB_005_truncated.txt"
+    lines = CAMA005.read_text(encoding="latin-1").splitlines()
+    bad.write_text("\n".join(lines[:200]) + "\n", encoding="latin-1")
+    with pytest.raises(ObservationFileError) as err:
+        check_record(bad)
+    assert str(bad) in str(err.value) and "Blocklength" in str(err.value)
+    missing = tmp_path / "nope.txt"
+    with pytest.raises(ObservationFileError, match="nope.txt"):
+        check_record(missing)
+
+
+def test_twin_noise_is_fixed_by_the_seed_and_has_the_declared_level():
+    t = observation_grid(0.0, 2.0e-4, 1.0e-6)
+    truth = pd.DataFrame({"time_s": t, "stress_Pa": 30e6 * np.sin(np.pi * t / 2e-4)})
+    a = twin_observations(truth, t, rng=rng_for(1, "noise"), relative_sigma=0.02)
+    b = twin_observations(truth, t, rng=rng_for(1, "noise"), relative_sigma=0.02)
+    c = twin_observations(truth, t, rng=rng_for(2, "noise"), relative_sigma=0.02)
+    assert np.array_equal(a.values, b.values) and not np.array_equal(a.values, c.values)
+    resid = a.values - truth["stress_Pa"].to_numpy()
+    assert a.sigma[0] == pytest.approx(0.02 * 30e6)
+    assert np.std(resid) == pytest.approx(0.6e6, rel=0.15)
+
+
+def test_a_curve_that_does_not_cover_the_grid_is_missing_there():
+    t = np.arange(0.0, 50e-6, 1e-6)
+    grid = observation_grid(0.0, 80e-6, 2e-6)
+    y = curve_on_grid(t, 2.0 * t, grid)
+    assert np.allclose(y[grid <= 49e-6], 2.0 * grid[grid <= 49e-6])
+    assert np.all(np.isnan(y[grid > 50e-6]))
+    assert np.all(np.isnan(curve_on_grid([], [], grid)))
+
+
+def test_observation_files_round_trip_and_bad_ones_are_named(tmp_path):
+    t = observation_grid(0.0, 1e-4, 1e-6)
+    truth = pd.DataFrame({"time_s": t, "stress_Pa": 1e6 * t / 1e-4})
+    obs = twin_observations(truth, t, rng=rng_for(0, "noise"), relative_sigma=0.01)
+    obs.write(tmp_path / "obs.csv", tmp_path / "obs.json")
+    back = read_observations(tmp_path / "obs.csv", tmp_path / "obs.json")
+    assert np.array_equal(back.values, obs.values) and back.records == ["synthetic"]
+    lines = (tmp_path / "obs.csv").read_text().splitlines()
+    cells = lines[4].split(",")
+    cells[2] = "oops"  # stress_Pa of data row 4
+    lines[4] = ",".join(cells)
+    (tmp_path / "bad.csv").write_text("\n".join(lines) + "\n")
+    with pytest.raises(ObservationFileError, match=r"bad.csv: column 'stress_Pa' is not a finite number"):
+        read_observations(tmp_path / "bad.csv", tmp_path / "obs.json")
+
+
+# --------------------------------------------------------------------------------------------------
+# the analysis step
+# --------------------------------------------------------------------------------------------------
+def _linear_setup(n_members=20):
+    cfg = validate_config(twin_config(ensemble_size=n_members, esmda={"steps": 3}), SCHEMA)
+    spec = ExperimentSpec.from_config("twin", cfg["experiments"]["twin"])
+    t = observation_grid(0.0, 1e-4, 2e-6)
+
+    def model(P):
+        P = np.atleast_2d(P)
+        return P[:, :1] * np.sin(np.pi * t / 1e-4) + 1e4 * P[:, 1:2] * (t / 1e-4)
+
+    truth = np.array([45e6, 500.0])
+    frame = pd.DataFrame({"time_s": t, "stress_Pa": model(truth)[0]})
+    obs = twin_observations(frame, t, rng=rng_for(spec.seed, "noise"), relative_sigma=0.01)
+    return spec, obs, model, truth
+
+
+def test_analysis_steps_recover_a_linear_twin_and_stop_when_the_schedule_is_spent():
+    spec, obs, model, truth = _linear_setup()
+    params0 = initial_ensemble(spec)
+    params, analyses = params0, []
+    for k in range(4):
+        Y = model(params[list(spec.names)].to_numpy())
+        status = pd.DataFrame({"member": params["member"], "status": "ok", "reason": ""})
+        a = analysis_step(spec, k, params, Y, status, obs, params0)
+        json.dumps(a, allow_nan=False)  # strict JSON
+        analyses.append(a)
+        K, decision = final_iteration(spec, analyses)
+        if decision is not None:
+            break
+        params = pd.DataFrame(a["next_params"]["values"], columns=a["next_params"]["names"])
+        params.insert(0, "member", range(len(params)))
+    assert K == 3 and decision["reason"] in ("discrepancy", "max_iterations")
+    post = analyses[-1]["posterior"]
+    assert post["sigma_t"]["mean"] == pytest.approx(truth[0], rel=0.02)
+    assert post["E_t"]["mean"] == pytest.approx(truth[1], rel=0.10)
+    assert analyses[-1]["misfit"]["rmse_Pa"] < 0.2 * analyses[0]["misfit"]["rmse_Pa"]
+
+
+def test_failed_members_are_left_out_and_their_reasons_recorded_and_too_many_failures_stop():
+    spec, obs, model, _ = _linear_setup(10)
+    params = initial_ensemble(spec)
+    Y = model(params[list(spec.names)].to_numpy())
+    Y[2] = np.nan
+    Y[7, 5:] = np.nan  # ok status, but the curve does not cover the grid
+    status = pd.DataFrame({"member": params["member"], "status": "ok", "reason": ""})
+    status.loc[2, ["status", "reason"]] = ["failed", "synthetic: numerical failure: energy balance diverged"]
+    a = analysis_step(spec, 0, params, Y, status, obs, params)
+    assert a["n_alive"] == 8 and a["alive"][2] is False and a["alive"][7] is False
+    reasons = {f["member"]: f["reason"] for f in a["failed_members"]}
+    assert "energy balance diverged" in reasons[2] and "does not cover the observation grid" in reasons[7]
+    assert sorted(a["update"]["replaced_members"]) == [2, 7]
+    assert all(np.isfinite(np.array(a["next_params"]["values"])).ravel())
+    status.loc[:6, "status"] = "failed"
+    with pytest.raises(EnsembleFailure, match="only 2 of 10 members succeeded"):
+        analysis_step(spec, 0, params, Y, status, obs, params)
+
+
+def test_the_same_seed_gives_bit_identical_analysis_files():
+    spec, obs, model, _ = _linear_setup()
+    p = initial_ensemble(spec)
+    Y = model(p[list(spec.names)].to_numpy())
+    st = pd.DataFrame({"member": p["member"], "status": "ok", "reason": ""})
+    one = json.dumps(analysis_step(spec, 0, p, Y, st, obs, p))
+    two = json.dumps(analysis_step(spec, 0, initial_ensemble(spec), Y, st, obs, p))
+    assert one == two
+
+
+def test_responses_file_round_trips(tmp_path):
+    Y = np.array([[1.0, 2.5e7, np.nan], [3.0, 4.0, 5.0]])
+    st = [{"status": "failed", "reason": "x, with a comma"}, {"status": "ok", "reason": "", "wall_s": 2.0}]
+    write_responses(tmp_path / "r.csv", [0, 1], st, Y)
+    status, back = read_responses(tmp_path / "r.csv")
+    assert np.array_equal(back, Y, equal_nan=True)
+    assert status["reason"].tolist() == ["x, with a comma", ""] and status["wall_s"].tolist() == [0.0, 2.0]
+    assert member_ids(8) == ["000", "001", "002", "003", "004", "005", "006", "007"]
+
+
+# --------------------------------------------------------------------------------------------------
+# one member run and its exit codes
+# --------------------------------------------------------------------------------------------------
+def test_member_exit_codes_numerical_failure_is_recorded_and_a_crash_is_retried_then_recorded(tmp_path):
+    cmd = write_stand_in(tmp_path).split()
+    common = dict(command=cmd, geometry="brazilian_disc", preset="fast", t_end=5e-5, sample_dt=1e-6)
+    ok = run_member(params={"sigma_t": 30e6, "E_t": 500.0}, curve_path=tmp_path / "ok/curve.csv",
+                    run_path=tmp_path / "ok/run.json", **common)
+    assert ok["status"] == "ok" and len(pd.read_csv(tmp_path / "ok/curve.csv")) == 51
+    os.environ["STAND_IN_FAIL_BELOW"] = "1e7"
+    try:
+        bad = run_member(params={"sigma_t": 5e6, "E_t": 500.0}, curve_path=tmp_path / "bad/curve.csv",
+                         run_path=tmp_path / "bad/run.json", log_path=tmp_path / "bad/log", **common)
+    finally:
+        del os.environ["STAND_IN_FAIL_BELOW"]
+    assert bad["status"] == "failed" and bad["reason"].startswith("numerical failure: energy balance diverged")
+    assert json.loads((tmp_path / "bad/run.json").read_text())["exit_code"] == 3
+    assert pd.read_csv(tmp_path / "bad/curve.csv").empty
+    crash = [sys.executable, "-c", "import sys; sys.exit('boom')"]
+    with pytest.raises(Exception, match="exited with code 1"):
+        run_member(command=crash, geometry="brazilian_disc", preset="fast", params={"sigma_t": 1.0},
+                   curve_path=tmp_path / "c/curve.csv", run_path=tmp_path / "c/run.json", attempt=1, max_attempts=2)
+    assert not (tmp_path / "c/run.json").exists()
+    last = run_member(command=crash, geometry="brazilian_disc", preset="fast", params={"sigma_t": 1.0},
+                      curve_path=tmp_path / "c/curve.csv", run_path=tmp_path / "c/run.json", attempt=2,
+                      max_attempts=2)
+    assert last["status"] == "failed" and "crashed on every attempt" in last["reason"] and "boom" in last["reason"]
+    assert sorted(p.name for p in (tmp_path / "c").iterdir()) == ["curve.csv", "run.json"]  # no temp left
+
+
+# --------------------------------------------------------------------------------------------------
+# the workflow (snakemake --cores 2)
+# --------------------------------------------------------------------------------------------------
+def test_workflow_runs_end_to_end_and_a_second_run_has_nothing_to_do(tmp_path):
+    """The real simulator at the fast preset: N = 8, two ES-MDA analyses (three ensembles)."""
+    write_config(tmp_path, twin_config())
+    t0 = time.time()
+    first = snakemake(tmp_path, "--cores", "2")
+    assert first.returncode == 0, first.stderr[-4000:]
+    wall = time.time() - t0
+    res = tmp_path / "results" / "twin"
+    for k in range(3):
+        assert (res / f"iter_{k}" / "params.csv").is_file()
+        assert (res / f"iter_{k}" / "analysis.json").is_file()
+        for m in member_ids(8):
+            assert (res / f"iter_{k}" / "members" / m / "synthetic" / "curve.csv").is_file()
+            run = json.loads((res / f"iter_{k}" / "members" / m / "synthetic" / "run.json").read_text())
+            assert run["preset"] == "fast" and "status" in run
+    assert not (res / "iter_3").exists()
+    for name in ("posterior.csv", "forecast/synthetic/curve.csv", "forecast/synthetic/run.json", "summary.json",
+                 "observations/obs.csv", *(f"plots/{p}.png" for p in ("parameters", "ensemble_curves", "forecast",
+                                                                       "misfit", "sensitivity"))):
+        assert (res / name).is_file(), name
+    summary = json.loads((res / "summary.json").read_text())
+    for key in ("experiment", "iterations", "converged", "stop_reason", "n_simulations", "posterior", "truth",
+                "misfit", "wall_s"):
+        assert key in summary, key
+    assert summary["iterations"] == 2 and summary["stop_reason"] == "max_iterations" or summary["converged"]
+    assert summary["n_simulations"] == 3 * 8 + 1 + 1
+    assert summary["misfit"][-1]["rmse_Pa"] < summary["misfit"][0]["rmse_Pa"]
+    assert summary["misfit"][-1]["chi2_per_obs"] < summary["misfit"][0]["chi2_per_obs"]
+    assert set(summary["posterior"]) == {"sigma_t", "E_t"}
+    print(f"\nend-to-end fast workflow: {wall:.0f} s; misfit per iteration "
+          f"{[round(m['rmse_Pa'] / 1e6, 2) for m in summary['misfit']]} MPa; posterior "
+          f"{ {p: round(v['mean'], 1) for p, v in summary['posterior'].items()} }")
+    second = snakemake(tmp_path, "--cores", "2")
+    assert second.returncode == 0, second.stderr[-4000:]
+    assert "Nothing to be done" in second.stdout + second.stderr
+
+
+def test_a_failed_member_is_retried_then_dropped_with_its_reason_in_analysis_json(tmp_path):
+    cfg = twin_config(ensemble_size=10, esmda={"steps": 1})
+    cfg["simulator"] = write_stand_in(tmp_path)
+    write_config(tmp_path, cfg)
+    lhs = validate_config(cfg, SCHEMA)
+    p0 = initial_ensemble(ExperimentSpec.from_config("twin", lhs["experiments"]["twin"]))
+    sig = np.sort(p0["sigma_t"].to_numpy())
+    fail_below = 0.5 * (sig[0] + sig[1])  # exactly one member fails numerically
+    crash_below = 0.5 * (sig[1] + sig[2])  # and the two lowest crash once (retried, then fine for one)
+    (tmp_path / "markers").mkdir()
+    env = {"STAND_IN_FAIL_BELOW": repr(float(fail_below)), "STAND_IN_CRASH_ONCE_BELOW": repr(float(crash_below)),
+           "STAND_IN_MARKERS": str(tmp_path / "markers")}
+    out = snakemake(tmp_path, "--cores", "2", env=env)
+    assert out.returncode == 0, out.stderr[-4000:]
+    a0 = json.loads((tmp_path / "results/twin/iter_0/analysis.json").read_text())
+    failed_member = int(p0["member"][p0["sigma_t"] < fail_below].iloc[0])
+    crashed_once = int(p0["member"][(p0["sigma_t"] > fail_below) & (p0["sigma_t"] < crash_below)].iloc[0])
+    assert a0["n_alive"] == 9 and a0["alive"][failed_member] is False
+    assert [f["member"] for f in a0["failed_members"]] == [failed_member]
+    assert "energy balance diverged (stand-in)" in a0["failed_members"][0]["reason"]
+    assert a0["update"]["replaced_members"] == [failed_member]
+    run = json.loads((tmp_path / f"results/twin/iter_0/members/{crashed_once:03d}/synthetic/run.json").read_text())
+    assert run["status"] == "ok" and run["attempt"] == 2  # crashed on attempt 1, Snakemake retried it
+    summary = json.loads((tmp_path / "results/twin/summary.json").read_text())
+    assert summary["failed_members"]["0"][0]["member"] == failed_member
+
+
+def test_a_killed_run_resumes_without_redoing_finished_members(tmp_path):
+    cfg = twin_config(ensemble_size=12, esmda={"steps": 1})
+    cfg["simulator"] = write_stand_in(tmp_path)
+    write_config(tmp_path, cfg)
+    cmd = [sys.executable, "-m", "snakemake", "--snakefile", str(REPO / "Snakefile"), "--directory", str(tmp_path),
+           "--configfile", str(tmp_path / "config.yaml"), "--workflow-profile", "none", "--cores", "2"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            env={**os.environ, "STAND_IN_SLEEP": "1.5"}, start_new_session=True)
+    members = tmp_path / "results/twin/iter_0/members"
+    deadline = time.time() + 240
+    while time.time() < deadline and len(list(members.glob("*/synthetic/run.json"))) < 4:
+        time.sleep(0.2)
+    # members finished (and registered by Snakemake) well before the kill; the jobs still running then
+    # (at most 2) are redone, as they must be. Identity by inode: every write is a new file renamed into
+    # place, while Snakemake touches (re-dates) a job's outputs when it registers the job as finished.
+    done = {p: p.stat().st_ino for p in members.glob("*/synthetic/run.json")}
+    time.sleep(2.0)
+    os.killpg(proc.pid, signal.SIGKILL)  # the whole process group, as a hard kill of the terminal would
+    proc.wait()
+    assert 4 <= len(done) < 12, len(done)
+    assert len(list(members.glob("*/synthetic/run.json"))) < 12, "the run finished before it was killed"
+    unlock = snakemake(tmp_path, "--unlock")
+    assert unlock.returncode == 0, unlock.stderr[-2000:]
+    again = snakemake(tmp_path, "--cores", "2", "--rerun-incomplete")
+    assert again.returncode == 0, again.stderr[-4000:]
+    for p, inode in done.items():
+        assert p.stat().st_ino == inode, f"{p} was simulated again"
+    assert len(list(members.glob("*/synthetic/run.json"))) == 12
+    assert (tmp_path / "results/twin/summary.json").is_file()
+
+
+def test_a_malformed_observation_file_fails_before_the_first_simulation(tmp_path):
+    bad = tmp_path / "CaMa_SHPB_099_bad.txt"
+    bad.write_text("\n".join(CAMA005.read_text(encoding="latin-1").splitlines()[:300]) + "\n", encoding="latin-1")
+    cfg = {"experiments": {"marble": {
+        "kind": "measured", "geometry": "cylinder", "preset": "fast", "seed": 1, "ensemble_size": 4,
+        "parameters": {"sigma_t": [1.0e7, 1.2e8], "E_t": [100.0, 5000.0]},
+        "simulation": {"t_end": 3.4e-4}, "observations": {"t_end": 3.2e-4, "records": [str(bad)]}}}}
+    write_config(tmp_path, cfg)
+    out = snakemake(tmp_path, "--cores", "2")
+    assert out.returncode != 0
+    assert str(bad) in out.stderr and "Blocklength" in out.stderr
+    assert not (tmp_path / "results").exists()
