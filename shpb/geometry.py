@@ -229,7 +229,7 @@ def brazilian_disc(preset: str | Preset = "standard", *,
                    window_s: float = DEFAULT_WINDOW_S,
                    incident_gauge_m: float | None = None, transmission_gauge_m: float | None = None,
                    incident_length_m: float | None = None, transmission_length_m: float | None = None,
-                   enforce_window: bool = True) -> Geometry:
+                   enforce_window: bool = True, flat_half_angle_deg: float = 0.0) -> Geometry:
     """Brazilian disc between an incident and a transmission bar (the paper's set-up), 2D along x.
 
     diameter_m, thickness_m: disc diameter and real thickness [m] (the plane-stress thickness).
@@ -241,6 +241,8 @@ def brazilian_disc(preset: str | Preset = "standard", *,
     incident_length_m, transmission_length_m: bar lengths [m]; checked against the rule unless
         ``enforce_window=False``.
     The incident bar is loaded by a velocity history on its ``load_end`` nodes.
+    flat_half_angle_deg: > 0 gives a flattened Brazilian disc whose loaded faces are flats of
+        half-angle alpha (chord x = +-R cos(alpha)); the bars then touch the flats.
     """
     p = get_preset(preset)
     _check_positive(diameter_m=diameter_m, thickness_m=thickness_m, bar_diameter_m=bar_diameter_m,
@@ -256,11 +258,15 @@ def brazilian_disc(preset: str | Preset = "standard", *,
     _check_bar_lengths(L_i, L_t, d_i, d_t, c, window_s, enforce_window, incident_free_end=True)
 
     R = 0.5 * diameter_m
-    x_front, x_back = -R, R
-    nodes, tris = _mesh_disc(R, p.specimen_h_m, p)
+    if not (0.0 <= flat_half_angle_deg < 30.0):
+        raise ValueError(f"flat_half_angle_deg must be in [0, 30) degrees, got {flat_half_angle_deg}")
+    alpha = np.radians(flat_half_angle_deg)
+    x_front, x_back = (-R, R) if alpha == 0.0 else (-R * np.cos(alpha), R * np.cos(alpha))
+    nodes, tris = _mesh_disc(R, p.specimen_h_m, p, alpha)
     centre, r_c = _centre_set(nodes, tris, (0.0, 0.0), CENTRE_RADIUS_FRACTION * diameter_m)
-    front = np.flatnonzero((nodes[:, 0] == x_front) & (nodes[:, 1] == 0.0))
-    back = np.flatnonzero((nodes[:, 0] == x_back) & (nodes[:, 1] == 0.0))
+    on_axis = (nodes[:, 1] == 0.0) if alpha == 0.0 else np.ones(len(nodes), bool)
+    front = np.flatnonzero((nodes[:, 0] == x_front) & on_axis)
+    back = np.flatnonzero((nodes[:, 0] == x_back) & on_axis)
     specimen = Body("disc", nodes, tris, disc, thickness=thickness_m, fracturable=True,
                     node_sets={"front_face": front, "back_face": back},
                     element_sets={"centre": centre})
@@ -456,12 +462,16 @@ def _loop_segments(n: int) -> np.ndarray:
     return np.column_stack([i, (i + 1) % n])
 
 
-def _mesh_disc(R: float, h: float, p: Preset) -> tuple[np.ndarray, np.ndarray]:
+def _mesh_disc(R: float, h: float, p: Preset, flat_half_angle: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Disc of radius R centred at the origin: an inscribed polygon of n = 4k vertices, chord ~ h.
 
     Vertices at angles 0, pi/2, pi, 3pi/2 are placed exactly, so (-R, 0) and (R, 0) are nodes (the
-    contact points with the bars).
+    contact points with the bars). With flat_half_angle = alpha > 0 the disc has two flat loaded
+    faces, the chords x = +-R cos(alpha), |y| <= R sin(alpha) (a flattened Brazilian disc), split into
+    segments of about h.
     """
+    if flat_half_angle > 0.0:
+        return _mesh_flattened_disc(R, h, p, flat_half_angle)
     n = 4 * max(2, int(round(2.0 * np.pi * R / (4.0 * h))))
     theta = 2.0 * np.pi * np.arange(n) / n
     v = np.column_stack([R * np.cos(theta), R * np.sin(theta)])
@@ -471,6 +481,24 @@ def _mesh_disc(R: float, h: float, p: Preset) -> tuple[np.ndarray, np.ndarray]:
     v[2 * q] = (-R, 0.0)
     v[3 * q] = (0.0, -R)
     return _triangulate(v, _loop_segments(n), p.max_area(h))
+
+
+def _mesh_flattened_disc(R: float, h: float, p: Preset, alpha: float) -> tuple[np.ndarray, np.ndarray]:
+    """Disc with two flats of half-angle alpha facing the bars (see _mesh_disc)."""
+    xf = R * np.cos(alpha)
+    yf = R * np.sin(alpha)
+    n_flat = max(2, int(round(2.0 * yf / h)))
+    n_arc = max(2, int(round(R * (np.pi - 2.0 * alpha) / h)))
+    pts = []
+    # right flat, bottom to top (x = +xf), then the upper arc, left flat top to bottom, lower arc
+    pts += [(xf, y) for y in np.linspace(-yf, yf, n_flat + 1)[:-1]]
+    pts += [(R * np.cos(t), R * np.sin(t)) for t in np.linspace(alpha, np.pi - alpha, n_arc + 1)[:-1]]
+    pts += [(-xf, y) for y in np.linspace(yf, -yf, n_flat + 1)[:-1]]
+    pts += [(R * np.cos(t), R * np.sin(t)) for t in np.linspace(np.pi + alpha, 2 * np.pi - alpha, n_arc + 1)[:-1]]
+    v = np.array(pts)
+    v[np.isclose(v[:, 0], xf), 0] = xf
+    v[np.isclose(v[:, 0], -xf), 0] = -xf
+    return _triangulate(v, _loop_segments(len(v)), p.max_area(h))
 
 
 def _mesh_rectangle(x0: float, x1: float, height: float, h: float, p: Preset) -> tuple[np.ndarray, np.ndarray]:
