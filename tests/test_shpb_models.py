@@ -151,9 +151,12 @@ def test_measured_record_drives_the_cylinder_model():
 
     for frac in (0.2, 0.5):
         assert abs(onset(eps_I_model, frac) - onset(eps_I_meas, frac)) <= 5e-6
-    # the model's own front-face force is zero before that wave arrives (no offset in the chain)
+    # the model's own front-face force is zero before that wave arrives (no offset in the chain);
+    # the 2D strip's dilatational precursor, sqrt(1/(1 - nu^2)) faster than the bar wave, leads the
+    # bar-wave arrival by about 13 us over 1.25 m, so the check starts 20 us before t = 0
     F = c.stress_front_Pa.to_numpy()
-    assert np.max(np.abs(F[tau < 0])) < 1e-3 * np.max(F)
+    assert np.max(np.abs(F[tau < -20e-6])) < 1e-3 * np.max(F)
+    assert np.max(np.abs(F[tau < 0])) < 0.01 * np.max(F)
     assert np.max(F[tau < onset(eps_I_meas, 0.2) + 50e-6]) > 0.01 * np.max(F)
     peak_sim = c.stress_Pa.max()
     assert 0.5 * red.peak_stress <= peak_sim <= 2.0 * red.peak_stress
