@@ -37,7 +37,7 @@ rule observations:
         csv="results/{exp}/observations/obs.csv",
         meta="results/{exp}/observations/obs.json",
     params:
-        exp=lambda wc: EXPERIMENTS[wc.exp],
+        exp=lambda wc: {k: EXPERIMENTS[wc.exp][k] for k in ("kind", "seed", "observations")},
         records=lambda wc: records(wc.exp),
     script:
         "../scripts/observations.py"

@@ -36,13 +36,12 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 __all__ = [
     "PARAM_NAMES", "CURVE_COLUMNS", "ConfigError", "SimulatorCrash", "load_yaml", "validate_config",
     "apply_defaults", "atomic_write_text", "atomic_write_json", "atomic_write_csv", "read_json",
     "member_ids", "record_name", "experiment_records", "run_member", "simulator_command",
-    "simulate_argv", "failed_curve", "member_params", "combine_member_runs", "write_responses",
+    "simulate_argv", "failed_curve_text", "member_params", "combine_member_runs", "write_responses",
     "read_responses", "known_parameters", "coerce_yaml_floats",
 ]
 
@@ -93,7 +92,7 @@ def atomic_write_json(path: str | Path, obj) -> Path:
     return atomic_write_text(path, json.dumps(obj, indent=2, allow_nan=False) + "\n")
 
 
-def atomic_write_csv(df: pd.DataFrame, path: str | Path) -> Path:
+def atomic_write_csv(df, path: str | Path) -> Path:
     """``df.to_csv`` without index, floats written with full precision (round-trip exact)."""
     return atomic_write_text(path, df.to_csv(index=False, lineterminator="\n"))
 
@@ -355,9 +354,9 @@ def simulate_argv(command: Sequence[str], *, geometry: str, preset: str, params:
     return argv + ["--out", str(out_dir)]
 
 
-def failed_curve() -> pd.DataFrame:
-    """The curve file of a failed member: the contract's columns and no rows (all values missing)."""
-    return pd.DataFrame({c: pd.Series(dtype=float) for c in CURVE_COLUMNS})
+def failed_curve_text() -> str:
+    """The curve file of a failed member: the contract's header and no rows (all values missing)."""
+    return ",".join(CURVE_COLUMNS) + "\n"
 
 
 def _tail(text: str, n: int = 1500) -> str:
@@ -410,7 +409,7 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
             run.update({"status": "failed", "reason": f"{kind}: {reason}", "geometry": geometry,
                         "preset": preset, "params": dict(params)}, **extra)
             run.setdefault("wall_s", wall)
-            atomic_write_csv(failed_curve(), curve_path)
+            atomic_write_text(curve_path, failed_curve_text())
             atomic_write_json(run_path, _jsonable(run))
             return run
         what = (f"simulator exited with code {proc.returncode}" if proc.returncode >= 0
@@ -422,7 +421,7 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
             raise SimulatorCrash(message)
         run = {"status": "failed", "reason": f"crashed on every attempt: {message}", "geometry": geometry,
                "preset": preset, "params": dict(params), "wall_s": wall, **extra}
-        atomic_write_csv(failed_curve(), curve_path)
+        atomic_write_text(curve_path, failed_curve_text())
         atomic_write_json(run_path, _jsonable(run))
         return run
     finally:
@@ -434,11 +433,13 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
 # --------------------------------------------------------------------------------------------------
 def member_params(params_csv: str | Path, member: str | int, fixed: Mapping[str, float] | None = None) -> dict:
     """The simulator parameters of one member: its row of ``params.csv`` plus the fixed parameters."""
-    df = pd.read_csv(params_csv)
-    row = df[df["member"] == int(member)]
-    if len(row) != 1:
-        raise KeyError(f"{params_csv}: member {member} not found (members: {df['member'].tolist()})")
-    values = {c: float(row.iloc[0][c]) for c in df.columns if c != "member"}
+    import csv
+
+    with open(params_csv, newline="") as fh:
+        rows = [r for r in csv.DictReader(fh) if int(r["member"]) == int(member)]
+    if len(rows) != 1:
+        raise KeyError(f"{params_csv}: member {member} not found")
+    values = {c: float(v) for c, v in rows[0].items() if c != "member"}
     return {**(fixed or {}), **values}
 
 
@@ -453,6 +454,8 @@ def combine_member_runs(runs: Mapping[str, Mapping]) -> dict:
 def write_responses(path: str | Path, members: Sequence[int], status: Sequence[Mapping], Y: np.ndarray) -> Path:
     """``iter_<k>/responses.csv``: one row per member, ``member, status, reason, wall_s`` and the curve
     on the observation grid as ``y_0 ... y_{m-1}`` (the order of ``obs.csv``; empty = missing)."""
+    import pandas as pd
+
     Y = np.asarray(Y, float)
     head = pd.DataFrame({"member": [int(m) for m in members], "status": [s["status"] for s in status],
                          "reason": [s.get("reason", "") for s in status],
@@ -461,8 +464,10 @@ def write_responses(path: str | Path, members: Sequence[int], status: Sequence[M
     return atomic_write_csv(pd.concat([head, body], axis=1), path)
 
 
-def read_responses(path: str | Path) -> tuple[pd.DataFrame, np.ndarray]:
+def read_responses(path: str | Path):
     """``(status frame [member, status, reason, wall_s], Y (N, m))`` from :func:`write_responses`."""
+    import pandas as pd
+
     df = pd.read_csv(path, keep_default_na=True)
     ycols = [c for c in df.columns if c.startswith("y_")]
     status = df[["member", "status", "reason", "wall_s"]].copy()
