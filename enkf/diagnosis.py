@@ -420,7 +420,7 @@ def score_test(white_resid, S_base_white, S_cand_white, *, rtol: float = 1e-10) 
     G = PC.T @ PC
     U = PC.T @ Pw
     ev, V = linalg.eigh(G)
-    keep = ev > max(rtol * max(ev.max(initial=0.0), 0.0), 0.0) if ev.size else np.zeros(0, bool)
+    keep = ev > rtol * max(float(ev.max()), 0.0)
     # a candidate inside the base span (to round-off) has no new direction: score 0, dof 0
     if lam.max() < rtol or not np.any(keep):
         score, dof, step = 0.0, 0, np.full(k, math.nan)
@@ -1035,6 +1035,7 @@ def write_report(report: dict, directory, *, time_scale: float = 1e6, value_scal
         alpha = report["settings"]["alpha_score"]
         axes[0].axvline(-math.log10(alpha), color="k", ls="--", lw=0.8, label=f"p = {alpha:g}")
         axes[0].set_xlabel("-log10 p (score test)")
+        axes[0].set_title(f"first ranking; kept: {', '.join(report['added']) or 'none'}", fontsize=9)
         axes[0].set_xscale("symlog", linthresh=1.0)
         axes[0].legend(fontsize=8)
         axes[1].barh(y, tab["collinearity"], color="C1")
