@@ -39,7 +39,7 @@ the model is the base model) and a one-line description with its equation. Two k
                                     sigma_n,t(rate) = sigma_n,t * DIF, DIF = max(1, 1 + k log10(rate/rate0)),
                                     rate0 = :data:`RATE0_PER_S` = 1 /s (quasi-static; no weakening below it),
                                     rate = the joint's local strain rate, opening (normal) or sliding
-                                    (tangential) rate divided by the joint's element size h. k = 0.42
+                                    (tangential) rate divided by the joint's element size h. k = 0.425
                                     gives DIF = 1.85 at 100 /s, the cap of one published tensile law
                                     (notes/reference-values.md), hence the box [0, 0.6].
   ``damping.beta``                  element viscous damping as a fraction of critical,
