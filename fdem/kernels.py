@@ -288,7 +288,8 @@ def contact_forces(x, v, inv_mass, pair_node, pair_edge, n_pairs, node_normal, e
       list early, but behind an intact joint face is still the body;
     - they are crack faces and the node is not inside the face's own triangle: near a crack tip a
       node can be behind the line of a face without being inside the body.
-    The node is pushed out with F_n = p_c w min(d, d_cap), w the smaller of the two bodies'
+    The node is pushed out with F_n = p_c w min(d, d_cap), p_c [Pa] the penalty of the body pair
+    (a symmetric n_bodies x n_bodies table), w the smaller of the two bodies'
     thicknesses (the real contact width), and the opposite force goes to the edge's nodes, so linear
     momentum is conserved exactly. d_cap = edge_dlim / 3: a node found deep inside is pushed out
     firmly, not shot out (the potential is linear beyond d_cap). Friction opposes the relative
@@ -374,7 +375,7 @@ def contact_forces(x, v, inv_mass, pair_node, pair_edge, n_pairs, node_normal, e
         tx = ex / L
         ty = ey / L
         wth = node_thick[n] if node_thick[n] < edge_thick[ed] else edge_thick[ed]
-        kc = p_c * wth
+        kc = p_c[node_body[n], node_body[p]] * wth
         dcap = edge_dlim[ed] * (1.0 / 3.0)
         if d <= dcap:
             Fn = kc * d

@@ -80,11 +80,25 @@ class JointParams:
 class ContactParams:
     """Penalty contact: penalty [Pa] (force = penalty * contact width * penetration), Coulomb
     friction coefficient, and the neighbour-search buffer [m] (None: 0.3 x the smallest surface
-    triangle altitude)."""
+    triangle altitude). pair_penalty overrides the penalty for given body pairs,
+    {(body_a, body_b): penalty}, e.g. a compliant seating layer between a bar and the specimen."""
 
     penalty: float
     friction: float = 0.0
     buffer: float | None = None
+    pair_penalty: dict = field(default_factory=dict)
+
+    def table(self, body_names) -> np.ndarray:
+        """Symmetric per-body-pair penalty table [Pa]."""
+        t = np.full((len(body_names), len(body_names)), float(self.penalty))
+        for (a, b), val in self.pair_penalty.items():
+            if a not in body_names or b not in body_names:
+                raise KeyError(f"pair_penalty names unknown bodies {(a, b)}; bodies are {body_names}")
+            if not val > 0:
+                raise ValueError(f"pair penalty for {(a, b)} must be > 0 Pa, got {val}")
+            i, j = body_names.index(a), body_names.index(b)
+            t[i, j] = t[j, i] = float(val)
+        return t
 
 
 @dataclass
@@ -433,7 +447,7 @@ def stable_time_step(model: Model, safety: float = DEFAULT_SAFETY) -> float:
             np.add.at(rows[:, 1], model.jn[:, col], 2.0 * kmax * wgt)
     if model.contact is not None:
         surf = np.unique(model.edges.reshape(-1))
-        kc = model.contact.penalty * model.node_thick[surf]
+        kc = model.contact.table(model.body_names).max(axis=1)[model.node_body[surf]] * model.node_thick[surf]
         # As a slave (row sum 2k) plus as the end of master edges pressed by the facing nodes: two
         # aligned faces make each node pair a double spring, so budget 8k (measured: 4k is unstable).
         rows[surf] += 8.0 * kc[:, None]

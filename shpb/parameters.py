@@ -5,7 +5,8 @@ and mode II specific fracture energies; a, b, c the softening-curve shape; E [Pa
 the specimen's elastic constants. Extra model settings: phi_deg (Mohr-Coulomb friction angle on the
 joint shear strength), penalty_factor (joint penalty p = f E), contact_penalty_factor (bar-specimen
 contact penalty in units of the specimen's E), damping.beta (element viscous damping fraction),
-interface_friction.mu (Coulomb friction at the bar-specimen faces).
+interface_friction.mu (Coulomb friction at the bar-specimen faces), seating.compliance_m_per_Pa
+(an extra face closure C sigma at the loaded faces, in series with the contact penalty).
 """
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ BRAZILIAN_DEFAULTS = {
     "a": 0.63, "b": 1.8, "c": 6.0,
     "E": 35e9, "nu": 0.16, "rho": 2550.0,
     "phi_deg": 0.0, "penalty_factor": 10.0, "contact_penalty_factor": 2.0,
-    "damping.beta": 0.0, "interface_friction.mu": 0.0,
+    "damping.beta": 0.0, "interface_friction.mu": 0.0, "seating.compliance_m_per_Pa": 0.0,
 }
 
 # Cylinder (uniaxial compression, Carrara marble records): E, nu, rho are overwritten by the
@@ -34,7 +35,7 @@ CYLINDER_DEFAULTS = {
     "a": 0.63, "b": 1.8, "c": 6.0,
     "E": 50e9, "nu": 0.27, "rho": 2700.0,
     "phi_deg": 30.0, "penalty_factor": 10.0, "contact_penalty_factor": 2.0,
-    "damping.beta": 0.0, "interface_friction.mu": 0.0,
+    "damping.beta": 0.0, "interface_friction.mu": 0.0, "seating.compliance_m_per_Pa": 0.0,
 }
 
 _BOUNDS = {
@@ -45,6 +46,7 @@ _BOUNDS = {
     "phi_deg": (0.0, 89.0, True), "penalty_factor": (3.0, math.inf, False),
     "contact_penalty_factor": (0.0, math.inf, False), "damping.beta": (0.0, 1.0, True),
     "interface_friction.mu": (0.0, 5.0, True),
+    "seating.compliance_m_per_Pa": (0.0, 1e-9, True),
 }
 
 

@@ -151,8 +151,17 @@ def build(geometry: str, preset: str, params: dict | None = None, record=None,
                      a=p["a"], b=p["b"], c=p["c"], penalty_factor=p["penalty_factor"],
                      compensate_compliance=True, friction_angle_deg=p["phi_deg"],
                      unbreakable=unbreakable)
-    contact = ContactParams(penalty=p["contact_penalty_factor"] * p["E"],
-                            friction=p["interface_friction.mu"])
+    # Seating: a face compliance C [m/Pa] in series with the contact penalty. The penalty acts per
+    # node (F = p w d) over a tributary length of about one specimen element h, so the series
+    # stiffness is 1 / (1/p + C/h).
+    p_c = p["contact_penalty_factor"] * p["E"]
+    C = p["seating.compliance_m_per_Pa"]
+    pairs = {}
+    if C > 0:
+        h_s = g.element_size_m["specimen"]
+        p_seat = 1.0 / (1.0 / p_c + C / h_s)
+        pairs = {(g.incident_bar, g.specimen): p_seat, (g.transmission_bar, g.specimen): p_seat}
+    contact = ContactParams(penalty=p_c, friction=p["interface_friction.mu"], pair_penalty=pairs)
     model = build_model(g.bodies, joints={g.specimen: jp}, contact=contact,
                         damping_beta=p["damping.beta"])
     inc = g.body(g.incident_bar)

@@ -44,3 +44,12 @@ def test_colliding_elastic_bars_conserve_momentum_and_exchange_velocity(ny_b, pe
     assert rigid_ke[1] / KE0 >= 0.95   # the struck bar leaves with >= 95% of the kinetic energy
     assert rigid_ke[0] / KE0 < 0.01    # the striker stops
     assert abs(res.energy_balance_error()[-1]) < 0.01 * KE0
+
+
+def test_pair_penalty_table_is_symmetric_and_softens_one_interface():
+    c = ContactParams(penalty=2e11, pair_penalty={("A", "C"): 1e9})
+    t = c.table(["A", "B", "C"])
+    assert t[0, 2] == t[2, 0] == 1e9
+    assert t[0, 1] == t[1, 2] == t[1, 1] == 2e11
+    with pytest.raises(KeyError, match="unknown bodies"):
+        ContactParams(penalty=1.0, pair_penalty={("A", "Z"): 1.0}).table(["A"])
