@@ -4,6 +4,8 @@
 #
 #   scripts/slurm_local_cluster.sh install             apt-get install slurm-wlm/munge, pip install the plugin
 #   scripts/slurm_local_cluster.sh up DIR              start munged, slurmctld, slurmd with state under DIR
+#                                                      (SLURM_LOCAL_ACCOUNTING=1: also MariaDB + slurmdbd, so
+#                                                      that sacct works; SLURM_LOCAL_MINJOBAGE=N: MinJobAge, 600)
 #   scripts/slurm_local_cluster.sh down DIR            cancel the cluster's jobs, stop exactly the PIDs `up` started
 #   scripts/slurm_local_cluster.sh with-cluster -- CMD ...
 #                                                      up in a fresh temp dir, run CMD with SLURM_CONF exported,
@@ -45,6 +47,10 @@ cmd_install() {
         apt-get update -q >/dev/null
         apt-get install -y -q slurm-wlm slurmctld slurmd slurm-client munge >/dev/null
     fi
+    if [[ "${SLURM_LOCAL_ACCOUNTING:-0}" == 1 ]] && ! command -v slurmdbd >/dev/null 2>&1; then
+        log "installing slurmdbd and mariadb-server (SLURM_LOCAL_ACCOUNTING=1)"
+        DEBIAN_FRONTEND=noninteractive apt-get install -y -q slurmdbd mariadb-server >/dev/null
+    fi
     if ! python3 -c 'import snakemake_executor_plugin_slurm' 2>/dev/null; then
         log "installing snakemake-executor-plugin-slurm (the project's [slurm] extra)"
         python3 -m pip install -q -e "${REPO}[slurm]"
@@ -73,6 +79,67 @@ publish_conf() {
     fi
     mkdir -p /run/slurm
     ln -s "$dir" /run/slurm/conf
+}
+
+# Accounting (SLURM_LOCAL_ACCOUNTING=1): MariaDB on 127.0.0.1, slurmdbd in front of it, the cluster
+# registered. Sets ACCOUNTING_CONF to the slurm.conf lines that point slurmctld at slurmdbd.
+ACCOUNTING_CONF="AccountingStorageType=accounting_storage/none"
+start_accounting() {
+    local dir="$1" sock="$2" db_port dbd_port i
+    for b in mariadb-install-db mariadbd mariadb slurmdbd sacctmgr; do
+        command -v "$b" >/dev/null 2>&1 || up_failed "$dir" "$b not found (run 'SLURM_LOCAL_ACCOUNTING=1 $0 install')"
+    done
+    db_port="$(free_port)"
+    dbd_port="$(free_port)"
+    mkdir -p "$dir/mysql"
+    mariadb-install-db --no-defaults --datadir="$dir/mysql" --user=root --skip-test-db \
+        --auth-root-authentication-method=socket >"$dir/log/mariadb-install.out" 2>&1 ||
+        up_failed "$dir" "mariadb-install-db failed (see $dir/log/mariadb-install.out)"
+    mariadbd --no-defaults --datadir="$dir/mysql" --user=root --bind-address=127.0.0.1 --port="$db_port" \
+        --socket="$dir/mysql/mysqld.sock" --pid-file="$dir/mysql/mysqld.pid" \
+        --log-error="$dir/log/mariadb.log" --skip-log-bin </dev/null >"$dir/log/mariadb.out" 2>&1 &
+    echo "$! mariadbd" >>"$dir/pids"
+    for ((i = 0; i < 300; i++)); do
+        mariadb --no-defaults -S "$dir/mysql/mysqld.sock" -u root -e 'SELECT 1' >/dev/null 2>&1 && break
+        sleep 0.1
+    done
+    mariadb --no-defaults -S "$dir/mysql/mysqld.sock" -u root -e "
+        CREATE USER 'slurm'@'127.0.0.1' IDENTIFIED BY 'slurmlocal';
+        GRANT ALL ON slurm_acct_db.* TO 'slurm'@'127.0.0.1';" ||
+        up_failed "$dir" "MariaDB did not start (see $dir/log/mariadb.log)"
+    # slurmdbd reads slurmdbd.conf from the directory of SLURM_CONF; it must be private to SlurmUser.
+    cat >"$dir/slurmdbd.conf" <<EOF
+AuthType=auth/munge
+AuthInfo=socket=$sock
+DbdHost=localhost
+DbdPort=$dbd_port
+SlurmUser=root
+StorageType=accounting_storage/mysql
+StorageHost=127.0.0.1
+StoragePort=$db_port
+StorageUser=slurm
+StoragePass=slurmlocal
+StorageLoc=slurm_acct_db
+PidFile=$dir/slurmdbd.pid
+LogFile=$dir/log/slurmdbd.log
+EOF
+    chmod 600 "$dir/slurmdbd.conf"
+    # AccountingStoragePass names the munge socket for connections to slurmdbd (AuthInfo does not).
+    ACCOUNTING_CONF="AccountingStorageType=accounting_storage/slurmdbd
+AccountingStorageHost=localhost
+AccountingStoragePort=$dbd_port
+AccountingStoragePass=$sock"
+    # A first slurm.conf for sacctmgr (cmd_up writes the full one next).
+    printf 'ClusterName=fdemlocal\nSlurmctldHost=localhost\nAuthType=auth/munge\nAuthInfo=socket=%s\n%s\n' "$sock" "$ACCOUNTING_CONF" \
+        >"$dir/slurm.conf"
+    SLURM_CONF="$dir/slurm.conf" slurmdbd -D </dev/null >"$dir/log/slurmdbd.out" 2>&1 &
+    echo "$! slurmdbd" >>"$dir/pids"
+    for ((i = 0; i < 100; i++)); do
+        SLURM_CONF="$dir/slurm.conf" timeout 5 sacctmgr -i add cluster fdemlocal >/dev/null 2>&1 && break
+        sleep 0.1
+    done
+    SLURM_CONF="$dir/slurm.conf" timeout 5 sacctmgr -n list cluster format=cluster 2>/dev/null | grep -q fdemlocal ||
+        up_failed "$dir" "slurmdbd did not register the cluster (see $dir/log/slurmdbd.log)"
 }
 
 # Start the daemons; writes DIR/slurm.conf, DIR/pids, DIR/env.
@@ -104,7 +171,11 @@ cmd_up() {
     for ((i = 0; i < 100; i++)); do [[ -S "$sock" ]] && break; sleep 0.1; done
     [[ -S "$sock" ]] || { cat "$dir/log/munged.out" >&2; up_failed "$dir" "munged did not create $sock"; }
 
-    local cpus mem_mb ctld_port slurmd_port
+    if [[ "${SLURM_LOCAL_ACCOUNTING:-0}" == 1 ]]; then
+        start_accounting "$dir" "$sock"
+    fi
+
+    local cpus mem_mb ctld_port slurmd_port min_job_age="${SLURM_LOCAL_MINJOBAGE:-600}"
     cpus="$(nproc)"
     # Declare 90% of the physical memory: slurmd drains a node whose RealMemory exceeds what it finds.
     mem_mb="$(awk '/^MemTotal:/ {printf "%d", $2 / 1024 * 0.9}' /proc/meminfo)"
@@ -137,12 +208,12 @@ SchedulerType=sched/backfill
 SelectType=select/cons_tres
 SelectTypeParameters=CR_Core_Memory
 DefMemPerCPU=1000
-AccountingStorageType=accounting_storage/none
+$ACCOUNTING_CONF
 JobAcctGatherType=jobacct_gather/none
 JobCompType=jobcomp/none
 # Finished jobs stay visible to squeue for 10 minutes: the Snakemake plugin's squeue status
 # command needs MinJobAge >= 3 x slurm-init-seconds-before-status-checks.
-MinJobAge=600
+MinJobAge=$min_job_age
 ReturnToService=2
 SlurmctldTimeout=30
 SlurmdTimeout=60

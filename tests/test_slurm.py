@@ -75,7 +75,9 @@ def test_slurm_profile_uses_the_executor_with_a_status_command_that_works_withou
 def test_test_cluster_keeps_finished_jobs_long_enough_for_squeue_status():
     # The plugin falls back from squeue to sacct when MinJobAge < 3 x the first-poll delay.
     init = load_profile("slurm")["slurm-init-seconds-before-status-checks"]
-    m = re.search(r"^MinJobAge=(\d+)$", CLUSTER.read_text(), re.M)
+    text = CLUSTER.read_text()
+    assert re.search(r"^MinJobAge=\$min_job_age$", text, re.M)
+    m = re.search(r'min_job_age="\$\{SLURM_LOCAL_MINJOBAGE:-(\d+)\}"', text)
     assert m and int(m.group(1)) >= 3 * init
 
 
