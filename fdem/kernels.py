@@ -21,11 +21,14 @@ _G1 = 0.5 + 0.5 / math.sqrt(3.0)
 def triangle_forces(x, v, tri, dminv, vol0, lam, mu, eta, f):
     """Internal forces of 3-node constant-strain triangles in plane stress.
 
-    Total Lagrangian: deformation gradient F = Ds Dm^-1, Green-Lagrange strain E = (F^T F - I)/2,
-    St. Venant-Kirchhoff second Piola-Kirchhoff stress S = lam tr(E) I + 2 mu E with the plane-stress
-    lam = E nu / (1 - nu^2). E is exactly zero for any rigid rotation, so a rotated body carries no
-    stress. vol0 = reference area * thickness [m^3]. Optional viscous stress S_v = eta dE/dt
-    (eta [Pa s]), whose dissipated power is returned.
+    Co-rotational linear elasticity, total Lagrangian: deformation gradient F = Ds Dm^-1, polar
+    decomposition F = R U in closed form, Biot strain e = U - I, Biot stress B = lam tr(e) I + 2 mu e
+    with the plane-stress lam = E nu / (1 - nu^2), first Piola-Kirchhoff stress P = R B (the exact
+    derivative of W = e : B / 2 per unit volume). e is exactly zero for any rigid rotation, so a
+    rotated body carries no stress; unlike St. Venant-Kirchhoff the stiffness does not vanish under
+    strong compression, so crushed fragments do not collapse or invert. vol0 = reference area *
+    thickness [m^3]. Optional viscous stress S_v = eta dE/dt on the Green-Lagrange rate (eta [Pa s]),
+    whose dissipated power is returned.
 
     Returns (strain energy [J], damping power [W]).
     """
@@ -47,15 +50,25 @@ def triangle_forces(x, v, tri, dminv, vol0, lam, mu, eta, f):
         F12 = d11 * m12 + d12 * m22
         F21 = d21 * m11 + d22 * m21
         F22 = d21 * m12 + d22 * m22
-        E11 = 0.5 * (F11 * F11 + F21 * F21 - 1.0)
-        E22 = 0.5 * (F12 * F12 + F22 * F22 - 1.0)
-        E12 = 0.5 * (F11 * F12 + F21 * F22)
-        tr = E11 + E22
-        S11 = lam[e] * tr + 2.0 * mu[e] * E11
-        S22 = lam[e] * tr + 2.0 * mu[e] * E22
-        S12 = 2.0 * mu[e] * E12
+        # Polar decomposition F = R U in closed form (2D): R rotates by atan2(F21 - F12, F11 + F22).
+        rr = math.sqrt((F11 + F22) ** 2 + (F21 - F12) ** 2)
+        cR = (F11 + F22) / rr
+        sR = (F21 - F12) / rr
+        # Biot strain e = U - I with U = R^T F (symmetric by construction of R)
+        e11 = cR * F11 + sR * F21 - 1.0
+        e22 = -sR * F12 + cR * F22 - 1.0
+        e12 = 0.5 * ((cR * F12 + sR * F22) + (-sR * F11 + cR * F21))
+        tr = e11 + e22
+        B11 = lam[e] * tr + 2.0 * mu[e] * e11
+        B22 = lam[e] * tr + 2.0 * mu[e] * e22
+        B12 = 2.0 * mu[e] * e12
         V = vol0[e]
-        U += 0.5 * V * (S11 * E11 + S22 * E22 + 2.0 * S12 * E12)
+        U += 0.5 * V * (B11 * e11 + B22 * e22 + 2.0 * B12 * e12)
+        # first Piola-Kirchhoff stress P = R B
+        P11 = cR * B11 - sR * B12
+        P12 = cR * B12 - sR * B22
+        P21 = sR * B11 + cR * B12
+        P22 = sR * B12 + cR * B22
         if eta[e] > 0.0:
             w11 = v[j, 0] - v[i, 0]
             w21 = v[j, 1] - v[i, 1]
@@ -72,13 +85,11 @@ def triangle_forces(x, v, tri, dminv, vol0, lam, mu, eta, f):
             Sv22 = eta[e] * R22
             Sv12 = eta[e] * R12
             P_damp += V * (Sv11 * R11 + Sv22 * R22 + 2.0 * Sv12 * R12)
-            S11 += Sv11
-            S22 += Sv22
-            S12 += Sv12
-        P11 = F11 * S11 + F12 * S12
-        P12 = F11 * S12 + F12 * S22
-        P21 = F21 * S11 + F22 * S12
-        P22 = F21 * S12 + F22 * S22
+            # viscous first Piola-Kirchhoff stress F S_v
+            P11 += F11 * Sv11 + F12 * Sv12
+            P12 += F11 * Sv12 + F12 * Sv22
+            P21 += F21 * Sv11 + F22 * Sv12
+            P22 += F21 * Sv12 + F22 * Sv22
         H11 = -V * (P11 * m11 + P12 * m12)
         H12 = -V * (P11 * m21 + P12 * m22)
         H21 = -V * (P21 * m11 + P22 * m12)
@@ -94,7 +105,7 @@ def triangle_forces(x, v, tri, dminv, vol0, lam, mu, eta, f):
 
 @njit(cache=True)
 def triangle_cauchy(x, tri, dminv, lam, mu, e):
-    """Cauchy stress (sxx, syy, sxy) [Pa] of triangle e: sigma = F S F^T / det F."""
+    """Cauchy stress (sxx, syy, sxy) [Pa] of triangle e: sigma = P F^T / det F, P = R B."""
     i = tri[e, 0]
     j = tri[e, 1]
     k = tri[e, 2]
@@ -110,19 +121,22 @@ def triangle_cauchy(x, tri, dminv, lam, mu, e):
     F12 = d11 * m12 + d12 * m22
     F21 = d21 * m11 + d22 * m21
     F22 = d21 * m12 + d22 * m22
-    E11 = 0.5 * (F11 * F11 + F21 * F21 - 1.0)
-    E22 = 0.5 * (F12 * F12 + F22 * F22 - 1.0)
-    E12 = 0.5 * (F11 * F12 + F21 * F22)
-    tr = E11 + E22
-    S11 = lam[e] * tr + 2.0 * mu[e] * E11
-    S22 = lam[e] * tr + 2.0 * mu[e] * E22
-    S12 = 2.0 * mu[e] * E12
+    rr = math.sqrt((F11 + F22) ** 2 + (F21 - F12) ** 2)
+    cR = (F11 + F22) / rr
+    sR = (F21 - F12) / rr
+    e11 = cR * F11 + sR * F21 - 1.0
+    e22 = -sR * F12 + cR * F22 - 1.0
+    e12 = 0.5 * ((cR * F12 + sR * F22) + (-sR * F11 + cR * F21))
+    tr = e11 + e22
+    B11 = lam[e] * tr + 2.0 * mu[e] * e11
+    B22 = lam[e] * tr + 2.0 * mu[e] * e22
+    B12 = 2.0 * mu[e] * e12
     J = F11 * F22 - F12 * F21
-    # F S F^T
-    A11 = F11 * S11 + F12 * S12
-    A12 = F11 * S12 + F12 * S22
-    A21 = F21 * S11 + F22 * S12
-    A22 = F21 * S12 + F22 * S22
+    # P = R B, sigma = P F^T / J
+    A11 = cR * B11 - sR * B12
+    A12 = cR * B12 - sR * B22
+    A21 = sR * B11 + cR * B12
+    A22 = sR * B12 + cR * B22
     sxx = (A11 * F11 + A12 * F12) / J
     syy = (A21 * F21 + A22 * F22) / J
     sxy = (A11 * F21 + A12 * F22) / J
