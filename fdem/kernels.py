@@ -310,7 +310,8 @@ def contact_forces(x, v, inv_mass, pair_node, pair_edge, n_pairs, node_normal, e
     tangential velocity with |F_t| <= mu_c F_n, and never more than the force that stops the sliding
     within one step (a stable regularisation of sticking). Pairs must be grouped by node
     (build_pairs does so). in_contact (per node) carries the contact state from step to step:
-    a node may enter contact only at d <= edge_dlim / 6 and then stays in it while it penetrates.
+    a node enters contact only as deep as its relative travel over six steps allows, then stays in
+    contact while it penetrates.
 
     Accumulates per-body contact force into body_force (n_bodies, 2).
     Returns (contact energy [J], friction power [W], maximum penetration [m]).
@@ -375,11 +376,18 @@ def contact_forces(x, v, inv_mass, pair_node, pair_edge, n_pairs, node_normal, e
         ed = best
         d = best_d
         xi = best_xi
-        # A node that was not in contact a step ago can only enter contact shallowly: one found
-        # deep inside (it crossed a face that was not yet a surface, in a crushed zone) is left
-        # alone rather than shot out by the penalty energy of an overlap nobody resisted.
-        if not in_contact[n] and d > edge_dlim[ed] * (1.0 / 6.0):
-            continue
+        # A node that was not in contact a step ago can only enter contact as deep as it can have
+        # travelled relative to the edge since the neighbour list last saw it (six steps: a new
+        # crack face waits at most five for the rebuild). One found deeper crossed a face that was
+        # not yet a surface (a crushed zone); it is left alone rather than shot out by the penalty
+        # energy of an overlap nobody resisted.
+        if not in_contact[n]:
+            pq = edges[ed, 0]
+            qq = edges[ed, 1]
+            vx_ = v[n, 0] - (1.0 - xi) * v[pq, 0] - xi * v[qq, 0]
+            vy_ = v[n, 1] - (1.0 - xi) * v[pq, 1] - xi * v[qq, 1]
+            if d > 6.0 * dt * math.sqrt(vx_ * vx_ + vy_ * vy_) + 1e-3 * edge_dlim[ed]:
+                continue
         in_contact[n] = True
         p = edges[ed, 0]
         q = edges[ed, 1]
