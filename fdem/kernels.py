@@ -17,6 +17,41 @@ _G0 = 0.5 - 0.5 / math.sqrt(3.0)
 _G1 = 0.5 + 0.5 / math.sqrt(3.0)
 
 
+@njit(cache=True, inline="always")
+def _corotational(x, tri, dminv, lam, mu, e):
+    """Deformation gradient F of triangle e and its co-rotational stress.
+
+    Polar decomposition F = R U in closed form (2D: R rotates by atan2(F21 - F12, F11 + F22)), Biot
+    strain b = U - I with U = R^T F (symmetric by construction of R), Biot stress
+    B = lam tr(b) I + 2 mu b, first Piola-Kirchhoff stress P = R B.
+    Returns (F11, F12, F21, F22, P11, P12, P21, P22, strain energy density b : B / 2).
+    """
+    i = tri[e, 0]
+    j = tri[e, 1]
+    k = tri[e, 2]
+    d11 = x[j, 0] - x[i, 0]
+    d21 = x[j, 1] - x[i, 1]
+    d12 = x[k, 0] - x[i, 0]
+    d22 = x[k, 1] - x[i, 1]
+    F11 = d11 * dminv[e, 0, 0] + d12 * dminv[e, 1, 0]
+    F12 = d11 * dminv[e, 0, 1] + d12 * dminv[e, 1, 1]
+    F21 = d21 * dminv[e, 0, 0] + d22 * dminv[e, 1, 0]
+    F22 = d21 * dminv[e, 0, 1] + d22 * dminv[e, 1, 1]
+    rr = math.sqrt((F11 + F22) ** 2 + (F21 - F12) ** 2)
+    cR = (F11 + F22) / rr
+    sR = (F21 - F12) / rr
+    b11 = cR * F11 + sR * F21 - 1.0
+    b22 = -sR * F12 + cR * F22 - 1.0
+    b12 = 0.5 * ((cR * F12 + sR * F22) + (-sR * F11 + cR * F21))
+    tr = b11 + b22
+    B11 = lam[e] * tr + 2.0 * mu[e] * b11
+    B22 = lam[e] * tr + 2.0 * mu[e] * b22
+    B12 = 2.0 * mu[e] * b12
+    w = 0.5 * (B11 * b11 + B22 * b22 + 2.0 * B12 * b12)
+    return (F11, F12, F21, F22, cR * B11 - sR * B12, cR * B12 - sR * B22, sR * B11 + cR * B12,
+            sR * B12 + cR * B22, w)
+
+
 @njit(cache=True)
 def triangle_forces(x, v, tri, dminv, vol0, lam, mu, eta, f):
     """Internal forces of 3-node constant-strain triangles in plane stress.
@@ -38,37 +73,13 @@ def triangle_forces(x, v, tri, dminv, vol0, lam, mu, eta, f):
         i = tri[e, 0]
         j = tri[e, 1]
         k = tri[e, 2]
-        d11 = x[j, 0] - x[i, 0]
-        d21 = x[j, 1] - x[i, 1]
-        d12 = x[k, 0] - x[i, 0]
-        d22 = x[k, 1] - x[i, 1]
         m11 = dminv[e, 0, 0]
         m12 = dminv[e, 0, 1]
         m21 = dminv[e, 1, 0]
         m22 = dminv[e, 1, 1]
-        F11 = d11 * m11 + d12 * m21
-        F12 = d11 * m12 + d12 * m22
-        F21 = d21 * m11 + d22 * m21
-        F22 = d21 * m12 + d22 * m22
-        # Polar decomposition F = R U in closed form (2D): R rotates by atan2(F21 - F12, F11 + F22).
-        rr = math.sqrt((F11 + F22) ** 2 + (F21 - F12) ** 2)
-        cR = (F11 + F22) / rr
-        sR = (F21 - F12) / rr
-        # Biot strain e = U - I with U = R^T F (symmetric by construction of R)
-        e11 = cR * F11 + sR * F21 - 1.0
-        e22 = -sR * F12 + cR * F22 - 1.0
-        e12 = 0.5 * ((cR * F12 + sR * F22) + (-sR * F11 + cR * F21))
-        tr = e11 + e22
-        B11 = lam[e] * tr + 2.0 * mu[e] * e11
-        B22 = lam[e] * tr + 2.0 * mu[e] * e22
-        B12 = 2.0 * mu[e] * e12
+        F11, F12, F21, F22, P11, P12, P21, P22, w = _corotational(x, tri, dminv, lam, mu, e)
         V = vol0[e]
-        U += 0.5 * V * (B11 * e11 + B22 * e22 + 2.0 * B12 * e12)
-        # first Piola-Kirchhoff stress P = R B
-        P11 = cR * B11 - sR * B12
-        P12 = cR * B12 - sR * B22
-        P21 = sR * B11 + cR * B12
-        P22 = sR * B12 + cR * B22
+        U += V * w
         if eta[e] > 0.0:
             w11 = v[j, 0] - v[i, 0]
             w21 = v[j, 1] - v[i, 1]
@@ -106,37 +117,8 @@ def triangle_forces(x, v, tri, dminv, vol0, lam, mu, eta, f):
 @njit(cache=True)
 def triangle_cauchy(x, tri, dminv, lam, mu, e):
     """Cauchy stress (sxx, syy, sxy) [Pa] of triangle e: sigma = P F^T / det F, P = R B."""
-    i = tri[e, 0]
-    j = tri[e, 1]
-    k = tri[e, 2]
-    d11 = x[j, 0] - x[i, 0]
-    d21 = x[j, 1] - x[i, 1]
-    d12 = x[k, 0] - x[i, 0]
-    d22 = x[k, 1] - x[i, 1]
-    m11 = dminv[e, 0, 0]
-    m12 = dminv[e, 0, 1]
-    m21 = dminv[e, 1, 0]
-    m22 = dminv[e, 1, 1]
-    F11 = d11 * m11 + d12 * m21
-    F12 = d11 * m12 + d12 * m22
-    F21 = d21 * m11 + d22 * m21
-    F22 = d21 * m12 + d22 * m22
-    rr = math.sqrt((F11 + F22) ** 2 + (F21 - F12) ** 2)
-    cR = (F11 + F22) / rr
-    sR = (F21 - F12) / rr
-    e11 = cR * F11 + sR * F21 - 1.0
-    e22 = -sR * F12 + cR * F22 - 1.0
-    e12 = 0.5 * ((cR * F12 + sR * F22) + (-sR * F11 + cR * F21))
-    tr = e11 + e22
-    B11 = lam[e] * tr + 2.0 * mu[e] * e11
-    B22 = lam[e] * tr + 2.0 * mu[e] * e22
-    B12 = 2.0 * mu[e] * e12
+    F11, F12, F21, F22, A11, A12, A21, A22, _ = _corotational(x, tri, dminv, lam, mu, e)
     J = F11 * F22 - F12 * F21
-    # P = R B, sigma = P F^T / J
-    A11 = cR * B11 - sR * B12
-    A12 = cR * B12 - sR * B22
-    A21 = sR * B11 + cR * B12
-    A22 = sR * B12 + cR * B22
     sxx = (A11 * F11 + A12 * F12) / J
     syy = (A21 * F21 + A22 * F22) / J
     sxy = (A11 * F21 + A12 * F22) / J
