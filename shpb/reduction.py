@@ -55,8 +55,6 @@ of the two. No dispersion correction is applied.
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -737,17 +735,7 @@ def write_reduced_csv(red: ReducedRecord, path: str | Path) -> Path:
     A reader never sees a half-written file; on error the temporary file is removed.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    df = reduced_to_dataframe(red)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", newline="") as fh:
-            df.to_csv(fh, index=False, float_format="%.9g")
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    from .atomic import atomic_write_text
+
+    atomic_write_text(path, reduced_to_dataframe(red).to_csv(index=False, float_format="%.9g"))
     return path

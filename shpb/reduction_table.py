@@ -17,10 +17,10 @@ without dispersion correction. The peak of our mean stress is listed as well.
 
 from __future__ import annotations
 
+from .atomic import atomic_write_text
+
 import argparse
-import os
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -256,17 +256,7 @@ decimal separator (SeeSst_018 and 022-029 use `.`); the reader detects the separ
 
 
 def _atomic_write(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    atomic_write_text(path, text)
 
 
 def update_readme(readme: str | Path, section: str) -> None:

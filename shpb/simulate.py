@@ -10,8 +10,6 @@ positive). Time 0 is when the incident wave reaches the specimen's front face.
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,6 +21,7 @@ from fdem import ContactParams, JointParams, Material, TractionBC, build_model, 
 from fdem.model import DEFAULT_SAFETY
 
 from . import geometry as geo
+from .atomic import atomic_write_text
 from .loading import TrapezoidPulse, face_tributary_areas
 from .parameters import resolve
 
@@ -52,24 +51,11 @@ class SimulationOutput:
     extra: dict = field(default_factory=dict)
 
 
-def _atomic_write_text(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def write_outputs(out_dir, curve: pd.DataFrame, run_info: dict) -> None:
     """curve.csv then run.json, each atomically (run.json last: its presence means complete)."""
     out = Path(out_dir)
-    _atomic_write_text(out / "curve.csv", curve.to_csv(index=False, float_format="%.9e"))
-    _atomic_write_text(out / "run.json", json.dumps(run_info, indent=1, default=float))
+    atomic_write_text(out / "curve.csv", curve.to_csv(index=False, float_format="%.9e"))
+    atomic_write_text(out / "run.json", json.dumps(run_info, indent=1, default=float))
 
 
 def _measured_incident(record):
