@@ -67,7 +67,7 @@ def _apply_velocity_bc(v, mass, vel_nodes, vel_dir, vel_hist, hv):
 
 @njit(cache=True)
 def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
-             jn, jarea, kn, kt, ft, fs, dn, dtm, tanphi, jedges, sa, sb, sc, Dmax, broken,
+             jn, jarea, kn, kt, ft, fs, dn, dtm, tanphi, jedges, sa, sb, sc, Dmax, broken, jrate,
              edges, edge_tri, edge_active, edge_dlim, edge_thick, tri_edges, edge_joint,
              node_body, node_vertex, node_tri, node_thick, body_fracturable, n_bodies,
              p_c, mu_c, buffer, use_contact,
@@ -88,6 +88,7 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
     hv = np.zeros(max(nh, 1))
     newly = np.empty(max(jn.shape[0], 1), np.int64)
     newly_dam = np.empty(max(jn.shape[0], 1), np.int64)
+    jdif = np.ones((jn.shape[0], 2))
     bforce = np.zeros((n_bodies, 2))
     in_contact = np.zeros(n, np.bool_)
     E = np.zeros(8)
@@ -113,8 +114,8 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
         _hist_eval(hist_ptr, hist_t, hist_v, cursor, 0.0, hv)
         E[7] += _apply_velocity_bc(v, mass, vel_nodes, vel_dir, vel_hist, hv)
     Us, Pd = triangle_forces(x, v, tri, dminv, vol0, lam, mu, eta, f)
-    Psi, dis, nnew, ndam = joint_forces(x, jn, jarea, kn, kt, ft, fs, dn, dtm, tanphi, sa, sb,
-                                        sc, Dmax, broken, f, newly, newly_dam)
+    Psi, dis, nnew, ndam = joint_forces(x, v, jn, jarea, kn, kt, ft, fs, dn, dtm, tanphi, sa, sb,
+                                        sc, Dmax, broken, f, newly, newly_dam, jrate, jdif)
     Uc, Pf, pen = contact_forces(x, v, inv_mass, pair_node, pair_edge, pair_node.shape[0],
                                  node_normal, edges, edge_tri, edge_joint, broken, Dmax, edge_dlim, edge_thick, node_thick, node_body,
                                  node_tri, tri, node_vertex, body_fracturable, p_c, mu_c, dt, f, bforce,
@@ -173,8 +174,8 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
             f[:, :] = 0.0
             bforce[:, :] = 0.0
             Us, Pd = triangle_forces(x, v, tri, dminv, vol0, lam, mu, eta, f)
-            Psi, dis, nnew, ndam = joint_forces(x, jn, jarea, kn, kt, ft, fs, dn, dtm, tanphi, sa,
-                                                sb, sc, Dmax, broken, f, newly, newly_dam)
+            Psi, dis, nnew, ndam = joint_forces(x, v, jn, jarea, kn, kt, ft, fs, dn, dtm, tanphi, sa,
+                                                sb, sc, Dmax, broken, f, newly, newly_dam, jrate, jdif)
             E[4] += dis
             # A joint that starts to soften exposes all edges of its two triangles to contact while
             # they still fit together, so no overlap can build up unseen before the faces part.

@@ -136,8 +136,8 @@ def _psi_branch(u, k, fmax):
 
 
 @njit(cache=True)
-def joint_forces(x, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax, broken, f, newly_broken,
-                 newly_damaged):
+def joint_forces(x, v, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax, broken, f,
+                 newly_broken, newly_damaged, jrate, jdif):
     """Cohesive 4-node joints (Munjiza's combined single and smeared crack, paper Appendix A).
 
     Nodes (a1, a2, b1, b2): a1->a2 is the edge of triangle A in its counter-clockwise order, b1/b2 the
@@ -156,6 +156,12 @@ def joint_forces(x, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax, b
     two Gauss points reach D >= 1 is broken: it carries nothing more and its faces join the contact.
     (Keeping a compressive branch on broken joints was tried and pumped energy into sliding
     fragments; see tests/test_fdem_fracture.py for the energy balance this choice achieves.)
+
+    Strain-rate-dependent strength (optional, jrate[:, 1] = k > 0): both strengths are scaled by
+    DIF = max(1, 1 + k log10(rate / rate0)), rate = |relative face velocity| / h at the Gauss
+    point (jrate columns: h [m], k, rate0 [1/s]); the DIF follows the current rate until damage
+    starts and is frozen from then on (jdif), so the softening branch is a fixed potential. The
+    softening displacements shrink by the same factor, keeping the fracture energies E_n, E_t.
 
     Joints whose damage first becomes positive are listed in newly_damaged, so that the integrator
     can expose their triangles to contact before the faces separate.
@@ -190,7 +196,6 @@ def joint_forces(x, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax, b
         w = 0.5 * jarea[jj]
         k_n = kn[jj]
         k_t = kt[jj]
-        f_t = ft[jj]
         n_broken_gp = 0
         psi_gp0 = 0.0
         psi_gp1 = 0.0
@@ -204,14 +209,26 @@ def joint_forces(x, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax, b
             gy = (1.0 - xi) * g1y + xi * g2y
             o = gx * nx + gy * ny
             s = gx * tx + gy * ty
+            dif = 1.0
+            if jrate[jj, 1] > 0.0:
+                if Dmax[jj, gp] > 0.0:
+                    dif = jdif[jj, gp]
+                else:
+                    vgx = (1.0 - xi) * (v[b1, 0] - v[a1, 0]) + xi * (v[b2, 0] - v[a2, 0])
+                    vgy = (1.0 - xi) * (v[b1, 1] - v[a1, 1]) + xi * (v[b2, 1] - v[a2, 1])
+                    rate = math.sqrt(vgx * vgx + vgy * vgy) / jrate[jj, 0]
+                    if rate > jrate[jj, 2]:
+                        dif = 1.0 + jrate[jj, 1] * math.log10(rate / jrate[jj, 2])
+                    jdif[jj, gp] = dif
+            f_t = ft[jj] * dif
             sig_c = k_n * o if o < 0.0 else 0.0
-            f_s = fs[jj] - tanphi[jj] * sig_c
+            f_s = fs[jj] * dif - tanphi[jj] * sig_c
             o_pos = o if o > 0.0 else 0.0
             ex_o = o_pos - f_t / k_n
             ex_s = abs(s) - f_s / k_t
             ex_o = ex_o if ex_o > 0.0 else 0.0
             ex_s = ex_s if ex_s > 0.0 else 0.0
-            D = math.sqrt((ex_o / dn[jj]) ** 2 + (ex_s / dt_[jj]) ** 2)
+            D = math.sqrt((ex_o * dif / dn[jj]) ** 2 + (ex_s * dif / dt_[jj]) ** 2)
             psi_pos = _psi_branch(o_pos, k_n, f_t) + _psi_branch(s, k_t, f_s)
             psi_neg = 0.5 * sig_c * o
             dm = Dmax[jj, gp]

@@ -38,6 +38,8 @@ class JointParams:
     compensate_compliance: scale the triangles' modulus by 1 / (1 - 3/(2 f)) so that the jointed
     body has the apparent modulus E (tested to 1%).
     friction_angle_deg: Mohr-Coulomb term on the shear strength, fs = sigma_t + tan(phi) * compression.
+    rate_k, rate0: strain-rate-dependent strength, DIF = max(1, 1 + rate_k log10(rate / rate0)) on
+    both strengths, rate = relative face velocity / element size (fdem.kernels.joint_forces).
     """
 
     sigma_n: float
@@ -52,12 +54,16 @@ class JointParams:
     compensate_compliance: bool = False
     friction_angle_deg: float = 0.0
     unbreakable: bool = False
+    rate_k: float = 0.0
+    rate0: float = 1.0
 
     def __post_init__(self):
         for name in ("sigma_n", "sigma_t", "E_n", "E_t", "a", "b", "c", "penalty_factor"):
             val = getattr(self, name)
             if not (np.isfinite(val) and val > 0):
                 raise ValueError(f"joint parameter {name} must be finite and > 0, got {val!r}")
+        if not (np.isfinite(self.rate_k) and self.rate_k >= 0 and self.rate0 > 0):
+            raise ValueError(f"rate_k must be >= 0 and rate0 > 0 1/s, got {self.rate_k}, {self.rate0}")
         if self.compensate_compliance and self.penalty_factor <= 3.0:
             raise ValueError("compensate_compliance needs penalty_factor > 3 (compensation 1/(1 - 3/(2f)))")
         if not (0.0 <= self.friction_angle_deg < 90.0):
@@ -122,6 +128,7 @@ class Model:
     tri_h: np.ndarray
     jn: np.ndarray
     jarea: np.ndarray
+    jrate: np.ndarray
     jlen0: np.ndarray
     kn: np.ndarray
     kt: np.ndarray
@@ -367,6 +374,7 @@ def build_model(bodies: list[Body], joints: dict[str, JointParams] | None = None
     dn = np.empty(nj)
     dtm = np.empty(nj)
     tanphi = np.empty(nj)
+    jrate = np.zeros((nj, 3))
     softening = (DEFAULT_A, DEFAULT_B, DEFAULT_C)
     for bi, b in enumerate(bodies):
         if not b.fracturable:
@@ -383,6 +391,9 @@ def build_model(bodies: list[Body], joints: dict[str, JointParams] | None = None
         dn[sel] = jp.delta_n_max
         dtm[sel] = jp.delta_t_max
         tanphi[sel] = np.tan(np.radians(jp.friction_angle_deg))
+        jrate[sel, 0] = h_j[sel]
+        jrate[sel, 1] = jp.rate_k
+        jrate[sel, 2] = jp.rate0
         softening = (jp.a, jp.b, jp.c)
     fr = [b for b in bodies if b.fracturable]
     if len({(joints[b.name].a, joints[b.name].b, joints[b.name].c) for b in fr}) > 1:
@@ -391,7 +402,7 @@ def build_model(bodies: list[Body], joints: dict[str, JointParams] | None = None
     return Model(
         x0=x0, mass=mass, node_body=node_body, node_vertex=node_vertex, node_tri=node_tri,
         node_thick=node_thick, tri=tri, dminv=np.ascontiguousarray(dminv), area0=area, vol0=vol0,
-        lam=lam, mu=mu, eta=eta, tri_body=tri_body, tri_h=tri_h, jn=jn, jarea=jarea, jlen0=L0, kn=kn, kt=kt,
+        lam=lam, mu=mu, eta=eta, tri_body=tri_body, tri_h=tri_h, jn=jn, jarea=jarea, jrate=jrate, jlen0=L0, kn=kn, kt=kt,
         ft=ft, fs=fs, dn=dn, dt=dtm, tanphi=tanphi, jedges=jedges, j_body=j_body,
         softening=softening, edges=edges_a, edge_tri=edge_tri_a, edge_dlim=edge_dlim,
         edge_thick=edge_thick, edge_active0=edge_active0, tri_edges=tri_edges, edge_joint=edge_joint, body_names=names,

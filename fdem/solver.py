@@ -195,7 +195,7 @@ def run(model: Model, t_end: float, *, dt: float | None = None, safety: float = 
     status, ns, steps, E, rebuilds = run_loop(
         x, v, model.mass, inv_mass, model.tri, model.dminv, model.vol0, model.lam, model.mu,
         model.eta, model.jn, model.jarea, model.kn, model.kt, model.ft, model.fs, model.dn,
-        model.dt, model.tanphi, model.jedges, float(sa), float(sb), float(sc), Dmax, broken,
+        model.dt, model.tanphi, model.jedges, float(sa), float(sb), float(sc), Dmax, broken, model.jrate,
         model.edges, model.edge_tri, edge_active, model.edge_dlim, model.edge_thick, model.tri_edges, model.edge_joint,
         model.node_body, model.node_vertex, model.node_tri, model.node_thick,
         model.body_fracturable, nb,

@@ -136,7 +136,7 @@ def build(geometry: str, preset: str, params: dict | None = None, record=None,
     jp = JointParams(sigma_n=p["sigma_n"], sigma_t=p["sigma_t"], E_n=p["E_n"], E_t=p["E_t"],
                      a=p["a"], b=p["b"], c=p["c"], penalty_factor=p["penalty_factor"],
                      compensate_compliance=True, friction_angle_deg=p["phi_deg"],
-                     unbreakable=unbreakable)
+                     unbreakable=unbreakable, rate_k=p["rate_strength.k"], rate0=1.0)
     # Seating: a face compliance C [m/Pa] in series with the contact penalty. The penalty acts per
     # node (F = p w d) over a tributary length of about one specimen element h, so the series
     # stiffness is 1 / (1/p + C/h).

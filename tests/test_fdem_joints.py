@@ -90,9 +90,10 @@ class _Joint:
         n = np.array([t[1], -t[0]])
         x[self.nB] += o * n + s * t
         f = np.zeros_like(x)
-        joint_forces(x, self.m.jn, self.m.jarea, self.m.kn, self.m.kt, self.m.ft, self.m.fs,
+        joint_forces(x, np.zeros_like(x), self.m.jn, self.m.jarea, self.m.kn, self.m.kt, self.m.ft, self.m.fs,
                      self.m.dn, self.m.dt, self.m.tanphi, *self.m.softening, self.Dmax,
-                     self.broken, f, np.zeros(1, np.int64), np.zeros(1, np.int64))
+                     self.broken, f, np.zeros(1, np.int64), np.zeros(1, np.int64),
+                     self.m.jrate, np.ones((1, 2)))
         F = -f[self.nB].sum(axis=0) / self.m.jarea[0]
         return float(F @ n), float(F @ t)
 
@@ -146,3 +147,41 @@ def test_mohr_coulomb_term_raises_shear_strength_under_compression():
     taus = [abs(j.traction(o_c, s)[1]) for s in np.linspace(0, s_max, 400)]
     expected = jp.sigma_t + np.tan(np.radians(phi)) * 4e6
     assert max(taus) == pytest.approx(expected, rel=2e-3)
+
+
+def test_rate_dependent_strength_raises_the_peak_by_the_DIF_and_keeps_the_fracture_energy():
+    k_rate = 0.3
+    jp = JointParams(sigma_n=8e6, sigma_t=20e6, E_n=60.0, E_t=300.0, rate_k=k_rate, rate0=1.0)
+    j = _Joint(jp)
+    m = j.m
+    h = m.jrate[0, 0]
+    V = 2.0  # opening velocity [m/s] -> rate V / h
+    dif = 1.0 + k_rate * np.log10(V / h)
+    a1, a2 = m.x0[j.nA]
+    t = (a2 - a1) / np.linalg.norm(a2 - a1)
+    n = np.array([t[1], -t[0]])
+    vel = np.zeros_like(m.x0)
+    vel[j.nB] = V * n
+    o_p = jp.sigma_n / m.kn[0]
+
+    def traction(o):
+        x = m.x0.copy()
+        x[j.nB] += o * n
+        f = np.zeros_like(x)
+        jdif = j.jdif
+        joint_forces(x, vel, m.jn, m.jarea, m.kn, m.kt, m.ft, m.fs, m.dn, m.dt, m.tanphi,
+                     *m.softening, j.Dmax, j.broken, f, np.zeros(1, np.int64), np.zeros(1, np.int64),
+                     m.jrate, jdif)
+        return float((-f[j.nB].sum(axis=0) / m.jarea[0]) @ n)
+
+    j.jdif = np.ones((1, 2))
+    # still elastic just below the raised strength; the static strength would have capped it
+    assert traction(0.999 * dif * o_p) == pytest.approx(0.999 * dif * jp.sigma_n, rel=1e-9)
+    assert j.Dmax[0, 0] == 0.0
+    # just past it: damage starts, the DIF is frozen, the traction is the dynamic strength
+    assert traction(1.0001 * dif * o_p) == pytest.approx(dif * jp.sigma_n, rel=1e-3)
+    assert j.jdif[0] == pytest.approx([dif, dif], rel=1e-12)
+    # the same joint pulled apart still dissipates E_n (softening displacement shrinks by the DIF)
+    model, res = _pull(jp, 0, speed=V)
+    dissipated = res.energy["joint_dissipated"][-1] / (L * THICK)
+    assert dissipated == pytest.approx(jp.E_n, rel=0.02)
