@@ -41,7 +41,28 @@ import numpy as np
 import pandas as pd
 
 REPO = Path(__file__).resolve().parents[1]
-DEFAULT_CONFIG = REPO / "config" / "test_fast.yaml"
+#: The comparison's experiment: the paper's twin (Brazilian disc, sigma_t and E_t) on the `fast` mesh,
+#: small enough for a test (6 members, 2 ES-MDA steps: 18 member simulations + truth + forecast).
+FAST_TWIN = {
+    "run": ["slurm_twin"],
+    "experiments": {
+        "slurm_twin": {
+            "description": "Cluster test: the paper's twin on the fast mesh, 6 members, 2 ES-MDA steps.",
+            "kind": "twin",
+            "geometry": "brazilian_disc",
+            "preset": "fast",
+            "seed": 7,
+            "ensemble_size": 6,
+            "method": "esmda",
+            "esmda": {"steps": 2},
+            "parameters": {"sigma_t": [4.0e6, 6.0e7], "E_t": [200.0, 2400.0]},
+            "simulation": {"t_end": 1.5e-4, "sample_dt": 5.0e-7},
+            "observations": {"t_start": 0.0, "t_end": 1.5e-4, "dt": 1.0e-6,
+                             "truth": {"sigma_t": 4.5e7, "E_t": 500.0}, "preset": "fast",
+                             "noise": {"relative_sigma": 0.01}},
+        }
+    },
+}
 #: Keys of summary.json (at any depth) that measure time, not results.
 TIMING_KEY = re.compile(r"wall|elapsed|duration|timestamp|date|updates_per_s", re.I)
 #: What the working directory of a run needs from the repository (read relative to the cwd).
@@ -100,13 +121,18 @@ def run(workdir: Path, argv: list[str], logname: str, timeout: float) -> dict:
     return {"wall_s": round(wall, 1), "log": str(logfile)}
 
 
+def member_folder(member: int) -> str:
+    """The member's folder name in results/<exp>/iter_<k>/members/ (shpb.workflow_io.member_ids)."""
+    return f"{member:03d}"
+
+
 def fault_wrapper(workdir: Path, member: int, iteration: int = 0) -> str:
     """A `simulator` command that crashes (exit 1) for one member of one iteration, else simulates."""
     script = workdir / "crashing_simulator.sh"
     script.write_text(
         "#!/bin/sh\n"
         "# Fault injection for the failed-member check: crash for one member, simulate for the rest.\n"
-        f'case "$*" in *"/iter_{iteration}/members/{member}/"*) echo "injected crash" >&2; exit 1;; esac\n'
+        f'case "$*" in *"/iter_{iteration}/members/{member_folder(member)}/"*) echo "injected crash" >&2; exit 1;; esac\n'
         f'exec {sys.executable} -m shpb simulate "$@"\n')
     script.chmod(0o755)
     return f"sh {script}"
@@ -163,6 +189,7 @@ def numbers_equal(x, y, path="") -> list[str]:
 
 def compare_results(a: Path, b: Path) -> dict:
     n_params = compare_tables(a, b, "results/*/iter_*/params.csv")
+    n_resp = compare_tables(a, b, "results/*/iter_*/responses.csv")  # the simulated curves
     n_post = compare_tables(a, b, "results/*/posterior.csv")
     sa, sb = sorted(a.glob("results/*/summary.json")), sorted(b.glob("results/*/summary.json"))
     if not sa or [p.relative_to(a) for p in sa] != [p.relative_to(b) for p in sb]:
@@ -174,7 +201,7 @@ def compare_results(a: Path, b: Path) -> dict:
         if diffs:
             raise CheckFailed(f"{pa.relative_to(a)} differs: " + "; ".join(diffs[:10]))
         summaries[pa.parent.name] = {k: ja.get(k) for k in ("iterations", "converged", "stop_reason", "n_simulations")}
-    return {"params_files": n_params, "posterior_files": n_post, "summaries": summaries, "identical": True}
+    return {"params_files": n_params, "responses_files": n_resp, "posterior_files": n_post, "summaries": summaries, "identical": True}
 
 
 def member_runs(root: Path) -> dict[str, dict]:
@@ -237,7 +264,7 @@ def scenario_fail(out: Path, cfg: Path, timeout: float, member: int = 1) -> dict
     failed = failed_slurm_jobs(slurm_log)
     if not failed:
         raise CheckFailed(f"no Slurm job reported failed in {slurm_log}")
-    runs = {k: v for k, v in member_runs(b).items() if f"/iter_0/members/{member}/" in k}
+    runs = {k: v for k, v in member_runs(b).items() if f"/iter_0/members/{member_folder(member)}/" in k}
     if not runs or any(r.get("status") != "failed" for r in runs.values()):
         raise CheckFailed(f"member {member} of iteration 0 not recorded as failed: {runs}")
     attempts = sorted({r.get("attempt") for r in runs.values()})
@@ -247,8 +274,8 @@ def scenario_fail(out: Path, cfg: Path, timeout: float, member: int = 1) -> dict
     return {"local_wall_s": results["fail-local"]["wall_s"], "slurm_wall_s": results["fail-slurm"]["wall_s"],
             "slurm_failed_jobs": [f"{j} {s}" for j, s in failed], "failed_member": member,
             "recorded_attempt": attempts, "reason": next(iter(runs.values())).get("reason", "")[:200],
-            "analysis_iter0_excerpt": [{k: d[k] for k in d if "fail" in k or "alive" in k or "drop" in k}
-                                       for d in dropped],
+            "analysis_iter0": [{"n_alive": d.get("n_alive"), "failed_members": d.get("failed_members")}
+                               for d in dropped],
             **res}
 
 
@@ -297,15 +324,21 @@ def scenario_resume(out: Path, cfg: Path, timeout: float, reference: Path) -> di
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--configfile", type=Path, default=DEFAULT_CONFIG)
+    ap.add_argument("--configfile", type=Path,
+                    help="workflow config for every run (default: FAST_TWIN above, written to the workdir)")
     ap.add_argument("--out", type=Path, help="working directory (default: a temporary one, removed on success)")
     ap.add_argument("--scenarios", default="compare,fail,resume")
     ap.add_argument("--timeout", type=float, default=1800, help="per snakemake run [s]")
     args = ap.parse_args(argv)
     if not os.environ.get("SLURM_CONF"):
         ap.error("SLURM_CONF is not set: run inside `scripts/slurm_local_cluster.sh with-cluster -- ...`")
-    cfg = args.configfile.resolve()
     out = (args.out or Path(tempfile.mkdtemp(prefix="slurm-compare-"))).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    if args.configfile:
+        cfg = args.configfile.resolve()
+    else:
+        cfg = out / "slurm_fast_twin.yaml"
+        cfg.write_text(json.dumps(FAST_TWIN, indent=2) + "\n")  # JSON is YAML (and keeps 4e6 a number)
     scenarios = [s.strip() for s in args.scenarios.split(",") if s.strip()]
     report = {"configfile": str(cfg), "workdir": str(out)}
     t0 = time.perf_counter()

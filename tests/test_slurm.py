@@ -213,10 +213,10 @@ def test_member_jobs_are_read_from_the_head_log(tmp_path):
 
 def test_fault_wrapper_crashes_only_for_its_member(tmp_path):
     cmd = slurm_compare.fault_wrapper(tmp_path, member=1).split()
-    crash = subprocess.run(cmd + ["--out", "results/e/iter_0/members/1/synthetic/.sim-x"], capture_output=True)
+    crash = subprocess.run(cmd + ["--out", "results/e/iter_0/members/001/synthetic/.sim-x"], capture_output=True)
     assert crash.returncode == 1 and b"injected crash" in crash.stderr
     # any other member reaches the real simulator (here: its argument parser, which rejects --help-me)
-    other = subprocess.run(cmd + ["--help-me", "--out", "results/e/iter_0/members/11/synthetic/.sim-x"],
+    other = subprocess.run(cmd + ["--help-me", "--out", "results/e/iter_0/members/011/synthetic/.sim-x"],
                            capture_output=True)
     assert b"injected crash" not in other.stderr
 
