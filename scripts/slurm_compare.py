@@ -10,10 +10,13 @@ cluster down afterwards. Scenarios (all by default):
     its own working directory; every ``results/*/iter_*/params.csv``, ``posterior.csv`` and every
     number in ``summary.json`` (wall times excepted) must be identical.
 ``fail``
-    A member whose simulator crashes on every attempt (through the workflow's ``simulator`` config
-    hook, a wrapper that exits 1 for that member of iteration 0): Slurm reports the job FAILED, the
-    workflow's ``retries`` re-submit it, the last attempt records the member as failed, the analysis
-    drops it, and the run finishes -- with the same result as a local run with the same fault.
+    Two faults through the workflow's ``simulator`` config hook (a wrapper around the simulator).
+    Member 1 of iteration 0 crashes (exit 1) on every attempt: the rule's ``retries`` re-run it (inside
+    the same Slurm job: the rule-level ``retries`` also apply in the job's own Snakemake), the last
+    attempt records it as failed, the analysis drops it. Member 2 of iteration 0 hangs on its first
+    attempt only (Slurm runs it under a 1-minute limit): Slurm kills the job (TIMEOUT), the head reports
+    the failed Slurm job and re-submits it, and the second attempt succeeds. The result must equal a
+    local run with the same crashing member (locally there is no time limit, so no hang there).
 ``resume``
     The head process is SIGKILLed while member jobs are queued and running; the old run's jobs are
     cancelled (``scancel --name <run id>``), the directory unlocked, the workflow re-run: members that
@@ -126,14 +129,21 @@ def member_folder(member: int) -> str:
     return f"{member:03d}"
 
 
-def fault_wrapper(workdir: Path, member: int, iteration: int = 0) -> str:
-    """A `simulator` command that crashes (exit 1) for one member of one iteration, else simulates."""
-    script = workdir / "crashing_simulator.sh"
-    script.write_text(
-        "#!/bin/sh\n"
-        "# Fault injection for the failed-member check: crash for one member, simulate for the rest.\n"
-        f'case "$*" in *"/iter_{iteration}/members/{member_folder(member)}/"*) echo "injected crash" >&2; exit 1;; esac\n'
-        f'exec {sys.executable} -m shpb simulate "$@"\n')
+def fault_wrapper(workdir: Path, crash: int | None = None, hang_once: int | None = None,
+                  iteration: int = 0) -> str:
+    """A `simulator` command for fault injection: crash (exit 1) for member `crash` of `iteration` on
+    every attempt; hang (sleep 15 min) for member `hang_once` on its first attempt only; else simulate."""
+    script = workdir / "faulty_simulator.sh"
+    lines = ["#!/bin/sh", "# Fault injection for the failed-member checks (scripts/slurm_compare.py)."]
+    if crash is not None:
+        lines.append(f'case "$*" in *"/iter_{iteration}/members/{member_folder(crash)}/"*) '
+                     'echo "injected crash" >&2; exit 1;; esac')
+    if hang_once is not None:
+        mark = workdir / f"hung-{member_folder(hang_once)}"
+        lines.append(f'case "$*" in *"/iter_{iteration}/members/{member_folder(hang_once)}/"*) '
+                     f'if mkdir "{mark}" 2>/dev/null; then echo "injected hang" >&2; exec sleep 900; fi;; esac')
+    lines.append(f'exec {sys.executable} -m shpb simulate "$@"')
+    script.write_text("\n".join(lines) + "\n")
     script.chmod(0o755)
     return f"sh {script}"
 
@@ -156,12 +166,14 @@ def compare_tables(a: Path, b: Path, pattern: str) -> int:
         if list(x.columns) != list(y.columns) or x.shape != y.shape:
             raise CheckFailed(f"{name}: columns/shape differ: {list(x.columns)} {x.shape} vs {list(y.columns)} {y.shape}")
         for col in x.columns:
+            if TIMING_KEY.search(str(col)):  # e.g. responses.csv's wall_s of each member
+                continue
             u, v = x[col].to_numpy(), y[col].to_numpy()
             if u.dtype.kind in "fiu" and v.dtype.kind in "fiu":
                 if not np.array_equal(u.astype(float), v.astype(float), equal_nan=True):
                     d = np.nanmax(np.abs(u.astype(float) - v.astype(float)))
                     raise CheckFailed(f"{name}: column {col} differs (max |diff| {d:.3g})")
-            elif not (x[col].astype(str) == y[col].astype(str)).all():
+            elif x[col].fillna("<missing>").astype(str).tolist() != y[col].fillna("<missing>").astype(str).tolist():
                 raise CheckFailed(f"{name}: column {col} differs")
     return len(fa)
 
@@ -252,31 +264,42 @@ def scenario_compare(out: Path, cfg: Path, timeout: float) -> dict:
     return {"local_wall_s": local["wall_s"], "slurm_wall_s": slurm["wall_s"], "slurm_member_jobs": n_jobs, **res}
 
 
-def scenario_fail(out: Path, cfg: Path, timeout: float, member: int = 1) -> dict:
-    results = {}
-    for name, profile, extra in (("fail-local", "default", ["--cores", "2"]), ("fail-slurm", "slurm", [])):
-        wd = prepare(out / name)
-        sim = fault_wrapper(wd, member)
-        results[name] = run(wd, snakemake_argv(profile, cfg, [*extra, "--config", f"simulator={sim}"]),
-                            "snakemake.log", timeout)
-    a, b = out / "fail-local", out / "fail-slurm"
-    slurm_log = Path(results["fail-slurm"]["log"])
+def scenario_fail(out: Path, cfg: Path, timeout: float, crash: int = 1, hang: int = 2) -> dict:
+    loc, slu = prepare(out / "fail-local"), prepare(out / "fail-slurm")
+    r_loc = run(loc, snakemake_argv("default", cfg, ["--cores", "2", "--config",
+                                                     f"simulator={fault_wrapper(loc, crash=crash)}"]),
+                "snakemake.log", timeout)
+    # A 1-minute Slurm time limit for the member jobs (replaces the profile's set-resources).
+    r_slu = run(slu, snakemake_argv("slurm", cfg, ["--config", f"simulator={fault_wrapper(slu, crash, hang)}",
+                                                   "--set-resources", "member:runtime=1"]),
+                "snakemake.log", timeout)
+    slurm_log = Path(r_slu["log"])
     failed = failed_slurm_jobs(slurm_log)
-    if not failed:
-        raise CheckFailed(f"no Slurm job reported failed in {slurm_log}")
-    runs = {k: v for k, v in member_runs(b).items() if f"/iter_0/members/{member_folder(member)}/" in k}
-    if not runs or any(r.get("status") != "failed" for r in runs.values()):
-        raise CheckFailed(f"member {member} of iteration 0 not recorded as failed: {runs}")
-    attempts = sorted({r.get("attempt") for r in runs.values()})
-    res = compare_results(a, b)
-    analysis = sorted(b.glob("results/*/iter_0/analysis.json"))
-    dropped = [json.loads(p.read_text()) for p in analysis]
-    return {"local_wall_s": results["fail-local"]["wall_s"], "slurm_wall_s": results["fail-slurm"]["wall_s"],
-            "slurm_failed_jobs": [f"{j} {s}" for j, s in failed], "failed_member": member,
-            "recorded_attempt": attempts, "reason": next(iter(runs.values())).get("reason", "")[:200],
-            "analysis_iter0": [{"n_alive": d.get("n_alive"), "failed_members": d.get("failed_members")}
-                               for d in dropped],
-            **res}
+    if not any(state == "TIMEOUT" for _, state in failed):
+        raise CheckFailed(f"no Slurm job reported TIMEOUT in {slurm_log}: {failed}")
+    submissions = {m: [j for j in jobs_in_log(slurm_log, "member")
+                       if j.get("it") == "0" and j.get("member") == member_folder(m)] for m in (crash, hang)}
+    if len(submissions[hang]) != 2:
+        raise CheckFailed(f"the timed-out member {hang} was submitted {len(submissions[hang])} times, not 2")
+    runs = member_runs(slu)
+    crashed = {k: v for k, v in runs.items() if f"/iter_0/members/{member_folder(crash)}/" in k}
+    hung = {k: v for k, v in runs.items() if f"/iter_0/members/{member_folder(hang)}/" in k}
+    if not crashed or any(r.get("status") != "failed" for r in crashed.values()):
+        raise CheckFailed(f"member {crash} of iteration 0 not recorded as failed: {crashed}")
+    if not hung or any(r.get("status") != "ok" for r in hung.values()):
+        raise CheckFailed(f"member {hang} of iteration 0 did not succeed after its timeout: {hung}")
+    analyses = [json.loads(p.read_text()) for p in sorted(slu.glob("results/*/iter_0/analysis.json"))]
+    dropped = [f["member"] for d in analyses for f in d.get("failed_members", [])]
+    if dropped != [crash]:
+        raise CheckFailed(f"iteration 0 dropped members {dropped}, expected [{crash}]")
+    res = compare_results(loc, slu)
+    return {"local_wall_s": r_loc["wall_s"], "slurm_wall_s": r_slu["wall_s"],
+            "slurm_failed_jobs": [f"{j} {s}" for j, s in failed],
+            "crashed_member": crash, "crashed_member_slurm_jobs": len(submissions[crash]),
+            "crashed_member_record": {k: f"{v.get('status')} (attempt {v.get('attempt')}): {v.get('reason', '')[:120]}"
+                                      for k, v in crashed.items()},
+            "timed_out_member": hang, "timed_out_member_slurm_jobs": len(submissions[hang]),
+            "iteration0_dropped": dropped, "iteration0_alive": [d.get("n_alive") for d in analyses], **res}
 
 
 def scenario_resume(out: Path, cfg: Path, timeout: float, reference: Path) -> dict:

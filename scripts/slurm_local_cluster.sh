@@ -215,6 +215,8 @@ JobCompType=jobcomp/none
 # command needs MinJobAge >= 3 x slurm-init-seconds-before-status-checks.
 MinJobAge=$min_job_age
 ReturnToService=2
+# Kill a timed-out job 5 s after its SIGTERM (default 30 s).
+KillWait=5
 SlurmctldTimeout=30
 SlurmdTimeout=60
 NodeName=localhost NodeAddr=127.0.0.1 CPUs=$cpus RealMemory=$mem_mb State=UNKNOWN

@@ -211,14 +211,23 @@ def test_member_jobs_are_read_from_the_head_log(tmp_path):
     assert slurm_compare.failed_slurm_jobs(log) == [("12", "FAILED")]
 
 
-def test_fault_wrapper_crashes_only_for_its_member(tmp_path):
-    cmd = slurm_compare.fault_wrapper(tmp_path, member=1).split()
-    crash = subprocess.run(cmd + ["--out", "results/e/iter_0/members/001/synthetic/.sim-x"], capture_output=True)
-    assert crash.returncode == 1 and b"injected crash" in crash.stderr
-    # any other member reaches the real simulator (here: its argument parser, which rejects --help-me)
-    other = subprocess.run(cmd + ["--help-me", "--out", "results/e/iter_0/members/011/synthetic/.sim-x"],
-                           capture_output=True)
-    assert b"injected crash" not in other.stderr
+def test_fault_wrapper_crashes_one_member_and_hangs_another_once(tmp_path):
+    cmd = slurm_compare.fault_wrapper(tmp_path, crash=1, hang_once=2).split()
+
+    def call(member, timeout=10):
+        return subprocess.run(cmd + ["--help-me", "--out", f"results/e/iter_0/members/{member}/synthetic/.sim-x"],
+                              capture_output=True, timeout=timeout)
+
+    for _ in range(2):
+        crash = call("001")
+        assert crash.returncode == 1 and b"injected crash" in crash.stderr
+    with pytest.raises(subprocess.TimeoutExpired):  # first attempt of member 2 hangs
+        call("002", timeout=2)
+    # then member 2, like any other member, reaches the real simulator (here: its argument parser,
+    # which rejects --help-me)
+    for member in ("002", "011"):
+        other = call(member)
+        assert other.returncode != 0 and b"injected" not in other.stderr
 
 
 # --------------------------------------------------------------------------------------------------
@@ -241,6 +250,7 @@ def test_fast_workflow_on_a_one_node_slurm_cluster_matches_the_local_run(tmp_pat
     assert report["ok"]
     assert report["compare"]["identical"] and report["resume"]["identical"] and report["fail"]["identical"]
     assert report["resume"]["members_finished_before_kill"] >= 2
-    assert report["fail"]["slurm_failed_jobs"]
+    assert any(j.endswith("TIMEOUT") for j in report["fail"]["slurm_failed_jobs"])
+    assert report["fail"]["iteration0_dropped"] == [1]
     # torn down: no link to a test cluster's configuration is left behind
     assert not Path("/run/slurm/conf").exists()
