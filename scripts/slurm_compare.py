@@ -314,7 +314,8 @@ def scenario_resume(out: Path, cfg: Path, timeout: float, reference: Path) -> di
             raise CheckFailed(f"the run ended (exit {proc.returncode}) before it could be interrupted; log {log1}")
         rid = run_id(log1)
         done = [p for p in wd.glob("results/*/iter_0/members/*/*/run.json")]
-        if rid and len(done) >= 2 and squeue(rid):
+        # (3: a member whose job is cancelled between writing its files and finishing loses them)
+        if rid and len(done) >= 3 and squeue(rid):
             break
         if time.monotonic() > deadline:
             raise CheckFailed("no member finished in time")

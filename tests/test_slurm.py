@@ -249,7 +249,7 @@ def test_fast_workflow_on_a_one_node_slurm_cluster_matches_the_local_run(tmp_pat
     print(json.dumps(report, indent=2), f"\nrun-compare wall time: {wall:.0f} s")
     assert report["ok"]
     assert report["compare"]["identical"] and report["resume"]["identical"] and report["fail"]["identical"]
-    assert report["resume"]["members_finished_before_kill"] >= 2
+    assert report["resume"]["members_finished_before_kill"] >= 1
     assert any(j.endswith("TIMEOUT") for j in report["fail"]["slurm_failed_jobs"])
     assert report["fail"]["iteration0_dropped"] == [1]
     # torn down: no link to a test cluster's configuration is left behind
