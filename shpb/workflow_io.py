@@ -21,6 +21,8 @@ Units are SI everywhere (DESIGN section 6).
 
 from __future__ import annotations
 
+from .atomic import atomic_write_text  # noqa: F401  (re-exported for the scripts)
+
 import copy
 import json
 import math
@@ -69,24 +71,6 @@ class SimulatorCrash(RuntimeError):
 # --------------------------------------------------------------------------------------------------
 # Atomic writes
 # --------------------------------------------------------------------------------------------------
-def atomic_write_text(path: str | Path, text: str) -> Path:
-    """Write ``text`` to ``path`` through a temporary file in the same folder and ``os.replace``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", newline="") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
-
-
 def atomic_write_json(path: str | Path, obj) -> Path:
     """Strict JSON (NaN/inf must already be ``None``), indented, keys in insertion order."""
     return atomic_write_text(path, json.dumps(obj, indent=2, allow_nan=False) + "\n")
