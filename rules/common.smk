@@ -59,5 +59,5 @@ def inference_settings(exp):
     """Config entries an analysis depends on (a change re-runs the analyses)."""
     e = EXPERIMENTS[exp]
     keys = ("method", "esmda", "max_iterations", "parameters", "transform", "inflation", "truncation",
-            "min_alive_fraction", "localization", "seed", "ensemble_size")
+            "max_rank", "min_alive_fraction", "localization", "seed", "ensemble_size")
     return {k: e[k] for k in keys}

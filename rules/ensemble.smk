@@ -6,7 +6,7 @@ rule lhs:
     output:
         params="results/{exp}/iter_0/params.csv",
     params:
-        inference=lambda wc: inference_settings(wc.exp),
+        prior=lambda wc: {k: EXPERIMENTS[wc.exp][k] for k in ("parameters", "ensemble_size", "seed")},
     script:
         "../scripts/lhs.py"
 

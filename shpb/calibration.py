@@ -38,7 +38,7 @@ from enkf import (BoxTransform, EnsembleFailure, StopCriteria, check_stop, enkf_
 
 from .observations import Observations
 
-__all__ = ["PURPOSES", "rng_for", "ExperimentSpec", "initial_ensemble", "analysis_step", "decide",
+__all__ = ["PURPOSES", "rng_for", "ExperimentSpec", "initial_ensemble", "analysis_step", "decide", "capped_truncation",
            "final_iteration", "linear_sensitivity", "record_misfits", "summary"]
 
 #: Independent random streams of an experiment (the ``spawn_key`` of :func:`rng_for`).
@@ -67,6 +67,7 @@ class ExperimentSpec:
     criteria: StopCriteria = field(default_factory=StopCriteria)
     inflation: object = "default"
     truncation: float | None = None
+    max_rank: int | None = None
     min_alive_fraction: float = 0.5
     unrelated: Mapping[str, Sequence[Sequence[float]]] = field(default_factory=dict)
     truth: Mapping[str, float] | None = None
@@ -92,6 +93,7 @@ class ExperimentSpec:
                    seed=int(exp["seed"]), method=method, alphas=alphas, max_iterations=max_it,
                    transform_kind=exp.get("transform", "logit"), criteria=criteria,
                    inflation=None if exp.get("inflation") == "none" else exp.get("inflation", "default"), truncation=exp.get("truncation"),
+                   max_rank=exp.get("max_rank"),
                    min_alive_fraction=float(exp.get("min_alive_fraction", 0.5)),
                    unrelated=dict(exp.get("localization") or {}),
                    truth=None if truth is None else {p: float(truth[p]) for p in truth})
@@ -206,19 +208,20 @@ def analysis_step(spec: ExperimentSpec, k: int, params: pd.DataFrame, responses:
     elif spec.method == "enkf":
         alpha = 1.0
     if alpha is not None:
+        base = spec.truncation if spec.truncation is not None else (0.99 if spec.method == "esmda" else 1.0)
+        truncation = capped_truncation(Y, alive, err, base, spec.max_rank)
         common = dict(rng=rng_for(spec.seed, "analysis", k), transform=transform,
                       localization=spec.localization(obs), prior_std=prior_spread, alive=alive,
                       min_alive_fraction=spec.min_alive_fraction, names=names)
         if spec.method == "esmda":
             infl = None if spec.inflation == "default" else spec.inflation
-            res = esmda_update(P, Y, d, err, alpha=alpha, inflation=infl,
-                               truncation=0.99 if spec.truncation is None else spec.truncation, **common)
+            res = esmda_update(P, Y, d, err, alpha=alpha, inflation=infl, truncation=truncation, **common)
         else:
             infl = "paper" if spec.inflation == "default" else spec.inflation
-            res = enkf_update(P, Y, d, err, inflation=infl,
-                              truncation=1.0 if spec.truncation is None else spec.truncation, **common)
+            res = enkf_update(P, Y, d, err, inflation=infl, truncation=truncation, **common)
         update = res.to_dict()
         update.pop("misfit_members", None)  # the same numbers are in "members" below
+        update["max_rank"] = spec.max_rank
         next_params = res.params.tolist()
 
     return jsonable({
@@ -243,6 +246,30 @@ def analysis_step(spec: ExperimentSpec, k: int, params: pd.DataFrame, responses:
         "update": update,
         "next_params": None if next_params is None else {"names": names, "values": next_params},
     })
+
+
+def capped_truncation(Y: np.ndarray, alive: np.ndarray, err, base: float, max_rank: int | None) -> float:
+    """The ``truncation`` argument of :func:`enkf.esmda_update` / :func:`enkf.enkf_update` that keeps at
+    most ``max_rank`` singular values of the whitened response anomalies (and never more than ``base``).
+
+    Same anomalies as the analysis: ``S = L^{-1} (Y_alive - mean)^T / sqrt(N_alive - 1)``; the
+    returned fraction sits just below the cumulative singular-value fraction of the ``max_rank``-th
+    value, so :func:`enkf.truncation_rank` keeps exactly ``min(rank(base), max_rank)`` values.
+    """
+    if max_rank is None:
+        return base
+    Ya = np.asarray(Y, float)[np.asarray(alive, bool)]
+    if Ya.shape[0] < 2:
+        return base
+    S = err.whiten((Ya - Ya.mean(axis=0)).T) / math.sqrt(Ya.shape[0] - 1)
+    s = np.linalg.svd(S, compute_uv=False)
+    if s.size == 0 or s[0] <= 0:
+        return base
+    frac = np.cumsum(s) / np.sum(s)
+    r = min(int(max_rank), int(np.count_nonzero(s > s[0] * 1e-12)))
+    if r >= s.size or frac[r - 1] >= base:
+        return base
+    return float(frac[r - 1]) - 1e-12
 
 
 def record_misfits(Y: np.ndarray, obs: Observations, alive=None) -> dict:

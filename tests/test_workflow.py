@@ -451,3 +451,21 @@ def test_a_malformed_observation_file_fails_before_the_first_simulation(tmp_path
     assert out.returncode != 0
     assert str(bad) in out.stderr and "Blocklength" in out.stderr
     assert not (tmp_path / "results").exists()
+
+
+def test_the_rank_cap_keeps_exactly_that_many_singular_values():
+    from enkf import esmda_update
+    from shpb.calibration import capped_truncation
+
+    spec, obs, model, _ = _linear_setup(20)
+    p = initial_ensemble(spec)
+    rng = np.random.default_rng(0)
+    Y = model(p[list(spec.names)].to_numpy()) + 3e5 * rng.standard_normal((20, obs.m))  # rank-19 anomalies
+    err, alive = obs.error_model(), np.ones(20, bool)
+    for cap in (1, 2, 3, 7):
+        tr = capped_truncation(Y, alive, err, 0.99, cap)
+        res = esmda_update(p[list(spec.names)].to_numpy(), Y, obs.values, err, alpha=3.0, rng=1, truncation=tr,
+                           transform=spec.transform)
+        assert res.rank == cap
+    assert capped_truncation(Y, alive, err, 0.99, None) == 0.99
+    assert capped_truncation(Y, alive, err, 0.5, 19) == 0.5  # the cap never keeps more than base would
