@@ -61,3 +61,14 @@ def inference_settings(exp):
     keys = ("method", "esmda", "max_iterations", "parameters", "transform", "inflation", "truncation",
             "max_rank", "min_alive_fraction", "localization", "seed", "ensemble_size")
     return {k: e[k] for k in keys}
+
+
+def time_limit_s(exp, preset=None):
+    """Wall-time limit of one simulation of this experiment (config member_time_limit_s, per preset)."""
+    return int(config["member_time_limit_s"][preset or EXPERIMENTS[exp]["preset"]])
+
+
+def runtime_min(exp, preset=None):
+    """Scheduler wall time [min] of a simulation job: the simulator's own limit plus 5 minutes, so
+    that the member stops itself (and is dropped as failed) before Slurm would kill the job."""
+    return -(-time_limit_s(exp, preset) // 60) + 5

@@ -46,5 +46,7 @@ rule member:
     retries: config["member_retries"]
     resources:
         attempt=lambda wc, attempt: attempt,
+        time_limit_s=lambda wc: time_limit_s(wc.exp, None),
+        runtime=lambda wc: runtime_min(wc.exp, None),
     script:
         "../scripts/member.py"

@@ -28,5 +28,7 @@ rule forecast:
     retries: config["member_retries"]
     resources:
         attempt=lambda wc, attempt: attempt,
+        time_limit_s=lambda wc: time_limit_s(wc.exp, None),
+        runtime=lambda wc: runtime_min(wc.exp, None),
     script:
         "../scripts/forecast.py"

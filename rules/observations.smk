@@ -19,6 +19,8 @@ rule truth:
     retries: config["member_retries"]
     resources:
         attempt=lambda wc, attempt: attempt,
+        time_limit_s=lambda wc: time_limit_s(wc.exp, EXPERIMENTS[wc.exp]["observations"]["preset"]),
+        runtime=lambda wc: runtime_min(wc.exp, EXPERIMENTS[wc.exp]["observations"]["preset"]),
     script:
         "../scripts/truth.py"
 

@@ -6,5 +6,5 @@ run_member(command=simulator_command(sim["command"]), geometry=sim["geometry"], 
            params={**sim["fixed"], **read_json(snakemake.input.params)["params"]},
            record=snakemake.params.record_file or None, t_end=sim["t_end"], sample_dt=sim["sample_dt"],
            curve_path=snakemake.output.curve, run_path=snakemake.output.run, log_path=snakemake.log[0],
-           attempt=snakemake.resources.attempt, max_attempts=snakemake.params.max_attempts,
+           attempt=snakemake.resources.attempt, time_limit_s=snakemake.resources.time_limit_s, max_attempts=snakemake.params.max_attempts,
            extra_run={"forecast": True, "record": snakemake.wildcards.record})

@@ -10,13 +10,14 @@ cluster down afterwards. Scenarios (all by default):
     its own working directory; every ``results/*/iter_*/params.csv``, ``posterior.csv`` and every
     number in ``summary.json`` (wall times excepted) must be identical.
 ``fail``
-    Two faults through the workflow's ``simulator`` config hook (a wrapper around the simulator).
-    Member 1 of iteration 0 crashes (exit 1) on every attempt: the rule's ``retries`` re-run it (inside
-    the same Slurm job: the rule-level ``retries`` also apply in the job's own Snakemake), the last
-    attempt records it as failed, the analysis drops it. Member 2 of iteration 0 hangs on its first
-    attempt only (Slurm runs it under a 1-minute limit): Slurm kills the job (TIMEOUT), the head reports
-    the failed Slurm job and re-submits it, and the second attempt succeeds. The result must equal a
-    local run with the same crashing member (locally there is no time limit, so no hang there).
+    Two faults through the workflow's ``simulator`` config hook (a wrapper around the simulator), the
+    same in a local and a Slurm run. Member 1 of iteration 0 crashes (exit 1) on every attempt: the
+    rule's ``retries`` re-run it (inside the same Slurm job: the rule-level ``retries`` also apply in
+    the job's own Snakemake), the last attempt records it as failed, the analysis drops it. Member 2 of
+    iteration 0 hangs on every attempt: the simulator is stopped at ``member_time_limit_s`` (set to
+    40 s here), before the job's Slurm time limit (the limit plus 5 minutes), and the member is
+    dropped with the reason ``time limit``; no Slurm job may end in TIMEOUT, member 2 is submitted
+    once, and the run goes on. The results must equal the local run's.
 ``resume``
     The head process is SIGKILLed while member jobs are queued and running; the old run's jobs are
     cancelled (``scancel --name <run id>``), the directory unlocked, the workflow re-run: members that
@@ -42,6 +43,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import yaml
 
 REPO = Path(__file__).resolve().parents[1]
 #: The comparison's experiment: the paper's twin (Brazilian disc, sigma_t and E_t) on the `fast` mesh,
@@ -129,19 +131,17 @@ def member_folder(member: int) -> str:
     return f"{member:03d}"
 
 
-def fault_wrapper(workdir: Path, crash: int | None = None, hang_once: int | None = None,
-                  iteration: int = 0) -> str:
-    """A `simulator` command for fault injection: crash (exit 1) for member `crash` of `iteration` on
-    every attempt; hang (sleep 15 min) for member `hang_once` on its first attempt only; else simulate."""
+def fault_wrapper(workdir: Path, crash: int | None = None, hang: int | None = None, iteration: int = 0) -> str:
+    """A `simulator` command for fault injection: crash (exit 1) for member `crash` of `iteration` and
+    hang (sleep 15 min) for member `hang` of `iteration`, both on every attempt; else simulate."""
     script = workdir / "faulty_simulator.sh"
     lines = ["#!/bin/sh", "# Fault injection for the failed-member checks (scripts/slurm_compare.py)."]
     if crash is not None:
         lines.append(f'case "$*" in *"/iter_{iteration}/members/{member_folder(crash)}/"*) '
                      'echo "injected crash" >&2; exit 1;; esac')
-    if hang_once is not None:
-        mark = workdir / f"hung-{member_folder(hang_once)}"
-        lines.append(f'case "$*" in *"/iter_{iteration}/members/{member_folder(hang_once)}/"*) '
-                     f'if mkdir "{mark}" 2>/dev/null; then echo "injected hang" >&2; exec sleep 900; fi;; esac')
+    if hang is not None:
+        lines.append(f'case "$*" in *"/iter_{iteration}/members/{member_folder(hang)}/"*) '
+                     'echo "injected hang" >&2; exec sleep 900;; esac')
     lines.append(f'exec {sys.executable} -m shpb simulate "$@"')
     script.write_text("\n".join(lines) + "\n")
     script.chmod(0o755)
@@ -264,41 +264,52 @@ def scenario_compare(out: Path, cfg: Path, timeout: float) -> dict:
     return {"local_wall_s": local["wall_s"], "slurm_wall_s": slurm["wall_s"], "slurm_member_jobs": n_jobs, **res}
 
 
+FAIL_TIME_LIMIT_S = 40  # the fail scenario's member_time_limit_s (fast members take about 5-15 s)
+
+
+def fault_config(cfg: Path, workdir: Path, crash: int, hang: int) -> Path:
+    """The run's config plus the fault-injecting simulator and a short member time limit."""
+    conf = yaml.safe_load(cfg.read_text())
+    conf["simulator"] = fault_wrapper(workdir, crash=crash, hang=hang)
+    conf["member_time_limit_s"] = {"fast": FAIL_TIME_LIMIT_S}
+    path = workdir / "fault_config.yaml"
+    path.write_text(json.dumps(conf, indent=2) + "\n")  # JSON is YAML (and keeps 4e6 a number)
+    return path
+
+
 def scenario_fail(out: Path, cfg: Path, timeout: float, crash: int = 1, hang: int = 2) -> dict:
     loc, slu = prepare(out / "fail-local"), prepare(out / "fail-slurm")
-    r_loc = run(loc, snakemake_argv("default", cfg, ["--cores", "2", "--config",
-                                                     f"simulator={fault_wrapper(loc, crash=crash)}"]),
+    r_loc = run(loc, snakemake_argv("default", fault_config(cfg, loc, crash, hang), ["--cores", "2"]),
                 "snakemake.log", timeout)
-    # A 1-minute Slurm time limit for the member jobs (replaces the profile's set-resources).
-    r_slu = run(slu, snakemake_argv("slurm", cfg, ["--config", f"simulator={fault_wrapper(slu, crash, hang)}",
-                                                   "--set-resources", "member:runtime=1"]),
-                "snakemake.log", timeout)
+    r_slu = run(slu, snakemake_argv("slurm", fault_config(cfg, slu, crash, hang)), "snakemake.log", timeout)
     slurm_log = Path(r_slu["log"])
     failed = failed_slurm_jobs(slurm_log)
-    if not any(state == "TIMEOUT" for _, state in failed):
-        raise CheckFailed(f"no Slurm job reported TIMEOUT in {slurm_log}: {failed}")
+    if any(state == "TIMEOUT" for _, state in failed):
+        raise CheckFailed(f"a Slurm job ended in TIMEOUT although the simulator stops itself first: {failed}")
     submissions = {m: [j for j in jobs_in_log(slurm_log, "member")
                        if j.get("it") == "0" and j.get("member") == member_folder(m)] for m in (crash, hang)}
-    if len(submissions[hang]) != 2:
-        raise CheckFailed(f"the timed-out member {hang} was submitted {len(submissions[hang])} times, not 2")
+    if len(submissions[hang]) != 1:
+        raise CheckFailed(f"the hanging member {hang} was submitted {len(submissions[hang])} times, not once")
     runs = member_runs(slu)
     crashed = {k: v for k, v in runs.items() if f"/iter_0/members/{member_folder(crash)}/" in k}
     hung = {k: v for k, v in runs.items() if f"/iter_0/members/{member_folder(hang)}/" in k}
     if not crashed or any(r.get("status") != "failed" for r in crashed.values()):
         raise CheckFailed(f"member {crash} of iteration 0 not recorded as failed: {crashed}")
-    if not hung or any(r.get("status") != "ok" for r in hung.values()):
-        raise CheckFailed(f"member {hang} of iteration 0 did not succeed after its timeout: {hung}")
+    if not hung or any(r.get("status") != "failed" or not str(r.get("reason", "")).startswith("time limit")
+                       for r in hung.values()):
+        raise CheckFailed(f"member {hang} of iteration 0 not recorded as failed for its time limit: {hung}")
     analyses = [json.loads(p.read_text()) for p in sorted(slu.glob("results/*/iter_0/analysis.json"))]
-    dropped = [f["member"] for d in analyses for f in d.get("failed_members", [])]
-    if dropped != [crash]:
-        raise CheckFailed(f"iteration 0 dropped members {dropped}, expected [{crash}]")
+    dropped = sorted(f["member"] for d in analyses for f in d.get("failed_members", []))
+    if dropped != sorted([crash, hang]):
+        raise CheckFailed(f"iteration 0 dropped members {dropped}, expected {sorted([crash, hang])}")
     res = compare_results(loc, slu)
     return {"local_wall_s": r_loc["wall_s"], "slurm_wall_s": r_slu["wall_s"],
             "slurm_failed_jobs": [f"{j} {s}" for j, s in failed],
             "crashed_member": crash, "crashed_member_slurm_jobs": len(submissions[crash]),
             "crashed_member_record": {k: f"{v.get('status')} (attempt {v.get('attempt')}): {v.get('reason', '')[:120]}"
                                       for k, v in crashed.items()},
-            "timed_out_member": hang, "timed_out_member_slurm_jobs": len(submissions[hang]),
+            "hung_member": hang, "hung_member_slurm_jobs": len(submissions[hang]),
+            "hung_member_record": {k: f"{v.get('status')}: {v.get('reason', '')[:120]}" for k, v in hung.items()},
             "iteration0_dropped": dropped, "iteration0_alive": [d.get("n_alive") for d in analyses], **res}
 
 

@@ -351,7 +351,8 @@ def _tail(text: str, n: int = 1500) -> str:
 def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Mapping[str, float],
                curve_path: str | Path, run_path: str | Path, record: str | None = None,
                t_end: float | None = None, sample_dt: float | None = None, attempt: int = 1,
-               max_attempts: int = 1, log_path: str | Path | None = None, extra_run: Mapping | None = None) -> dict:
+               max_attempts: int = 1, log_path: str | Path | None = None, extra_run: Mapping | None = None,
+               time_limit_s: float | None = None) -> dict:
     """Run one simulation and leave ``curve_path`` and ``run_path`` behind, atomically.
 
     Exit code 0: the simulator's ``curve.csv``/``run.json`` are moved into place. Exit code 3 (numerical
@@ -361,6 +362,11 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
     Any other outcome (crash, signal, missing outputs) is a :class:`SimulatorCrash`: raised while
     ``attempt < max_attempts`` so that Snakemake's ``retries`` re-run the job, recorded as a failed
     member on the last attempt.
+
+    ``time_limit_s``: the simulator is killed after this wall time and the member is failed at once
+    (``reason`` starts with ``time limit``). The limit sits below the job's scheduler wall time, so a
+    member that runs too long is dropped under the failed-member policy instead of being killed by
+    Slurm on every attempt, which would stop the whole run.
 
     Returns the ``run.json`` dict written.
     """
@@ -372,7 +378,12 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
                          t_end=t_end, sample_dt=sample_dt)
     t0 = time.perf_counter()
     try:
-        proc = subprocess.run(argv, capture_output=True, text=True)
+        try:
+            proc = _run_with_limit(argv, time_limit_s)
+        except subprocess.TimeoutExpired as exc:
+            return _timed_out(exc, argv=argv, wall=time.perf_counter() - t0, geometry=geometry, preset=preset,
+                              params=params, curve_path=curve_path, run_path=run_path, log_path=log_path,
+                              extra=dict(extra_run or {}, attempt=attempt, exit_code=None))
         wall = time.perf_counter() - t0
         if log_path is not None:
             atomic_write_text(log_path, f"$ {shlex.join(argv)}\n# exit code {proc.returncode}, "
@@ -410,6 +421,41 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
         return run
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _run_with_limit(argv, time_limit_s):
+    """subprocess.run(argv, capture_output=True, text=True) that kills the simulator at the time limit
+    and does not then wait for processes it may have started that still hold its pipes."""
+    with subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc:
+        try:
+            out, err = proc.communicate(timeout=time_limit_s)
+        except subprocess.TimeoutExpired as exc:
+            proc.kill()
+            try:
+                exc.stdout, exc.stderr = proc.communicate(timeout=10.0)
+            except subprocess.TimeoutExpired:
+                pass
+            raise
+        except BaseException:
+            proc.kill()
+            raise
+    return subprocess.CompletedProcess(argv, proc.returncode, out, err)
+
+
+def _timed_out(exc: subprocess.TimeoutExpired, *, argv, wall, geometry, preset, params, curve_path, run_path,
+               log_path, extra) -> dict:
+    """The failed member of a simulation stopped by ``time_limit_s`` (subprocess.run killed it)."""
+    def text(b):
+        return b.decode(errors="replace") if isinstance(b, bytes) else (b or "")
+    if log_path is not None:
+        atomic_write_text(log_path, f"$ {shlex.join(argv)}\n# killed after the time limit of {exc.timeout:g} s\n"
+                                    f"--- stdout\n{text(exc.stdout)}\n--- stderr\n{text(exc.stderr)}\n")
+    run = {"status": "failed", "geometry": geometry, "preset": preset, "params": dict(params), "wall_s": wall,
+           "reason": f"time limit: the simulation ran longer than {exc.timeout:g} s (member_time_limit_s) "
+                     f"and was stopped", **extra}
+    atomic_write_text(curve_path, failed_curve_text())
+    atomic_write_json(run_path, _jsonable(run))
+    return run
 
 
 # --------------------------------------------------------------------------------------------------

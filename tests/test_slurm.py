@@ -211,8 +211,8 @@ def test_member_jobs_are_read_from_the_head_log(tmp_path):
     assert slurm_compare.failed_slurm_jobs(log) == [("12", "FAILED")]
 
 
-def test_fault_wrapper_crashes_one_member_and_hangs_another_once(tmp_path):
-    cmd = slurm_compare.fault_wrapper(tmp_path, crash=1, hang_once=2).split()
+def test_fault_wrapper_crashes_one_member_and_hangs_another(tmp_path):
+    cmd = slurm_compare.fault_wrapper(tmp_path, crash=1, hang=2).split()
 
     def call(member, timeout=10):
         return subprocess.run(cmd + ["--help-me", "--out", f"results/e/iter_0/members/{member}/synthetic/.sim-x"],
@@ -221,13 +221,23 @@ def test_fault_wrapper_crashes_one_member_and_hangs_another_once(tmp_path):
     for _ in range(2):
         crash = call("001")
         assert crash.returncode == 1 and b"injected crash" in crash.stderr
-    with pytest.raises(subprocess.TimeoutExpired):  # first attempt of member 2 hangs
-        call("002", timeout=2)
-    # then member 2, like any other member, reaches the real simulator (here: its argument parser,
-    # which rejects --help-me)
-    for member in ("002", "011"):
-        other = call(member)
-        assert other.returncode != 0 and b"injected" not in other.stderr
+        with pytest.raises(subprocess.TimeoutExpired):  # member 2 hangs on every attempt
+            call("002", timeout=2)
+    # every other member reaches the real simulator (here: its argument parser, which rejects --help-me)
+    other = call("011")
+    assert other.returncode != 0 and b"injected" not in other.stderr
+
+
+def test_fault_config_sets_the_wrapper_and_a_member_time_limit_below_the_slurm_runtime(tmp_path):
+    cfg = tmp_path / "cfg.yaml"
+    cfg.write_text(json.dumps(slurm_compare.FAST_TWIN))
+    from shpb.workflow_io import coerce_yaml_floats
+
+    # (YAML 1.1 reads JSON's 1e-06 as a string; the workflow converts such strings back)
+    conf = coerce_yaml_floats(yaml.safe_load(slurm_compare.fault_config(cfg, tmp_path, 1, 2).read_text()))
+    assert conf["simulator"].endswith("faulty_simulator.sh")
+    assert conf["member_time_limit_s"] == {"fast": slurm_compare.FAIL_TIME_LIMIT_S}
+    assert conf["experiments"] == json.loads(json.dumps(slurm_compare.FAST_TWIN))["experiments"]
 
 
 # --------------------------------------------------------------------------------------------------
@@ -250,7 +260,8 @@ def test_fast_workflow_on_a_one_node_slurm_cluster_matches_the_local_run(tmp_pat
     assert report["ok"]
     assert report["compare"]["identical"] and report["resume"]["identical"] and report["fail"]["identical"]
     assert report["resume"]["members_finished_before_kill"] >= 1
-    assert any(j.endswith("TIMEOUT") for j in report["fail"]["slurm_failed_jobs"])
-    assert report["fail"]["iteration0_dropped"] == [1]
+    assert not any(j.endswith("TIMEOUT") for j in report["fail"]["slurm_failed_jobs"])
+    assert report["fail"]["hung_member_slurm_jobs"] == 1
+    assert report["fail"]["iteration0_dropped"] == [1, 2]
     # torn down: no link to a test cluster's configuration is left behind
     assert not Path("/run/slurm/conf").exists()

@@ -65,7 +65,8 @@ STAND_IN = textwrap.dedent('''
     Peak 0.8 sigma_t at 20 us, exponential decay with tau = 5 us + 30 us E_t / 2400 J/m^2.
     Injected failures (environment): STAND_IN_FAIL_BELOW: sigma_t below it -> exit 3 with a failed
     run.json; STAND_IN_CRASH_ONCE_BELOW: sigma_t below it -> crash (exit 1) on the first call only
-    (a marker file per parameter set); STAND_IN_SLEEP: seconds per run.
+    (a marker file per parameter set); STAND_IN_SLEEP: seconds per run; STAND_IN_HANG_RANGE "lo,hi":
+    sigma_t inside it -> hang (sleep 10 min) on every call.
     """
     import argparse, hashlib, json, os, sys, time
     import numpy as np
@@ -79,6 +80,9 @@ STAND_IN = textwrap.dedent('''
     p = {k: float(v) for k, v in (s.split("=") for s in a.param)}
     time.sleep(float(os.environ.get("STAND_IN_SLEEP", "0")))
     st, et = p["sigma_t"], p["E_t"]
+    hang = [float(v) for v in os.environ.get("STAND_IN_HANG_RANGE", "1,-1").split(",")]
+    if hang[0] < st < hang[1]:
+        time.sleep(600.0)
     key = hashlib.md5(repr(sorted(p.items())).encode()).hexdigest()
     crash_below = float(os.environ.get("STAND_IN_CRASH_ONCE_BELOW", "-1"))
     marker = os.path.join(os.environ.get("STAND_IN_MARKERS", "."), key)
@@ -384,28 +388,35 @@ def test_workflow_runs_end_to_end_and_a_second_run_has_nothing_to_do(tmp_path):
 def test_a_failed_member_is_retried_then_dropped_with_its_reason_in_analysis_json(tmp_path):
     cfg = twin_config(ensemble_size=10, esmda={"steps": 1})
     cfg["simulator"] = write_stand_in(tmp_path)
+    cfg["member_time_limit_s"] = {"fast": 5}
     write_config(tmp_path, cfg)
     lhs = validate_config(cfg, SCHEMA)
     p0 = initial_ensemble(ExperimentSpec.from_config("twin", lhs["experiments"]["twin"]))
     sig = np.sort(p0["sigma_t"].to_numpy())
     fail_below = 0.5 * (sig[0] + sig[1])  # exactly one member fails numerically
     crash_below = 0.5 * (sig[1] + sig[2])  # and the two lowest crash once (retried, then fine for one)
+    hang = (0.5 * (sig[2] + sig[3]), 0.5 * (sig[3] + sig[4]))  # one member hangs on every attempt
     (tmp_path / "markers").mkdir()
     env = {"STAND_IN_FAIL_BELOW": repr(float(fail_below)), "STAND_IN_CRASH_ONCE_BELOW": repr(float(crash_below)),
-           "STAND_IN_MARKERS": str(tmp_path / "markers")}
+           "STAND_IN_MARKERS": str(tmp_path / "markers"), "STAND_IN_HANG_RANGE": f"{float(hang[0])!r},{float(hang[1])!r}"}
+    t0 = time.time()
     out = snakemake(tmp_path, "--cores", "2", env=env)
     assert out.returncode == 0, out.stderr[-4000:]
+    assert time.time() - t0 < 300  # the hanging member was stopped at its 5 s limit, not after 10 min
     a0 = json.loads((tmp_path / "results/twin/iter_0/analysis.json").read_text())
     failed_member = int(p0["member"][p0["sigma_t"] < fail_below].iloc[0])
     crashed_once = int(p0["member"][(p0["sigma_t"] > fail_below) & (p0["sigma_t"] < crash_below)].iloc[0])
-    assert a0["n_alive"] == 9 and a0["alive"][failed_member] is False
-    assert [f["member"] for f in a0["failed_members"]] == [failed_member]
-    assert "energy balance diverged (stand-in)" in a0["failed_members"][0]["reason"]
-    assert a0["update"]["replaced_members"] == [failed_member]
+    hung = int(p0["member"][(p0["sigma_t"] > hang[0]) & (p0["sigma_t"] < hang[1])].iloc[0])
+    assert a0["n_alive"] == 8 and a0["alive"][failed_member] is False and a0["alive"][hung] is False
+    reasons = {f["member"]: f["reason"] for f in a0["failed_members"]}
+    assert sorted(reasons) == sorted([failed_member, hung])
+    assert "energy balance diverged (stand-in)" in reasons[failed_member]
+    assert "time limit: the simulation ran longer than 5 s" in reasons[hung]
+    assert sorted(a0["update"]["replaced_members"]) == sorted([failed_member, hung])
     run = json.loads((tmp_path / f"results/twin/iter_0/members/{crashed_once:03d}/synthetic/run.json").read_text())
     assert run["status"] == "ok" and run["attempt"] == 2  # crashed on attempt 1, Snakemake retried it
     summary = json.loads((tmp_path / "results/twin/summary.json").read_text())
-    assert summary["failed_members"]["0"][0]["member"] == failed_member
+    assert sorted(f["member"] for f in summary["failed_members"]["0"]) == sorted([failed_member, hung])
 
 
 def test_a_killed_run_resumes_without_redoing_finished_members(tmp_path):
