@@ -31,6 +31,7 @@ if workflow.is_main_process:
         _paths = list(_exp["observations"].get("records") or [])
         if _exp["observations"].get("incident_record"):
             _paths.append(_exp["observations"]["incident_record"])
+        _paths += list((_exp.get("diagnosis") or {}).get("heldout_records") or [])
         for _path in _paths:
             try:
                 check_record(_path, _exp["observations"]["t_end"] if _exp["kind"] == "measured" else None)
@@ -46,10 +47,12 @@ include: "rules/ensemble.smk"
 include: "rules/assimilate.smk"
 include: "rules/forecast.smk"
 include: "rules/report.smk"
+include: "rules/diagnosis.smk"
 
 
 rule all:
     input:
         expand("results/{exp}/summary.json", exp=RUN),
         expand("results/{exp}/plots/{plot}.png", exp=RUN, plot=PLOTS),
+        expand("results/{exp}/diagnosis/report.json", exp=diagnosed_experiments()),
     default_target: True

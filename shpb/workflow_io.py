@@ -245,6 +245,23 @@ def _semantic_errors(config: Mapping, base: Path) -> list[str]:
             for key in ("truth", "incident_record"):
                 if obs.get(key) is not None:
                     errors.append(f"{where}.observations.{key}: only twin experiments take it")
+        diag = exp.get("diagnosis")
+        if diag is not None:
+            if exp.get("kind") != "measured":
+                errors.append(f"{where}.diagnosis: the discrepancy loop runs on measured experiments (a twin "
+                              f"knows its model; the planted-effect tests cover twins)")
+            held = diag.get("heldout_records") or []
+            calib = {record_name(r) for r in obs.get("records") or []}
+            for r in held:
+                p = Path(r) if Path(r).is_absolute() else base / r
+                if not p.is_file():
+                    errors.append(f"{where}.diagnosis.heldout_records: file not found: {r} (looked at {p})")
+                if record_name(r) in calib:
+                    errors.append(f"{where}.diagnosis.heldout_records: {record_name(r)} is also a calibration "
+                                  f"record; held-out data must not be used to calibrate")
+            for key in diag.get("physical_upper") or {}:
+                if key.split(".")[0] not in (diag.get("candidates") or []):
+                    errors.append(f"{where}.diagnosis.physical_upper.{key}: not a parameter of a listed candidate")
         method = exp.get("method")
         if method == "esmda" and exp.get("esmda", {}).get("alphas") is not None:
             alphas = np.asarray(exp["esmda"]["alphas"], float)

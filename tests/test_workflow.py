@@ -139,6 +139,12 @@ def test_shipped_configs_are_valid():
     cfg = validate_config(merged, SCHEMA, base_dir=REPO)
     truths = [cfg["experiments"][e]["observations"].get("truth") for e in cfg["run"]]
     assert len({(t["sigma_t"], t["E_t"]) for t in truths}) == 3  # the paper's three reference points
+    diag = load_yaml(REPO / "config" / "diagnosis.yaml")  # (its sandstone records are in ../shared)
+    merged = {**base, **diag, "experiments": {**base["experiments"], **diag["experiments"]}}
+    cfg = validate_config(merged, SCHEMA, base_dir=REPO)
+    for e in cfg["run"]:
+        d = cfg["experiments"][e]["diagnosis"]
+        assert d["heldout_records"] and {"seating", "rate_strength", "gauge_gain"} <= set(d["candidates"])
 
 
 @pytest.mark.parametrize("mutate, expected", [
@@ -150,6 +156,9 @@ def test_shipped_configs_are_valid():
     (lambda c: c["experiments"]["twin"]["observations"].update(t_end=5.0e-4), "experiments.twin.simulation.t_end"),
     (lambda c: c["experiments"]["twin"].update(kind="measured"), "experiments.twin.geometry: measured records"),
     (lambda c: c.update(run=["nope"]), "run: experiment 'nope' is not defined"),
+    (lambda c: c["experiments"]["twin"].update(diagnosis={}), "experiments.twin.diagnosis: the discrepancy loop runs on measured"),
+    (lambda c: c["experiments"]["twin"].update(diagnosis={"candidates": ["seeting"]}), "experiments.twin.diagnosis.candidates"),
+    (lambda c: c.update(member_time_limit_s={"fast": 0}), "member_time_limit_s.fast"),
 ])
 def test_a_bad_config_key_or_value_fails_with_a_message_naming_it(mutate, expected):
     cfg = twin_config()

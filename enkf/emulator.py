@@ -1,0 +1,108 @@
+"""An interpolating emulator of a simulator's response curves over a parameter box.
+
+Used where a step needs many more model evaluations than the simulator can afford, e.g. the
+re-calibrations of the discrepancy loop (:mod:`enkf.diagnosis`): a design of simulator runs, then a
+radial-basis-function interpolant (SciPy's ``RBFInterpolator``; thin-plate spline plus a linear
+polynomial by default) of the whole curve, with inputs scaled to the unit box so that no parameter's
+units dominate the distances.
+
+The emulator is not the model: its error is measured by leave-one-out cross-validation at the design
+points (:meth:`CurveEmulator.loo_residuals`, exact refits, not an approximation) and should be carried
+as an extra, independent error term of the observations (:meth:`CurveEmulator.error_model`), so that a
+calibration on the emulator does not read interpolation error as signal (Kennedy & O'Hagan's "code
+uncertainty", in its simplest form: a diagonal variance per observation).
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+from scipy.interpolate import RBFInterpolator
+
+from .covariance import DenseError, ObservationError
+
+__all__ = ["CurveEmulator", "with_emulator_error"]
+
+
+class CurveEmulator:
+    """``(N, n)`` parameters -> ``(N, m)`` curves, interpolating a design of runs.
+
+    X : (n_design, n) design parameters (finite, inside ``[lower, upper]``).
+    Y : (n_design, m) the simulator's curves (finite; drop failed runs before).
+    lower, upper : the box the emulator is valid in; evaluations outside it raise.
+    kernel, degree, smoothing : passed to ``scipy.interpolate.RBFInterpolator``.
+    """
+
+    def __init__(self, X, Y, lower, upper, *, names: Sequence[str] | None = None,
+                 kernel: str = "thin_plate_spline", degree: int = 1, smoothing: float = 0.0):
+        X = np.array(X, dtype=float, ndmin=2)
+        Y = np.array(Y, dtype=float, ndmin=2)
+        self.lower = np.asarray(lower, dtype=float)
+        self.upper = np.asarray(upper, dtype=float)
+        n = self.lower.size
+        if X.shape[1] != n or self.upper.shape != (n,):
+            raise ValueError(f"design has {X.shape[1]} columns, box has {n} / {self.upper.size} bounds")
+        if X.shape[0] != Y.shape[0]:
+            raise ValueError(f"{X.shape[0]} design points but {Y.shape[0]} curves")
+        if not (np.all(np.isfinite(X)) and np.all(np.isfinite(Y))):
+            raise ValueError("design and curves must be finite (drop failed runs first)")
+        if np.any(self.upper <= self.lower):
+            raise ValueError("every upper bound must exceed its lower bound")
+        self.names = list(names) if names is not None else [f"x{i}" for i in range(n)]
+        self.X, self.Y = X, Y
+        self._kw = {"kernel": kernel, "degree": degree, "smoothing": smoothing}
+        self._rbf = RBFInterpolator(self._unit(X, check=True), Y, **self._kw)
+        self._loo: np.ndarray | None = None
+
+    @property
+    def n_params(self) -> int:
+        return self.lower.size
+
+    @property
+    def m(self) -> int:
+        return self.Y.shape[1]
+
+    def _unit(self, P, check: bool = True) -> np.ndarray:
+        P = np.array(P, dtype=float, ndmin=2)
+        if P.shape[1] != self.n_params:
+            raise ValueError(f"expected {self.n_params} parameters per row, got {P.shape[1]}")
+        u = (P - self.lower) / (self.upper - self.lower)
+        if check and (np.any(u < -1e-9) or np.any(u > 1 + 1e-9)):
+            bad = np.argwhere((u < -1e-9) | (u > 1 + 1e-9))[0]
+            raise ValueError(f"{self.names[bad[1]]} = {P[bad[0], bad[1]]:g} is outside the emulator's box "
+                             f"[{self.lower[bad[1]]:g}, {self.upper[bad[1]]:g}]")
+        return u
+
+    def __call__(self, P) -> np.ndarray:
+        return self._rbf(self._unit(P))
+
+    def loo_residuals(self) -> np.ndarray:
+        """``(n_design, m)``: curve minus its prediction by the emulator refitted without that point."""
+        if self._loo is None:
+            U = self._unit(self.X)
+            out = np.empty_like(self.Y)
+            for i in range(self.X.shape[0]):
+                keep = np.arange(self.X.shape[0]) != i
+                out[i] = self.Y[i] - RBFInterpolator(U[keep], self.Y[keep], **self._kw)(U[i:i + 1])[0]
+            self._loo = out
+        return self._loo
+
+    def error_std(self, weights=None) -> np.ndarray:
+        """``(m,)``: root-mean-square leave-one-out error per output (optionally weighted rows)."""
+        r = self.loo_residuals()
+        w = np.ones(r.shape[0]) if weights is None else np.asarray(weights, dtype=float)
+        return np.sqrt(np.average(r ** 2, axis=0, weights=w))
+
+    def error_model(self, weights=None) -> DenseError:
+        """The emulator error as an independent (diagonal) term, for :func:`with_emulator_error`."""
+        s = self.error_std(weights)
+        return DenseError(np.diag(np.maximum(s, 1e-12 * max(float(s.max()), 1.0)) ** 2), _symmetric=True)
+
+
+def with_emulator_error(obs_error: ObservationError, emulator_std) -> DenseError:
+    """``R + diag(emulator_std^2)``: the observation error plus independent emulator error."""
+    s = np.asarray(emulator_std, dtype=float)
+    if s.shape != (obs_error.m,):
+        raise ValueError(f"emulator_std has shape {s.shape}, the observations {obs_error.m}")
+    return DenseError(obs_error.dense() + np.diag(s ** 2), _symmetric=True)

@@ -1,0 +1,25 @@
+"""diagnosis/design/params.csv + design.json: the emulator design around the calibrated posterior."""
+import numpy as np
+import pandas as pd
+
+from shpb.calibration import ExperimentSpec
+from shpb.diagnose import base_design_box, design_points, physical_design_ranges
+from shpb.workflow_io import atomic_write_csv, atomic_write_json
+
+e, exp = snakemake.params.exp, snakemake.wildcards.exp
+d = e["diagnosis"]
+spec = ExperimentSpec.from_config(exp, e)
+post = pd.read_csv(snakemake.input.posterior)
+blo, bhi = base_design_box(post, spec.names, spec.lower, spec.upper, width_sd=d["base_width_sd"],
+                           min_rel_width=d["base_min_rel_width"])
+pnames, plo, phi = physical_design_ranges(d["candidates"], d["physical_upper"])
+X = design_points(blo, bhi, plo, phi, d["design_points"], seed=d["seed"], null_fraction=d["null_fraction"])
+names = list(spec.names) + pnames
+frame = pd.DataFrame(X, columns=names)
+frame.insert(0, "member", np.arange(len(frame)))
+atomic_write_csv(frame, snakemake.output.design)
+atomic_write_json(snakemake.output.meta, {"names": names, "base_names": list(spec.names), "physical_names": pnames,
+                                          "lower": np.concatenate([blo, plo]).tolist(),
+                                          "upper": np.concatenate([bhi, phi]).tolist(),
+                                          "posterior_mean": {n: float(post[n].mean()) for n in spec.names},
+                                          "posterior_std": {n: float(post[n].std(ddof=1)) for n in spec.names}})
