@@ -4,10 +4,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from enkf.diagnosis import covariate_trends, curve_errors, report_to_json, write_report
-from enkf.emulator import CurveEmulator
+from enkf.diagnosis import covariate_trends, report_to_json, write_report
 from shpb import effects as fx
-from shpb.diagnose import EmulatedSHPB, curve_on_model_grid, diagnose, record_covariates
+from shpb.diagnose import EmulatedSHPB, diagnose, emulators_from_design, errors_per_record, record_covariates
 from shpb.observations import read_curve, read_observations
 from shpb.workflow_io import atomic_write_csv, atomic_write_json, read_json
 
@@ -22,16 +21,10 @@ obs = read_observations(inp.obs, inp.obs_meta)
 held = read_observations(inp.heldout, inp.heldout_meta) if "heldout" in inp.keys() else None
 
 root = Path(inp.design).parent
-emulators, n_failed = {}, {}
-for rec in snakemake.params.design_records:
-    Y = [curve_on_model_grid(read_curve(root / p / rec / "curve.csv"), model_t) for p in snakemake.params.points]
-    ok = np.array([y is not None for y in Y])
-    n_failed[rec] = int((~ok).sum())
-    if ok.sum() < len(names) + 2:
-        raise RuntimeError(f"diagnosis of {snakemake.wildcards.exp}: only {ok.sum()} of {len(Y)} design runs "
-                           f"of {rec} succeeded; the emulator needs at least {len(names) + 2}")
-    emulators[rec] = CurveEmulator(X[ok], np.array([y for y in Y if y is not None]), meta["lower"], meta["upper"],
-                                   names=names)
+curves = {rec: [read_curve(root / p / rec / "curve.csv") for p in snakemake.params.points]
+          for rec in snakemake.params.design_records}
+emulators, n_failed = emulators_from_design(X, curves, model_t, meta["lower"], meta["upper"], names,
+                                            label=f"diagnosis of {snakemake.wildcards.exp}")
 obs_times = {r: obs.grid(r) for r in obs.records}
 if held is not None:
     obs_times.update({r: held.grid(r) for r in held.records})
@@ -47,19 +40,9 @@ report = diagnose(model, base_names=meta["base_names"], candidates=[fx.get_effec
 
 # per record: errors before/after, and the residual against the strain rate (covariates)
 c = report["curves"]
-per_record, resid = {}, {}
+per_record, resid, sigma = errors_per_record([("calibration", obs, c["fitted_before"], c["fitted_after"]),
+                                              ("heldout", held, c["heldout_before"], c["heldout_after"])])
 info = {**obs.meta.get("record_info", {}), **(held.meta.get("record_info", {}) if held is not None else {})}
-sigma = {}
-for data, o, fb, fa in (("calibration", obs, c["fitted_before"], c["fitted_after"]),
-                        ("heldout", held, c["heldout_before"], c["heldout_after"])):
-    if o is None:
-        continue
-    for r in o.records:
-        s = o.record_slice(r)
-        t, y = o.time[s], o.values[s]
-        per_record[r] = {"data": data, "before": curve_errors(t, fb[s], y), "after": curve_errors(t, fa[s], y)}
-        resid[r] = y - fb[s]
-        sigma[r] = float(np.sqrt(np.mean(o.sigma[s] ** 2)))
 cov = record_covariates(info, resid, sigma)
 cov["data"] = [per_record[r]["data"] for r in cov["record"]]
 trends = covariate_trends(cov, "strain_rate_per_s", ["mean_resid_sd", "rms_resid_sd"]) if len(cov) >= 3 else None

@@ -31,7 +31,8 @@ from enkf.emulator import CurveEmulator, with_emulator_error
 
 from . import effects as fx
 
-__all__ = ["design_points", "interpolation_matrix", "EmulatedSHPB", "diagnose"]
+__all__ = ["design_points", "interpolation_matrix", "EmulatedSHPB", "diagnose", "emulators_from_design",
+           "errors_per_record"]
 
 
 def design_points(base_lower, base_upper, physical_lower, physical_upper, n: int, *, seed: int,
@@ -225,6 +226,48 @@ def curve_on_model_grid(curve, model_times) -> np.ndarray | None:
     if not np.all(np.isfinite(s)) or t[0] > model_times[0] + 1e-12 or t[-1] < model_times[-1] - 1e-12:
         return None
     return np.interp(model_times, t, s)
+
+
+def emulators_from_design(X, curves: Mapping[str, Sequence], model_times, lower, upper, names: Sequence[str],
+                          *, label: str = "diagnosis") -> tuple[dict, dict]:
+    """One :class:`CurveEmulator` per record from the design ``X`` (points x parameters) and, per record,
+    the design runs' curves (DataFrames or None for a failed run), in the order of ``X``. Failed runs
+    and runs that do not cover ``model_times`` are left out; returns ``(emulators, n_failed)``.
+    Raises ``RuntimeError`` when a record has fewer than ``len(names) + 2`` usable runs."""
+    X = np.asarray(X, dtype=float)
+    emulators, n_failed = {}, {}
+    for rec, runs in curves.items():
+        Y = [curve_on_model_grid(c, model_times) for c in runs]
+        ok = np.array([y is not None for y in Y], dtype=bool)
+        n_failed[rec] = int((~ok).sum())
+        if ok.sum() < len(names) + 2:
+            raise RuntimeError(f"{label}: only {int(ok.sum())} of {len(Y)} design runs of {rec} succeeded; "
+                               f"the emulator needs at least {len(names) + 2}")
+        emulators[rec] = CurveEmulator(X[ok], np.array([y for y in Y if y is not None]), lower, upper,
+                                       names=list(names))
+    return emulators, n_failed
+
+
+def errors_per_record(sets) -> tuple[dict, dict, dict]:
+    """Per record, the error of the model before and after the loop (:func:`enkf.diagnosis.curve_errors`).
+
+    ``sets``: iterable of ``(data_label, observations, fitted_before, fitted_after)`` with the curves on the
+    observations' vector (``observations`` None to skip the set). Returns ``(errors, residuals, sigma)``:
+    ``errors[rec] = {"data", "before", "after"}``, the residual ``data - before`` and the record's RMS
+    observation sd, the inputs of :func:`record_covariates`."""
+    from enkf.diagnosis import curve_errors
+    errors, resid, sigma = {}, {}, {}
+    for label, o, before, after in sets:
+        if o is None:
+            continue
+        for r in o.records:
+            s = o.record_slice(r)
+            t, y = o.time[s], o.values[s]
+            errors[r] = {"data": label, "before": curve_errors(t, before[s], y),
+                         "after": curve_errors(t, after[s], y)}
+            resid[r] = y - before[s]
+            sigma[r] = float(np.sqrt(np.mean(o.sigma[s] ** 2)))
+    return errors, resid, sigma
 
 
 def record_covariates(record_info: Mapping[str, Mapping], residuals: Mapping[str, np.ndarray],

@@ -274,6 +274,42 @@ def test_curve_errors():
     assert e["time_to_peak_error"] == pytest.approx(1.0)
 
 
+def test_emulators_from_design_leave_failed_runs_out_and_refuse_too_few():
+    from shpb.diagnose import emulators_from_design
+    t = np.linspace(0.0, 1e-4, 41)
+    X = np.array([[a, b] for a in np.linspace(1.0, 3.0, 4) for b in np.linspace(0.5, 1.5, 4)])
+    runs = [pd.DataFrame({"time_s": t, "stress_Pa": x[0] * 1e6 * np.sin(x[1] * t / 1e-4)}) for x in X]
+    runs[3] = pd.DataFrame({"time_s": [], "stress_Pa": []})  # a failed member's empty curve
+    runs[5] = runs[5].iloc[:20]  # stops before the end of the grid
+    em, failed = emulators_from_design(X, {"r": runs}, t, [1.0, 0.5], [3.0, 1.5], ["a", "b"])
+    assert failed == {"r": 2}
+    x = np.array([[2.2, 1.1]])  # a point off the design: the thin-plate interpolant of a smooth field
+    exact = 2.2e6 * np.sin(1.1 * t / 1e-4)
+    assert np.max(np.abs(em["r"](x)[0] - exact)) < 0.02 * np.max(np.abs(exact))
+    with pytest.raises(RuntimeError, match=r"diagnosis of x: only 3 of 16 design runs of r succeeded"):
+        emulators_from_design(X, {"r": runs[:3] + [None] * 13}, t, [1.0, 0.5], [3.0, 1.5], ["a", "b"],
+                              label="diagnosis of x")
+
+
+def test_errors_per_record_split_calibration_and_heldout():
+    from shpb.diagnose import errors_per_record
+    from shpb.observations import Observations
+
+    def obs(recs):
+        rows = [{"record": r, "time_s": t, "stress_Pa": 1e6 * k, "sigma_Pa": 2e5}
+                for r in recs for k, t in enumerate([0.0, 1e-6, 2e-6])]
+        return Observations(pd.DataFrame(rows))
+    cal, held = obs(["a", "b"]), obs(["c"])
+    err, resid, sigma = errors_per_record([("calibration", cal, cal.values + 1e5, cal.values),
+                                           ("heldout", held, held.values - 3e5, held.values + 1e5),
+                                           ("none", None, None, None)])
+    assert {r: e["data"] for r, e in err.items()} == {"a": "calibration", "b": "calibration", "c": "heldout"}
+    assert err["a"]["before"]["rmse"] == pytest.approx(1e5) and err["a"]["after"]["rmse"] == 0.0
+    assert err["c"]["before"]["rmse"] == pytest.approx(3e5) and err["c"]["after"]["rmse"] == pytest.approx(1e5)
+    np.testing.assert_allclose(resid["c"], [3e5] * 3)
+    assert sigma == {"a": pytest.approx(2e5), "b": pytest.approx(2e5), "c": pytest.approx(2e5)}
+
+
 # ----------------------------------------------------------------------------------------------
 # end-to-end loop: ES-MDA on the surrogate with the catalogue's measurement effects
 # ----------------------------------------------------------------------------------------------
