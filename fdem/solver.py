@@ -142,6 +142,9 @@ def run(model: Model, t_end: float, *, dt: float | None = None, safety: float = 
     if sample_dt is None:
         sample_dt = t_end / 500.0
     sample_every = max(1, int(round(sample_dt / dt)))
+    # whole sample intervals, so the last sample lies at or after t_end: callers compare the curve with
+    # data up to t_end, and a window ending up to one interval short would leave its last point uncovered
+    n_steps = -(-n_steps // sample_every) * sample_every
     n_samples = n_steps // sample_every + 1
 
     x = np.array(model.x0 if x_init is None else x_init, dtype=np.float64, order="C")

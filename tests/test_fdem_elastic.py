@@ -99,3 +99,17 @@ def test_undamped_free_vibration_conserves_energy():
     assert np.max(np.abs(total - total[0])) / total[0] < 0.005
     # Energy really moves between kinetic and stored forms (a meaningful conservation check).
     assert e["strain"].max() + e["joint_elastic"].max() > 0.15 * total[0]
+
+
+@pytest.mark.parametrize("t_end", [3.0e-4, 2.8e-4, 1.0e-4 + 0.3e-6])
+def test_samples_cover_the_requested_window(t_end):
+    """The last sample lies at or after t_end and at most one interval later (the workflow compares
+    the curve with data up to t_end; before the fix a 300 us window ended at 299.6 us)."""
+    nodes, tris = meshing.rectangle(0.0, 0.0, 0.01, 0.01, 2, 2)
+    model = build_model([Body("b", nodes, tris, STEEL, 0.01)])
+    dt = 0.07e-6  # not a divisor of the sample interval
+    res = run(model, t_end, dt=dt, sample_dt=0.5e-6)
+    assert res.status == "ok"
+    step = round(0.5e-6 / dt) * dt
+    assert t_end <= res.time[-1] < t_end + step + 1e-15
+    np.testing.assert_allclose(np.diff(res.time), step, rtol=1e-9)
