@@ -942,6 +942,14 @@ def report_to_json(report: dict, *, curves: bool = False) -> dict:
     return jsonable(conv(out))
 
 
+def _split_records(t, y):
+    """``(t, y)`` with a NaN gap wherever the time runs backwards (the next record of a concatenated
+    vector starts), so a plotted line does not join the end of one record to the start of the next."""
+    t, y = np.asarray(t, dtype=float), np.asarray(y, dtype=float)
+    cut = np.nonzero(np.diff(t) < 0)[0] + 1
+    return np.insert(t, cut, np.nan), np.insert(y, cut, np.nan)
+
+
 def write_report(report: dict, directory, *, time_scale: float = 1e6, value_scale: float = 1e-6,
                  time_label: str = "time [us]", value_label: str = "stress [MPa]") -> list[Path]:
     """Write a :func:`diagnose_loop` report to ``directory`` (e.g. ``results/<experiment>/diagnosis/``):
@@ -989,16 +997,16 @@ def write_report(report: dict, directory, *, time_scale: float = 1e6, value_scal
                              sharex="col", gridspec_kw={"height_ratios": [2, 1]})
     t = np.asarray(c["times"]) * time_scale
     ax = axes[0, 0]
-    ax.plot(t, np.asarray(c["obs"]) * value_scale, ".", ms=2, color="0.5", label="data")
-    ax.plot(t, np.asarray(c["fitted_before"]) * value_scale, label="base model")
-    ax.plot(t, np.asarray(c["fitted_after"]) * value_scale,
+    ax.plot(*_split_records(t, np.asarray(c["obs"]) * value_scale), ".", ms=2, color="0.5", label="data")
+    ax.plot(*_split_records(t, np.asarray(c["fitted_before"]) * value_scale), label="base model")
+    ax.plot(*_split_records(t, np.asarray(c["fitted_after"]) * value_scale),
             label="with " + (", ".join(report["added"]) if report["added"] else "nothing added"))
     ax.set_ylabel(value_label)
     ax.set_title(f"calibration data; verdict: {report['verdict']}")
     ax.legend(fontsize=8)
     ax = axes[1, 0]
-    ax.plot(t, c["white_before"], lw=0.8, label="base")
-    ax.plot(t, c["white_after"], lw=0.8, label="after")
+    ax.plot(*_split_records(t, c["white_before"]), lw=0.8, label="base")
+    ax.plot(*_split_records(t, c["white_after"]), lw=0.8, label="after")
     ax.axhline(0, color="k", lw=0.5)
     ax.set_ylabel("whitened residual")
     ax.set_xlabel(time_label)
@@ -1006,15 +1014,15 @@ def write_report(report: dict, directory, *, time_scale: float = 1e6, value_scal
     if ho:
         th = np.asarray(c["heldout_times"]) * time_scale
         ax = axes[0, 1]
-        ax.plot(th, np.asarray(c["heldout_obs"]) * value_scale, ".", ms=2, color="0.5", label="held-out data")
-        ax.plot(th, np.asarray(c["heldout_before"]) * value_scale, label="base model")
-        ax.plot(th, np.asarray(c["heldout_after"]) * value_scale, label="after")
+        ax.plot(*_split_records(th, np.asarray(c["heldout_obs"]) * value_scale), ".", ms=2, color="0.5", label="held-out data")
+        ax.plot(*_split_records(th, np.asarray(c["heldout_before"]) * value_scale), label="base model")
+        ax.plot(*_split_records(th, np.asarray(c["heldout_after"]) * value_scale), label="after")
         ax.set_title("held-out data")
         ax.legend(fontsize=8)
         ax = axes[1, 1]
-        ax.plot(th, (np.asarray(c["heldout_obs"]) - np.asarray(c["heldout_before"])) * value_scale, lw=0.8,
+        ax.plot(*_split_records(th, (np.asarray(c["heldout_obs"]) - np.asarray(c["heldout_before"])) * value_scale), lw=0.8,
                 label="base")
-        ax.plot(th, (np.asarray(c["heldout_obs"]) - np.asarray(c["heldout_after"])) * value_scale, lw=0.8,
+        ax.plot(*_split_records(th, (np.asarray(c["heldout_obs"]) - np.asarray(c["heldout_after"])) * value_scale), lw=0.8,
                 label="after")
         ax.axhline(0, color="k", lw=0.5)
         ax.set_ylabel(f"residual [{value_label.split('[')[-1]}" if "[" in value_label else "residual")

@@ -490,6 +490,13 @@ def test_report_is_json_ready_and_written_with_tables_and_plots(tmp_path):
     assert set(err["data"]) == {"calibration", "heldout"} and set(err["when"]) == {"before", "after"}
 
 
+def test_plotted_curves_break_between_concatenated_records():
+    from enkf.diagnosis import _split_records
+    t, y = _split_records([0.0, 1.0, 2.0, 0.0, 1.0], [5.0, 6.0, 7.0, 8.0, 9.0])
+    np.testing.assert_array_equal(np.isnan(t), [False, False, False, True, False, False])
+    np.testing.assert_array_equal(y[~np.isnan(y)], [5.0, 6.0, 7.0, 8.0, 9.0])
+
+
 def test_loop_takes_generic_candidates_and_respects_max_additions():
     # the loop reads only name / param_names / nulls (and lower / upper) from a candidate
     gain = Candidate("gauge_gain", ("gauge_gain.g",), (1.0,), (0.8,), (1.2,))
