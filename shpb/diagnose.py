@@ -26,10 +26,11 @@ from scipy.stats import qmc
 
 from enkf import BoxTransform, assimilate, esmda_alphas, latin_hypercube
 from enkf.covariance import ObservationError
-from enkf.diagnosis import CalibrationResult, diagnose_loop, finite_difference_sensitivity
+from enkf.diagnosis import CalibrationResult, curve_errors, diagnose_loop, finite_difference_sensitivity
 from enkf.emulator import CurveEmulator, with_emulator_error
 
 from . import effects as fx
+from .observations import curve_on_grid
 
 __all__ = ["design_points", "interpolation_matrix", "EmulatedSHPB", "diagnose", "emulators_from_design",
            "errors_per_record"]
@@ -218,14 +219,13 @@ def physical_design_ranges(effect_names: Sequence[str], upper_override: Mapping[
 
 
 def curve_on_model_grid(curve, model_times) -> np.ndarray | None:
-    """A simulated curve (DataFrame with ``time_s``, ``stress_Pa``) on ``model_times``; None when it
-    failed or does not cover the grid."""
+    """A simulated curve (DataFrame with ``time_s``, ``stress_Pa``) on ``model_times``
+    (:func:`shpb.observations.curve_on_grid`, the workflow's rule); None when it failed or does not
+    cover the grid."""
     if curve is None or len(curve) < 2:
         return None
-    t, s = curve["time_s"].to_numpy(float), curve["stress_Pa"].to_numpy(float)
-    if not np.all(np.isfinite(s)) or t[0] > model_times[0] + 1e-12 or t[-1] < model_times[-1] - 1e-12:
-        return None
-    return np.interp(model_times, t, s)
+    y = curve_on_grid(curve["time_s"].to_numpy(float), curve["stress_Pa"].to_numpy(float), model_times)
+    return None if np.any(np.isnan(y)) else y
 
 
 def emulators_from_design(X, curves: Mapping[str, Sequence], model_times, lower, upper, names: Sequence[str],
@@ -255,7 +255,6 @@ def errors_per_record(sets) -> tuple[dict, dict, dict]:
     observations' vector (``observations`` None to skip the set). Returns ``(errors, residuals, sigma)``:
     ``errors[rec] = {"data", "before", "after"}``, the residual ``data - before`` and the record's RMS
     observation sd, the inputs of :func:`record_covariates`."""
-    from enkf.diagnosis import curve_errors
     errors, resid, sigma = {}, {}, {}
     for label, o, before, after in sets:
         if o is None:
