@@ -545,10 +545,35 @@ def effective_sample_size(source, n: int | None = None) -> float:
     return max(1.0, m * (1.0 - rho) / (1.0 + rho))
 
 
+def pinned_at_bounds(samples, lower, upper, names: Sequence[str], *, nulls: Mapping[str, float] | None = None,
+                     fraction: float = 0.02) -> list[dict]:
+    """Parameters whose posterior median lies within ``fraction`` of the box width of a bound of the box
+    the calibration was confined to: there the box, not the data, decided the estimate (a bounded
+    transform piles the ensemble up against a bound the data push it through). A bound equal to the
+    parameter's null value (``nulls``) is exempt: an estimate at the null is the null criterion's
+    business, not a box limit. Returns one dict per pinned parameter: ``name``, ``median``, ``side``
+    (``"lower"``/``"upper"``), ``bound``, ``text``."""
+    X = np.array(samples, dtype=float, ndmin=2)
+    lo, hi = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+    if X.shape[1] != len(names) or lo.shape != (len(names),) or hi.shape != (len(names),):
+        raise ValueError("samples, lower, upper and names must describe the same parameters")
+    nulls = nulls or {}
+    out = []
+    for j, n in enumerate(names):
+        med, width = float(np.median(X[:, j])), float(hi[j] - lo[j])
+        for side, b in (("lower", lo[j]), ("upper", hi[j])):
+            if n in nulls and math.isclose(float(nulls[n]), float(b), rel_tol=0.0, abs_tol=1e-12 * width):
+                continue
+            if abs(med - b) <= fraction * width:
+                out.append({"name": n, "median": med, "side": side, "bound": float(b),
+                            "text": f"{n} median {med:.4g} at its {side} bound {b:.4g}"})
+    return out
+
+
 def accept_effect(bic_base: float, bic_aug: float, posterior_samples_of_effect_param, null_value,
                   heldout_err_base: float | None, heldout_err_aug: float | None, *, margin: float = 10.0,
                   interval: float = 0.90, null_tolerance=0.0, explained: float | None = None,
-                  min_explained: float = 0.25) -> tuple[bool, list[str]]:
+                  min_explained: float = 0.25, pinned: Sequence[dict] | None = None) -> tuple[bool, list[str]]:
     """Keep an added effect only if all hold:
 
     1. the BIC improves by at least ``margin`` (default 10, "very strong" on Kass & Raftery's scale);
@@ -558,7 +583,9 @@ def accept_effect(bic_base: float, bic_aug: float, posterior_samples_of_effect_p
        trivially exceeds);
     3. the error on held-out data falls (skipped, and said so, when no held-out data are given);
     4. if ``explained`` is given (the re-calibrated model's drop in chi-square as a fraction of the
-       base residual's excess over its noise expectation), it is at least ``min_explained``.
+       base residual's excess over its noise expectation), it is at least ``min_explained``;
+    5. if ``pinned`` is given (:func:`pinned_at_bounds` of the augmented calibration), it is empty: an
+       estimate the box decided says only that the answer lies outside the box.
 
     Returns ``(accepted, reasons)``, one human-readable line per criterion starting with ``pass`` or ``fail``.
     """
@@ -593,7 +620,12 @@ def accept_effect(bic_base: float, bic_aug: float, posterior_samples_of_effect_p
         ok_ex = bool(np.isfinite(explained) and explained >= min_explained)
         reasons.append(f"{'pass' if ok_ex else 'fail'}: explains {explained:.1%} of the excess residual "
                        f"(minimum {min_explained:.0%})")
-    return bool(ok_bic and ok_null and ok_ho and ok_ex), reasons
+    ok_box = True
+    if pinned is not None:
+        ok_box = not pinned
+        reasons.append("pass: no estimate at a bound of its box" if ok_box else
+                       "fail: set by the box, not the data: " + "; ".join(p["text"] for p in pinned))
+    return bool(ok_bic and ok_null and ok_ho and ok_ex and ok_box), reasons
 
 
 def curve_errors(times, sim, obs) -> dict:
@@ -635,6 +667,9 @@ class CalibrationResult:
     heldout : (m_h,) its prediction of the held-out observations, or None.
     responses : (N, m) the posterior ensemble's responses, if the caller wants ensemble sensitivities.
     info : anything else (JSON-ready), copied into the report.
+    lower, upper : (n,) the box the calibration was confined to (prior box, or an emulator's design box),
+        if it had one; the loop then refuses estimates the box, not the data, decided
+        (:func:`pinned_at_bounds`).
     """
 
     names: list[str]
@@ -643,6 +678,8 @@ class CalibrationResult:
     heldout: np.ndarray | None = None
     responses: np.ndarray | None = None
     info: dict = field(default_factory=dict)
+    lower: np.ndarray | None = None
+    upper: np.ndarray | None = None
 
     def __post_init__(self):
         self.names = list(self.names)
@@ -650,6 +687,12 @@ class CalibrationResult:
         self.fitted = np.asarray(self.fitted, dtype=float)
         if self.params.shape[1] != len(self.names):
             raise ValueError(f"params has {self.params.shape[1]} columns for {len(self.names)} names")
+        if (self.lower is None) != (self.upper is None):
+            raise ValueError("give both lower and upper, or neither")
+        if self.lower is not None:
+            self.lower, self.upper = np.asarray(self.lower, dtype=float), np.asarray(self.upper, dtype=float)
+            if self.lower.shape != (len(self.names),) or self.upper.shape != (len(self.names),):
+                raise ValueError(f"lower/upper need {len(self.names)} entries, one per name")
 
     def mean(self) -> dict[str, float]:
         return dict(zip(self.names, self.params.mean(axis=0).tolist()))
@@ -676,7 +719,7 @@ def diagnose_loop(calibrate: Callable[[list[str]], CalibrationResult],
                   bic_margin: float = 10.0, interval: float = 0.90, null_tolerance_fraction: float = 0.01,
                   n_eff: str | float = "model", max_trials: int = 3, tie_fraction: float = 0.25,
                   windows: Mapping[str, tuple[float, float]] | None = None, lag: int | None = None,
-                  base_result: CalibrationResult | None = None) -> dict:
+                  base_result: CalibrationResult | None = None, bound_fraction: float | None = 0.02) -> dict:
     """The discrepancy loop: calibrate the base model, test its residual, rank the candidate effects by
     score test, add the best one if re-calibration justifies it, repeat.
 
@@ -714,6 +757,10 @@ def diagnose_loop(calibrate: Callable[[list[str]], CalibrationResult],
     windows : structure-test windows (default :func:`default_windows` of the base model's curve).
     lag : Ljung-Box lag.
     base_result : an already calibrated base model (skips the first ``calibrate`` call).
+    bound_fraction : for calibrations that report their box (``CalibrationResult.lower``/``upper``): an
+        augmented calibration with any parameter's median within this fraction of the box width of a
+        bound is refused (:func:`pinned_at_bounds`, :func:`accept_effect` criterion 5), and a base
+        calibration at a bound is reported (``box_limited``) and said in ``why``. None disables it.
 
     After an addition, every effect added earlier whose interval now contains its null is re-tested:
     the model is re-calibrated without it and it is dropped unless it is worth the BIC margin (an early
@@ -729,7 +776,9 @@ def diagnose_loop(calibrate: Callable[[list[str]], CalibrationResult],
     ``structure_after``, ``params_before`` / ``params_after`` (posterior mean, std, q05, q95),
     ``base_shift`` (how far each base parameter's mean moved, in before-posterior std and relative),
     ``bic`` (before, after, n_eff), ``errors`` (``calibration`` and ``heldout``, each ``before``/``after``
-    from :func:`curve_errors`) and ``curves`` (arrays for plotting).
+    from :func:`curve_errors`), ``box_limited`` (``base`` and ``final``: :func:`pinned_at_bounds` of the
+    base and of the final calibration, None when the calibrations report no box) and ``curves`` (arrays
+    for plotting).
     """
     obs = np.asarray(obs, dtype=float)
     times = np.asarray(times, dtype=float)
@@ -749,6 +798,15 @@ def diagnose_loop(calibrate: Callable[[list[str]], CalibrationResult],
     base = base_result if base_result is not None else calibrate(list(base_names))
     if list(base.names) != base_names:
         raise ValueError(f"calibrate returned names {base.names}, expected {base_names}")
+    effect_nulls = {p: z for c in candidates for p, z in zip(c.param_names, c.nulls)}
+
+    def pinned(res: CalibrationResult) -> list[dict] | None:
+        if bound_fraction is None or res.lower is None:
+            return None
+        return pinned_at_bounds(res.params, res.lower, res.upper, res.names, nulls=effect_nulls,
+                                fraction=bound_fraction)
+
+    base_pinned = pinned(base)
     if windows is None:
         try:
             windows = default_windows(times, base.fitted)
@@ -840,7 +898,7 @@ def diagnose_loop(calibrate: Callable[[list[str]], CalibrationResult],
                                         cur_eval["heldout_rmse"], ev["heldout_rmse"], margin=bic_margin,
                                         interval=interval,
                                         null_tolerance=_candidate_tolerances(cand, null_tolerance_fraction),
-                                        explained=explained, min_explained=min_explained)
+                                        explained=explained, min_explained=min_explained, pinned=pinned(res))
             step["trials"].append({"effect": name, "accepted": ok, "reasons": reasons, "bic": ev["bic"],
                                    "explained": explained,
                                    "chi2": ev["chi2"], "heldout_rmse": ev["heldout_rmse"],
@@ -889,6 +947,10 @@ def diagnose_loop(calibrate: Callable[[list[str]], CalibrationResult],
                 current, cur_eval = res_wo, ev_wo
                 step["why"] += f"; dropped {old} (" + step["dropped"][-1]["reason"] + ")"
 
+    if base_pinned:
+        why = ("the base calibration is box-limited (" + "; ".join(p["text"] for p in base_pinned)
+               + "): its residual, and what the candidates are measured against, is that of a base model "
+               "held at the edge of its box. " + why)
     final_struct = iterations[-1]["structure"]
     before_post = posterior_dict(base.params, base.names)
     after_post = posterior_dict(current.params, current.names)
@@ -910,11 +972,13 @@ def diagnose_loop(calibrate: Callable[[list[str]], CalibrationResult],
         "params_before": before_post, "params_after": after_post, "base_shift": shift,
         "bic": {"before": base_eval["bic"], "after": cur_eval["bic"], "n_eff": neff},
         "errors": errors,
+        "box_limited": {"base": base_pinned, "final": pinned(current)},
         "settings": {"max_additions": max_additions, "alpha_structure": alpha_structure, "alpha_score": alpha_score,
                      "min_explained": min_explained, "screen_min_explained": screen_min_explained,
                      "max_collinearity": max_collinearity, "bic_margin": bic_margin,
                      "interval": interval, "null_tolerance_fraction": null_tolerance_fraction, "n_eff": n_eff,
-                     "max_trials": max_trials, "tie_fraction": tie_fraction, "windows": windows},
+                     "max_trials": max_trials, "tie_fraction": tie_fraction, "windows": windows,
+                     "bound_fraction": bound_fraction},
         "curves": {"times": times, "obs": obs, "fitted_before": base.fitted, "fitted_after": current.fitted,
                    "white_before": base_eval["w"], "white_after": cur_eval["w"],
                    "heldout_times": ho_t, "heldout_obs": ho_obs,

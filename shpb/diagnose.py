@@ -163,7 +163,7 @@ def diagnose(model: EmulatedSHPB, *, base_names: Sequence[str], candidates: Sequ
         return CalibrationResult(names, res.params[res.alive], f(mean)[0], heldout=held,
                                  responses=res.responses[res.alive],
                                  info={"stop_reason": res.decision.reason, "n_members": n_members,
-                                       "esmda_steps": esmda_steps})
+                                       "esmda_steps": esmda_steps}, lower=lo, upper=hi)
 
     def sensitivities(result, names):
         mean = result.mean()

@@ -28,6 +28,7 @@ from scipy import stats
 
 from enkf import (AR1Error, BoxTransform, DiagonalError, assimilate, esmda_alphas, latin_hypercube)
 from enkf.diagnosis import (Candidate, CalibrationResult, accept_effect, bic, covariate_trends, curve_errors,
+                            pinned_at_bounds,
                             default_windows, diagnose_loop, durbin_watson, effective_sample_size,
                             ensemble_sensitivity, finite_difference_sensitivity, ljung_box, rank_candidates,
                             report_to_json, runs_test, score_test, structure_tests, whitened_residual,
@@ -372,7 +373,8 @@ def run_loop(planted, seed, extra=None, candidates=None, **kw):
                          alphas=esmda_alphas(N_STEPS), transform=BoxTransform(lo, hi), names=names)
         mean = res.params.mean(axis=0)
         return CalibrationResult(names, res.params, f(mean)[0], heldout=forward(names, K_HELD)(mean)[0],
-                                 responses=res.responses, info={"stop_reason": res.decision.reason})
+                                 responses=res.responses, info={"stop_reason": res.decision.reason},
+                                 lower=lo, upper=hi)
 
     def sensitivities(result, names):
         # calibrated parameters: regression over the posterior ensemble (no extra run); candidates:
@@ -449,6 +451,44 @@ def test_loop_names_a_planted_baseline_drift_and_leaves_the_offset_at_zero():
     drift, offset = report["params_after"]["baseline.drift_Pa_per_s"], report["params_after"]["baseline.offset_Pa"]
     assert drift["q05"] <= 4e9 <= drift["q95"] and offset["q05"] <= 0.0 <= offset["q95"]
     assert report["errors"]["heldout"]["after"]["rmse"] < 0.6 * report["errors"]["heldout"]["before"]["rmse"]
+
+
+def test_loop_refuses_an_effect_whose_estimate_the_box_decided():
+    # a gain of 1.35 lies beyond the catalogue's box [0.8, 1.2]. The base strength absorbs it up to its
+    # own upper bound (60 MPa for a 40 MPa truth), which the report flags; a trigger shift then takes part
+    # of the excess with every estimate inside its box; the gain, tried next, piles up at 1.2, which says
+    # only that the answer lies outside the box, and is refused. The residual stays unexplained.
+    report, _ = run_loop({"gauge_gain.g": 1.35}, 100)
+    assert [p["name"] for p in report["box_limited"]["base"]] == ["sigma_p"]
+    assert report["box_limited"]["base"][0]["side"] == "upper" and "box-limited" in report["why"]
+    trials = [t for it in report["iterations"] for t in it["trials"] if t["effect"] == "gauge_gain"]
+    assert trials and not any(t["accepted"] for t in trials)
+    box_reason = [r for r in trials[0]["reasons"] if "set by the box" in r]
+    assert box_reason and box_reason[0].startswith("fail") and "gauge_gain.g" in box_reason[0], trials[0]["reasons"]
+    assert trials[0]["posterior"]["gauge_gain.g"]["mean"] > 1.19
+    assert "gauge_gain" not in report["added"] and report["verdict"] == "unexplained", report["why"]
+    assert report["box_limited"]["final"] == []
+
+
+def test_pinned_at_bounds_flags_a_median_at_a_bound_but_not_at_the_null_bound():
+    rng = np.random.default_rng(0)
+    S = np.column_stack([1.2 - np.abs(rng.normal(0, 0.002, 200)),  # piled against the upper bound 1.2
+                         np.abs(rng.normal(0, 1e-8, 200)),          # low-pass tau at its null bound 0
+                         rng.normal(0.0, 1e6, 200)])                # interior
+    names = ["gauge_gain.g", "lowpass.tau_s", "baseline.offset_Pa"]
+    lo, hi = [0.8, 0.0, -5e6], [1.2, 5e-6, 5e6]
+    nulls = {"gauge_gain.g": 1.0, "lowpass.tau_s": 0.0, "baseline.offset_Pa": 0.0}
+    hits = pinned_at_bounds(S, lo, hi, names, nulls=nulls)
+    assert [(h["name"], h["side"]) for h in hits] == [("gauge_gain.g", "upper")]
+    assert hits[0]["bound"] == 1.2 and abs(hits[0]["median"] - 1.2) < 0.01
+    # without the null exemption tau at 0 is at its lower bound; 1 % of the width tolerates a median
+    # 0.008 below 1.2 only down to 1.196
+    assert len(pinned_at_bounds(S, lo, hi, names)) == 2
+    assert pinned_at_bounds(S[:, :1] - 0.01, lo[:1], hi[:1], names[:1], fraction=0.01) == []
+    ok, why = accept_effect(1000.0, 900.0, S[:, 0], 1.0, 2.0, 1.0, pinned=hits)
+    assert not ok and why[-1].startswith("fail: set by the box") and "gauge_gain.g" in why[-1]
+    ok, why = accept_effect(1000.0, 900.0, S[:, 0], 1.0, 2.0, 1.0, pinned=[])
+    assert ok and why[-1] == "pass: no estimate at a bound of its box"
 
 
 def test_loop_adds_nothing_in_the_null_case():
