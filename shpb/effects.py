@@ -53,6 +53,18 @@ the model is the base model) and a one-line description with its equation. Two k
                                     Null 0 (perfect seating). A granite specimen's own compliance L/E
                                     is ~1e-12 m/Pa (50 mm / 35 GPa), a 50 um asperity closure at
                                     50 MPa is 1e-12 m/Pa; box [0, 2e-12].
+  ``face_gap.gap_m``                closure [m] the incident bar's face travels before the specimen
+                                    takes any load: an initial gap between bar and specimen
+                                    (shpb.geometry ``face_gap_m``), closed by contact. Null 0. It is
+                                    the large-closure limit of seating, which a penalty layer cannot
+                                    carry (a closure of 100 um is a quarter of a fast specimen
+                                    element). Where it comes from in a real test: ends not flat or
+                                    not parallel, no preload to close the seating, an interlayer; a
+                                    gap at the back face acts the same to within the specimen's
+                                    inertia (~0.1 kg pushed ahead of the bar). The Freiburg records'
+                                    own evidence: the incident bar's face (from incident and
+                                    reflected waves) travels 100-270 um while the specimen carries
+                                    under 5 % of its peak (README, "Closing the loop"). Box [0, 400 um].
 
 Public helpers: :func:`get_effect`, :func:`effects`, :func:`effect_of`, :func:`split_params`,
 :func:`apply_measurement`, :func:`bounds`, :func:`null_values`, :func:`candidates`.
@@ -248,6 +260,11 @@ CATALOGUE: dict[str, Effect] = {e.name: e for e in (
     Effect("interface_friction", "physical", (_P("mu", 0.0, 0.6, 0.0, "-"),),
            "bar-specimen Coulomb friction: |tau| <= mu sigma_n at the loaded faces",
            fdem="fdem.model.ContactParams(friction=mu) on the bar-specimen contact pairs"),
+    Effect("face_gap", "physical", (_P("gap_m", 0.0, 4e-4, 0.0, "m"),),
+           "face gap: the incident bar's face travels gap_m before the specimen takes load (ends not flat "
+           "or not parallel, seating never closed by a preload, a squeezed interlayer)",
+           fdem="initial gap between the incident bar's face and the specimen's front face "
+                "(shpb.geometry face_gap_m); contact closes it"),
     Effect("seating", "physical", (_P("compliance_m_per_Pa", 0.0, 2e-12, 0.0, "m/Pa"),),
            "contact seating: extra face closure delta = C sigma_n at the loaded faces",
            fdem="normal stiffness per unit area of the bar-specimen contact 1/(1/k_contact + C), "

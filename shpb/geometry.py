@@ -13,7 +13,8 @@ Conventions
   transmission bar; y is the diameter direction. The bodies touch along the loaded faces with zero gap:
   the incident bar's end face is the line ``x = x_front`` (the specimen's minimum x), the transmission
   bar's is ``x = x_back`` (its maximum x). A disc touches each bar at one node, its extreme node
-  ``(+-R, 0)``; a cylinder touches along its whole end face.
+  ``(+-R, 0)``; a cylinder touches along its whole end face. The one exception is the ``face_gap``
+  effect (``face_gap_m > 0``): the incident bar's face is then at ``x_front - face_gap_m``.
 * Plane stress with a thickness per body chosen so that each cross-section area matches the 3D test:
   a bar of diameter ``D`` is a strip of height ``D`` and thickness ``t = pi D / 4`` (so ``D t = pi D^2/4``);
   the disc's thickness is its real thickness; a cylinder of diameter ``D`` is a rectangle of height ``D``
@@ -74,6 +75,7 @@ data's PROVENANCE.md; c = 4,983 m/s) with nu 0.32, a handbook value for Ti-6Al-4
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -229,7 +231,8 @@ def brazilian_disc(preset: str | Preset = "standard", *,
                    window_s: float = DEFAULT_WINDOW_S,
                    incident_gauge_m: float | None = None, transmission_gauge_m: float | None = None,
                    incident_length_m: float | None = None, transmission_length_m: float | None = None,
-                   enforce_window: bool = True, flat_half_angle_deg: float = 0.0) -> Geometry:
+                   enforce_window: bool = True, flat_half_angle_deg: float = 0.0,
+                   face_gap_m: float = 0.0) -> Geometry:
     """Brazilian disc between an incident and a transmission bar (the paper's set-up), 2D along x.
 
     diameter_m, thickness_m: disc diameter and real thickness [m] (the plane-stress thickness).
@@ -243,6 +246,8 @@ def brazilian_disc(preset: str | Preset = "standard", *,
     The incident bar is loaded by a velocity history on its ``load_end`` nodes.
     flat_half_angle_deg: > 0 gives a flattened Brazilian disc whose loaded faces are flats of
         half-angle alpha (chord x = +-R cos(alpha)); the bars then touch the flats.
+    face_gap_m: initial gap between the incident bar's face and the specimen [m] (``face_gap`` effect);
+        the gauge distance stays measured from the bar's face.
     """
     p = get_preset(preset)
     _check_positive(diameter_m=diameter_m, thickness_m=thickness_m, bar_diameter_m=bar_diameter_m,
@@ -271,8 +276,8 @@ def brazilian_disc(preset: str | Preset = "standard", *,
                     node_sets={"front_face": front, "back_face": back},
                     element_sets={"centre": centre})
 
-    incident, transmission, gauge_x = _bars(p, bar, bar_diameter_m, x_front, x_back, L_i, L_t, d_i, d_t,
-                                            odd_face=True)
+    incident, transmission, gauge_x = _bars(p, bar, bar_diameter_m, x_front - _gap(face_gap_m), x_back,
+                                            L_i, L_t, d_i, d_t, odd_face=True)
     return Geometry(
         kind="brazilian_disc", preset=p.name, bodies=[incident, specimen, transmission],
         incident_bar=incident.name, specimen=specimen.name, transmission_bar=transmission.name,
@@ -287,7 +292,8 @@ def cylinder(preset: str | Preset, length_m: float, diameter_m: float, rock: Mat
              window_s: float = DEFAULT_WINDOW_S,
              incident_gauge_m: float = FREIBURG_GAUGE_DISTANCES_M[0],
              transmission_gauge_m: float = FREIBURG_GAUGE_DISTANCES_M[1],
-             transmission_length_m: float | None = None, enforce_window: bool = True) -> Geometry:
+             transmission_length_m: float | None = None, enforce_window: bool = True,
+             face_gap_m: float = 0.0) -> Geometry:
     """Cylindrical compression specimen between titanium bars (the Freiburg set-up), 2D along x.
 
     length_m, diameter_m: specimen length (along x) and diameter [m]; it is a rectangle of height D with
@@ -298,6 +304,9 @@ def cylinder(preset: str | Preset, length_m: float, diameter_m: float, rock: Mat
     the measured incident wave is injected there (``load_end``) through an absorbing boundary, so
     ``L_i = incident_gauge_m``. The transmission bar's default length is ``d_t + c window_s / 2``; a
     shorter bar needs ``enforce_window=False`` (e.g. with an absorbing boundary on ``free_end``).
+    face_gap_m: initial gap between the incident bar's face and the specimen's front face [m] (the
+        ``face_gap`` effect: closure the bar's face travels before the specimen takes load); the incident
+        bar moves back by it, so the gauge stays ``incident_gauge_m`` from the bar's face.
     """
     p = get_preset(preset)
     _check_positive(length_m=length_m, diameter_m=diameter_m, bar_diameter_m=bar_diameter_m,
@@ -324,7 +333,7 @@ def cylinder(preset: str | Preset, length_m: float, diameter_m: float, rock: Mat
                                "back_face": np.flatnonzero(nodes[:, 0] == x_back)},
                     element_sets={"centre": centre})
 
-    incident, transmission, gauge_x = _bars(p, bar, bar_diameter_m, x_front, x_back, L_i, L_t,
+    incident, transmission, gauge_x = _bars(p, bar, bar_diameter_m, x_front - _gap(face_gap_m), x_back, L_i, L_t,
                                             incident_gauge_m, transmission_gauge_m, odd_face=False)
     return Geometry(
         kind="cylinder", preset=p.name, bodies=[incident, specimen, transmission],
@@ -380,6 +389,13 @@ def plot_geometry(geometry: Geometry, path, *, zoom_m: float | None = None) -> N
 # --------------------------------------------------------------------------------------------------
 # Checks
 # --------------------------------------------------------------------------------------------------
+
+def _gap(face_gap_m: float) -> float:
+    g = float(face_gap_m)
+    if not (math.isfinite(g) and g >= 0.0):
+        raise ValueError(f"face_gap_m must be a finite gap >= 0 m, got {face_gap_m}")
+    return g
+
 
 def _check_positive(**values) -> None:
     for name, v in values.items():

@@ -102,7 +102,8 @@ def build(geometry: str, preset: str, params: dict | None = None, record=None,
                                flat_half_angle_deg=DISC_FLAT_HALF_ANGLE_DEG,
                                transmission_gauge_m=DISC_GAUGE_M,
                                incident_length_m=DISC_INCIDENT_LENGTH_M,
-                               transmission_length_m=DISC_TRANSMISSION_LENGTH_M, enforce_window=False)
+                               transmission_length_m=DISC_TRANSMISSION_LENGTH_M, enforce_window=False,
+                               face_gap_m=p["face_gap.gap_m"])
         pulse = pulse or TrapezoidPulse()
         t_v, v_v = pulse.history()
         bar = g.bar_material
@@ -121,7 +122,8 @@ def build(geometry: str, preset: str, params: dict | None = None, record=None,
         p = resolve(geometry, base)
         inj = {} if injection_distance_m is None else {"incident_gauge_m": float(injection_distance_m)}
         g = geo.cylinder(preset, L, D, Material(p["E"], p["nu"], p["rho"]),
-                         transmission_length_m=CYL_TRANSMISSION_LENGTH_M, enforce_window=False, **inj)
+                         transmission_length_m=CYL_TRANSMISSION_LENGTH_M, enforce_window=False,
+                         face_gap_m=p["face_gap.gap_m"], **inj)
         bar = g.bar_material
         if red is not None:
             t_g, eps_g = red.incident_wave_at_gauge()

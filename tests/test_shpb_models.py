@@ -58,6 +58,28 @@ def test_force_balance_after_four_transits():
     assert np.nanmedian(early) > 0.3  # and it was not balanced during the first transit
 
 
+def test_face_gap_closes_when_the_free_bar_face_has_travelled_the_gap():
+    """Face gap g (issue 8's ``face_gap`` effect), incident ramp v = A t / t_r at the bar's face: until
+    contact the face is free and moves at 2 v (1D), so it has travelled A t^2 / t_r and the gap closes at
+    t_c = sqrt(g t_r / A). Before t_c the specimen carries nothing; without the gap it is loaded from the
+    start. Tolerance 1.5 us: six samples, 2.5 % of t_c, covering the 2D strip's departure from 1D."""
+    E, rho, L, D = 50e9, 2700.0, 0.04, 0.04
+    A, t_r, g = 2.0, 100e-6, 60e-6
+    t_c = np.sqrt(g * t_r / A)  # 54.8 us
+    kw = dict(pulse=TrapezoidPulse(A, t_r, 100e-6, 20e-6), specimen_size_m=(L, D), unbreakable=True,
+              injection_distance_m=0.3, t_end=90e-6, sample_dt=0.25e-6)
+    gap = simulate("cylinder", "fast", params={"E": E, "rho": rho, "nu": 0.25, "face_gap.gap_m": g}, **kw)
+    ref = simulate("cylinder", "fast", params={"E": E, "rho": rho, "nu": 0.25}, **kw)
+    assert gap.run["status"] == "ok" and ref.run["status"] == "ok"
+    assert gap.run["energy_balance_rel"] < 0.01
+    t, s = gap.curve.time_s.to_numpy(), gap.curve.stress_front_Pa.to_numpy()
+    onset = t[np.flatnonzero(s > 1e6)[0]]
+    assert onset == pytest.approx(t_c, abs=1.5e-6)
+    assert np.max(np.abs(gap.curve.stress_back_Pa.to_numpy()[t < t_c - 1.5e-6])) < 0.1e6
+    r = ref.curve
+    assert np.interp(0.5 * t_c, r.time_s, r.stress_front_Pa) > 5e6  # loaded long before, without the gap (11 MPa)
+
+
 def _peak(params):
     out = simulate("brazilian_disc", "fast", params=params)
     assert out.run["status"] == "ok", out.run["reason"]
