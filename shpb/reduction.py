@@ -480,6 +480,23 @@ class ReducedRecord:
         sel = self.stress_back[: i + 1] >= level * self.peak_stress
         return float(np.mean(self.strain_rate[: i + 1][sel]))
 
+    def front_face_displacement(self) -> np.ndarray:
+        """Travel of the incident bar's face toward the specimen [m] from ``t = 0``:
+        :math:`u_1(t) = c_0 \\int_0^t (\\varepsilon_I - \\varepsilon_R)\\,dt` (1D wave theory; trapezoidal rule);
+        0 before ``t = 0``."""
+        v = self.bar.c0 * (self.eps_incident - self.eps_reflected)
+        u = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(self.time))])
+        k0 = int(np.searchsorted(self.time, 0.0))
+        return np.where(self.time >= self.time[k0], u - u[k0], 0.0)
+
+    def closure_before_load(self, level: float = 0.02) -> float:
+        """Travel of the incident bar's face [m] from ``t = 0`` until the specimen (back-face) stress first
+        exceeds ``level`` x its peak: closure the specimen did not resist. Its own elastic shortening at
+        that stress, ``level * peak * L / E``, is a few micrometres for rock; anything beyond is seating
+        or a gap at the faces (the ``face_gap`` effect)."""
+        i = int(np.flatnonzero((self.time >= 0.0) & (self.stress_back > level * self.peak_stress))[0])
+        return float(self.front_face_displacement()[i])
+
     def incident_wave_at_gauge(self) -> tuple[np.ndarray, np.ndarray]:
         """(time [s], strain) of the incident wave at the incident gauge, time 0 = its arrival there."""
         return self.incident_gauge_time, self.incident_gauge_strain

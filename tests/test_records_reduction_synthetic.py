@@ -120,6 +120,22 @@ def test_strain_rate_and_strain_match_the_exact_solution(reduced):
     assert reduced.strain[-1] == pytest.approx(final_strain, rel=0.02)
 
 
+def test_front_face_travel_is_the_integral_of_incident_minus_reflected(reduced):
+    # u_1 = c0 int (e_I - e_R) dt; with e_R = e_T - e_I, u_1 = c0 (2 - beta) AMP int sin^2, which is
+    # (2 - beta) AMP c0 T / 2 at the end of the pulse and (2 - beta) AMP c0 (tau/2 - T sin(2 pi tau/T)/(4 pi))
+    # on the way; before the load reaches 2 % of the peak (sin^2 = 0.02) the face has moved that much
+    lag = reduced.arrival_time_gauge - (1.0e-3 + DT * T0_INDEX)
+    c0 = FREIBURG_BAR.c0
+    tau = np.clip(reduced.time + lag, 0.0, PULSE)
+    exact = (2 - BETA) * AMP * c0 * (tau / 2 - PULSE * np.sin(2 * np.pi * tau / PULSE) / (4 * np.pi))
+    u = reduced.front_face_displacement()
+    sel = reduced.time >= 0
+    assert np.max(np.abs(u[sel] - exact[sel])) < 0.01 * exact.max()
+    tau_2 = PULSE * np.arcsin(np.sqrt(0.02)) / np.pi
+    u_2 = (2 - BETA) * AMP * c0 * (tau_2 / 2 - PULSE * np.sin(2 * np.pi * tau_2 / PULSE) / (4 * np.pi))
+    assert reduced.closure_before_load(0.02) == pytest.approx(u_2, rel=0.05, abs=0.2e-6)
+
+
 def test_force_balance_is_zero_for_balanced_waves(reduced):
     i = reduced.peak_index
     assert reduced.force_balance_at_peak < 0.01
