@@ -55,4 +55,5 @@ rule all:
         expand("results/{exp}/summary.json", exp=RUN),
         expand("results/{exp}/plots/{plot}.png", exp=RUN, plot=PLOTS),
         expand("results/{exp}/diagnosis/report.json", exp=diagnosed_experiments()),
+        expand("results/{exp}/diagnosis/check.json", exp=diagnosed_experiments()),
     default_target: True

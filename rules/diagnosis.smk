@@ -113,3 +113,52 @@ rule diagnosis:
         points=lambda wc: member_ids(diagnosis_cfg(wc.exp)["design_points"]),
     script:
         "../scripts/diagnosis.py"
+
+
+rule diagnosis_check_member:
+    """The FDEM check of the loop's answer: one real run per record (calibration and held-out) at the
+    posterior mean before the loop (base model) and after it (with the effects it added), so the errors
+    before and after are stated on FDEM, not only on the emulator."""
+    input:
+        unpack(lambda wc: {"report": f"results/{wc.exp}/diagnosis/report.json",
+                           "record": [design_records(wc.exp)[wc.record]]}),
+    output:
+        curve="results/{exp}/diagnosis/check/{which}/{record}/curve.csv",
+        run="results/{exp}/diagnosis/check/{which}/{record}/run.json",
+    log:
+        "results/{exp}/diagnosis/check/{which}/{record}/simulate.log",
+    wildcard_constraints:
+        which="before|after",
+    params:
+        sim=lambda wc: sim_settings(wc.exp),
+        record_file=lambda wc: design_records(wc.exp)[wc.record],
+        max_attempts=config["member_retries"] + 1,
+    threads: 1
+    retries: config["member_retries"]
+    resources:
+        attempt=lambda wc, attempt: attempt,
+        time_limit_s=lambda wc: time_limit_s(wc.exp),
+        runtime=lambda wc: runtime_min(wc.exp),
+    script:
+        "../scripts/diagnosis_check_member.py"
+
+
+def diagnosis_check_inputs(wc):
+    files = {k: v for k, v in diagnosis_inputs(wc).items() if k in ("obs", "obs_meta", "heldout", "heldout_meta")}
+    files["report"] = f"results/{wc.exp}/diagnosis/report.json"
+    files["curves"] = expand("results/{exp}/diagnosis/check/{which}/{record}/curve.csv", exp=wc.exp,
+                             which=["before", "after"], record=list(design_records(wc.exp)))
+    return files
+
+
+rule diagnosis_check:
+    input:
+        unpack(diagnosis_check_inputs),
+    output:
+        check=report("results/{exp}/diagnosis/check.json", category="{exp}", subcategory="diagnosis"),
+        png=report("results/{exp}/diagnosis/check.png", category="{exp}", subcategory="diagnosis",
+                   caption="../report/diagnosis_check.rst"),
+    params:
+        exp=lambda wc: EXPERIMENTS[wc.exp],
+    script:
+        "../scripts/diagnosis_check.py"

@@ -33,7 +33,7 @@ from . import effects as fx
 from .observations import curve_on_grid
 
 __all__ = ["design_points", "interpolation_matrix", "EmulatedSHPB", "diagnose", "emulators_from_design",
-           "errors_per_record"]
+           "errors_per_record", "simulator_params", "measured_curve"]
 
 
 def design_points(base_lower, base_upper, physical_lower, physical_upper, n: int, *, seed: int,
@@ -246,6 +246,26 @@ def emulators_from_design(X, curves: Mapping[str, Sequence], model_times, lower,
         emulators[rec] = CurveEmulator(X[ok], np.array([y for y in Y if y is not None]), lower, upper,
                                        names=list(names))
     return emulators, n_failed
+
+
+def simulator_params(posterior: Mapping[str, Mapping[str, float]]) -> dict[str, float]:
+    """The parameters an FDEM run needs from a loop posterior (``params_before``/``params_after`` of the
+    report: ``{name: {"mean": ...}}``): base and physical effect parameters at their posterior mean;
+    measurement effects are left to :func:`measured_curve`."""
+    return {n: float(v["mean"]) for n, v in posterior.items()
+            if (fx.effect_of(n) is None or fx.effect_of(n).kind != "measurement")}
+
+
+def measured_curve(curve, model_times, posterior: Mapping[str, Mapping[str, float]], obs_times) -> np.ndarray | None:
+    """An FDEM run's curve as the loop's model sees it: on ``model_times``, through the measurement chain
+    of the posterior's measurement parameters (at their means), at ``obs_times``; None for a failed run.
+    The FDEM check of a loop answer (rules/diagnosis.smk) compares it with the data."""
+    y = curve_on_model_grid(curve, model_times)
+    if y is None:
+        return None
+    meas = {n: float(v["mean"]) for n, v in posterior.items()
+            if fx.effect_of(n) is not None and fx.effect_of(n).kind == "measurement"}
+    return interpolation_matrix(model_times, obs_times) @ fx.apply_measurement(model_times, y, meas)
 
 
 def errors_per_record(sets) -> tuple[dict, dict, dict]:

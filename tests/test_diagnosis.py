@@ -292,6 +292,22 @@ def test_emulators_from_design_leave_failed_runs_out_and_refuse_too_few():
                               label="diagnosis of x")
 
 
+def test_fdem_check_passes_physical_parameters_to_the_simulator_and_applies_measurement_ones_in_the_chain():
+    from shpb.diagnose import measured_curve, simulator_params
+    post = {"sigma_t": {"mean": 4e7}, "face_gap.gap_m": {"mean": 2e-4}, "gauge_gain.g": {"mean": 1.1},
+            "baseline.offset_Pa": {"mean": -1e6}}
+    assert simulator_params(post) == {"sigma_t": 4e7, "face_gap.gap_m": 2e-4}
+    # a run sampled from before the arrival (negative times), as FDEM writes it; the chain acts on the
+    # model grid from t = 0, exactly as on the emulated curve: y = 1.1 s - 1 MPa at the observation times
+    t_run = np.arange(-50e-6, 300e-6 + 1e-12, 0.5e-6)
+    s = 1e12 * np.clip(t_run, 0.0, None)  # 1 MPa/us ramp from the arrival
+    model_t = np.arange(0.0, 280e-6 + 1e-12, 0.5e-6)
+    obs_t = np.arange(0.0, 280e-6 + 1e-12, 2e-6)
+    y = measured_curve(pd.DataFrame({"time_s": t_run, "stress_Pa": s}), model_t, post, obs_t)
+    np.testing.assert_allclose(y, 1.1 * 1e12 * obs_t - 1e6, rtol=0, atol=1e-3)
+    assert measured_curve(pd.DataFrame({"time_s": [], "stress_Pa": []}), model_t, post, obs_t) is None
+
+
 def test_errors_per_record_split_calibration_and_heldout():
     from shpb.diagnose import errors_per_record
     from shpb.observations import Observations
