@@ -33,7 +33,7 @@ from . import effects as fx
 from .observations import curve_on_grid
 
 __all__ = ["design_points", "interpolation_matrix", "EmulatedSHPB", "diagnose", "emulators_from_design",
-           "errors_per_record", "simulator_params", "measured_curve"]
+           "errors_per_record", "simulator_params", "measured_curve", "check_errors"]
 
 
 def design_points(base_lower, base_upper, physical_lower, physical_upper, n: int, *, seed: int,
@@ -266,6 +266,29 @@ def measured_curve(curve, model_times, posterior: Mapping[str, Mapping[str, floa
     meas = {n: float(v["mean"]) for n, v in posterior.items()
             if fx.effect_of(n) is not None and fx.effect_of(n).kind == "measurement"}
     return interpolation_matrix(model_times, obs_times) @ fx.apply_measurement(model_times, y, meas)
+
+
+def check_errors(sets, runs: Mapping[str, Mapping], model_times,
+                 posteriors: Mapping[str, Mapping]) -> tuple[dict, dict]:
+    """The FDEM check of a loop answer: per record, the errors (:func:`enkf.diagnosis.curve_errors`) of
+    real runs at the posterior means against the data.
+
+    ``sets``: ``(data_label, Observations)`` pairs (calibration, held-out); ``runs[which][record]``: the
+    run's curve (DataFrame) for each ``which`` of ``posteriors`` (e.g. ``"before"``, ``"after"``, the
+    report's ``params_before`` / ``params_after``). Returns ``(errors, curves)``:
+    ``errors[rec] = {"data": label, which: curve_errors or None for a failed run}`` and
+    ``curves[rec] = {"data", "time", "obs", which: the run seen through the chain (or None)}``."""
+    errors, curves = {}, {}
+    for label, o in sets:
+        for r in o.records:
+            s = o.record_slice(r)
+            t, y = o.time[s], o.values[s]
+            errors[r], curves[r] = {"data": label}, {"data": label, "time": t, "obs": y}
+            for which, post in posteriors.items():
+                sim = measured_curve(runs[which][r], model_times, post, t)
+                curves[r][which] = sim
+                errors[r][which] = None if sim is None else curve_errors(t, sim, y)
+    return errors, curves
 
 
 def errors_per_record(sets) -> tuple[dict, dict, dict]:

@@ -306,6 +306,16 @@ def test_fdem_check_passes_physical_parameters_to_the_simulator_and_applies_meas
     y = measured_curve(pd.DataFrame({"time_s": t_run, "stress_Pa": s}), model_t, post, obs_t)
     np.testing.assert_allclose(y, 1.1 * 1e12 * obs_t - 1e6, rtol=0, atol=1e-3)
     assert measured_curve(pd.DataFrame({"time_s": [], "stress_Pa": []}), model_t, post, obs_t) is None
+    # per record and data set: errors of each run, None for a failed one
+    from shpb.diagnose import check_errors
+    from shpb.observations import Observations
+    obs = Observations(pd.DataFrame({"record": "r1", "time_s": obs_t, "stress_Pa": 1.1e12 * obs_t - 1e6,
+                                     "sigma_Pa": 1e5}))
+    runs = {"after": {"r1": pd.DataFrame({"time_s": t_run, "stress_Pa": s})},
+            "before": {"r1": pd.DataFrame({"time_s": [], "stress_Pa": []})}}
+    errors, curves = check_errors([("heldout", obs)], runs, model_t, {"before": {}, "after": post})
+    assert errors["r1"]["data"] == "heldout" and errors["r1"]["before"] is None
+    assert errors["r1"]["after"]["rmse"] < 1e-3 and curves["r1"]["before"] is None
 
 
 def test_errors_per_record_split_calibration_and_heldout():
