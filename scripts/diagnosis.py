@@ -6,7 +6,8 @@ import pandas as pd
 
 from enkf.diagnosis import covariate_trends, report_to_json, write_report
 from shpb import effects as fx
-from shpb.diagnose import EmulatedSHPB, diagnose, emulators_from_design, errors_per_record, record_covariates
+from shpb.diagnose import (EmulatedSHPB, diagnose, emulators_from_design, errors_per_record, record_calibrations,
+                           record_covariates)
 from shpb.observations import read_curve, read_observations
 from shpb.workflow_io import atomic_write_csv, atomic_write_json, read_json
 
@@ -45,12 +46,17 @@ per_record, resid, sigma = errors_per_record([("calibration", obs, c["fitted_bef
 info = {**obs.meta.get("record_info", {}), **(held.meta.get("record_info", {}) if held is not None else {})}
 cov = record_covariates(info, resid, sigma)
 cov["data"] = [per_record[r]["data"] for r in cov["record"]]
-trends = covariate_trends(cov, "strain_rate_per_s", ["mean_resid_sd", "rms_resid_sd"]) if len(cov) >= 3 else None
+# the base parameters fitted to each record alone, against the same covariates
+fits = record_calibrations(model, meta["base_names"], [o for o in (obs, held) if o is not None], seed=d["seed"],
+                           n_members=d["members"], esmda_steps=d["esmda_steps"])
+cov = cov.merge(fits, on="record", how="left")
+trend_cols = ["mean_resid_sd", "rms_resid_sd"] + [f"{n}_mean" for n in meta["base_names"]]
+trends = covariate_trends(cov, "strain_rate_per_s", trend_cols) if len(cov) >= 3 else None
 
 paths = write_report(report, out.report.rsplit("/", 1)[0])
 js = report_to_json(report)
 js["errors_per_record"] = per_record
-js["covariate_trends"] = trends.to_dict(orient="records") if trends is not None else None
+js["covariate_trends"] = trends.reset_index().to_dict(orient="records") if trends is not None else None
 js["design"] = {"names": names, "lower": meta["lower"], "upper": meta["upper"], "points": len(X),
                 "failed_runs": n_failed}
 atomic_write_json(out.report, js)

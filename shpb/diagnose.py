@@ -30,10 +30,10 @@ from enkf.diagnosis import CalibrationResult, curve_errors, diagnose_loop, finit
 from enkf.emulator import CurveEmulator, with_emulator_error
 
 from . import effects as fx
-from .observations import curve_on_grid
+from .observations import Observations, curve_on_grid
 
 __all__ = ["design_points", "interpolation_matrix", "EmulatedSHPB", "diagnose", "emulators_from_design",
-           "errors_per_record", "simulator_params", "measured_curve", "check_errors"]
+           "errors_per_record", "simulator_params", "measured_curve", "check_errors", "record_calibrations"]
 
 
 def design_points(base_lower, base_upper, physical_lower, physical_upper, n: int, *, seed: int,
@@ -181,6 +181,35 @@ def diagnose(model: EmulatedSHPB, *, base_names: Sequence[str], candidates: Sequ
                           "obs_sigma_rms_Pa": float(np.sqrt(np.mean(obs_error.std ** 2))),
                           "design_points": {r: int(model.emulators[r].X.shape[0]) for r in model.emulators}}
     return report
+
+
+def record_calibrations(model: EmulatedSHPB, base_names: Sequence[str], observation_sets, *, seed: int = 0,
+                        n_members: int = 100, esmda_steps: int = 4):
+    """The base model calibrated on each record alone (ES-MDA on the emulator, its leave-one-out error
+    added, as in :func:`diagnose`): one row per record with ``<param>_mean`` and ``<param>_sd``, for the
+    fitted-parameters-against-covariates check (a strength that rises with the strain rate across
+    records is a rate effect the model lacks). ``observation_sets``: :class:`shpb.observations.Observations`
+    whose records the emulator covers."""
+    import pandas as pd
+
+    names = list(base_names)
+    lo, hi = model.box(names)
+    rows = []
+    for o in observation_sets:
+        for r in o.records:
+            frame = o.frame[o.frame["record"].astype(str) == r].reset_index(drop=True)
+            sub = Observations(frame, o.error_kind, {r: o.corr_time[r]} if r in o.corr_time else {})
+            err = with_emulator_error(sub.error_model(), model.emulator_std([r]))
+            rng = np.random.default_rng(_seed_for(seed, [r, *names]))
+            res = assimilate(model.forward(names, [r]), latin_hypercube(lo, hi, n_members, rng), sub.values, err,
+                             rng=rng, method="esmda", alphas=esmda_alphas(esmda_steps),
+                             transform=BoxTransform(lo, hi), names=names)
+            P = res.params[res.alive]
+            row = {"record": r}
+            for j, n in enumerate(names):
+                row[f"{n}_mean"], row[f"{n}_sd"] = float(P[:, j].mean()), float(P[:, j].std(ddof=1))
+            rows.append(row)
+    return pd.DataFrame(rows)
 
 
 # --------------------------------------------------------------------------------------------------

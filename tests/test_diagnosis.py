@@ -28,7 +28,7 @@ from scipy import stats
 
 from enkf import (AR1Error, BoxTransform, DiagonalError, assimilate, esmda_alphas, latin_hypercube)
 from enkf.diagnosis import (Candidate, CalibrationResult, accept_effect, bic, covariate_trends, curve_errors,
-                            pinned_at_bounds,
+                            pinned_at_bounds, spearman_exact,
                             default_windows, diagnose_loop, durbin_watson, effective_sample_size,
                             ensemble_sensitivity, finite_difference_sensitivity, ljung_box, rank_candidates,
                             report_to_json, runs_test, score_test, structure_tests, whitened_residual,
@@ -112,6 +112,15 @@ def test_window_rms_points_at_the_window_where_the_structure_is():
     rms = {k: v["rms"] for k, v in st["windows"].items()}
     assert max(rms, key=rms.get) == "peak" and rms["peak"] > 2.5 and rms["post_peak"] < 1.3
     assert sum(v["n"] for v in st["windows"].values()) == t.size
+
+
+def test_spearman_p_is_exact_for_a_handful_of_records():
+    # 3 records in perfect rank order: 2 of the 3! orderings reach |rho| = 1, p = 1/3 (not 0)
+    tr = covariate_trends(pd.DataFrame({"rate": [135.0, 195.0, 257.0], "resid": [-9.0, -5.0, -1.0]}), "rate")
+    assert tr.loc["resid", "rho"] == pytest.approx(1.0) and tr.loc["resid", "p_spearman"] == pytest.approx(1 / 3)
+    # 5 records: 2 of 120 orderings are perfect; rho = 0.9 is reached by 10 of 120 in absolute value
+    rho, p = spearman_exact([1, 2, 3, 4, 5], [1, 2, 3, 5, 4])
+    assert rho == pytest.approx(0.9) and p == pytest.approx(10 / 120)
 
 
 def test_covariate_trends_find_a_rate_dependence_across_records():
@@ -290,6 +299,32 @@ def test_emulators_from_design_leave_failed_runs_out_and_refuse_too_few():
     with pytest.raises(RuntimeError, match=r"diagnosis of x: only 3 of 16 design runs of r succeeded"):
         emulators_from_design(X, {"r": runs[:3] + [None] * 13}, t, [1.0, 0.5], [3.0, 1.5], ["a", "b"],
                               label="diagnosis of x")
+
+
+def test_record_calibrations_fit_each_record_alone_and_expose_a_rate_trend():
+    # three records whose amplitude a (the "strength") rises with the record's strain rate: fitted one
+    # record at a time, the per-record estimates follow it; the trend test then sees the rise
+    from shpb.diagnose import EmulatedSHPB, emulators_from_design, record_calibrations
+    from shpb.observations import Observations
+    t = np.linspace(0.0, 2e-4, 81)
+    X = np.array([[a, b] for a in np.linspace(1.0, 3.0, 6) for b in np.linspace(0.5, 1.5, 6)])
+    recs = {"r135": 1.4, "r195": 1.9, "r257": 2.5}
+    curves = {r: [pd.DataFrame({"time_s": t, "stress_Pa": x[0] * 1e6 * np.sin(x[1] * t / 1e-4)}) for x in X]
+              for r in recs}
+    em, _ = emulators_from_design(X, curves, t, [1.0, 0.5], [3.0, 1.5], ["a", "b"])
+    model = EmulatedSHPB(em, ["a", "b"], t, {r: t for r in recs})
+    rng = np.random.default_rng(7)
+    frame = pd.concat([pd.DataFrame({"record": r, "time_s": t, "sigma_Pa": 2e4,
+                                     "stress_Pa": a * 1e6 * np.sin(t / 1e-4) + rng.normal(0, 2e4, t.size)})
+                       for r, a in recs.items()], ignore_index=True)
+    fits = record_calibrations(model, ["a", "b"], [Observations(frame)], seed=3, n_members=60, esmda_steps=4)
+    assert list(fits["record"]) == list(recs)
+    for r, a in recs.items():
+        row = fits.set_index("record").loc[r]
+        assert row["a_mean"] == pytest.approx(a, abs=0.05) and row["b_mean"] == pytest.approx(1.0, abs=0.05)
+    fits["strain_rate"] = [135.0, 195.0, 257.0]
+    tr = covariate_trends(fits, "strain_rate", ["a_mean"])
+    assert tr.loc["a_mean", "slope"] > 0 and tr.loc["a_mean", "rho"] == pytest.approx(1.0)
 
 
 def test_fdem_check_passes_physical_parameters_to_the_simulator_and_applies_measurement_ones_in_the_chain():
