@@ -263,8 +263,11 @@ def covariate_trends(table: pd.DataFrame, covariate: str, columns: Sequence[str]
         row = {"column": col, "n": int(ok.sum())}
         if x.size >= 3 and np.ptp(x) > 0 and np.ptp(y) > 0:
             lr = stats.linregress(x, y)
-            rho, p_rho = spearman_exact(x, y) if x.size <= 8 else (lambda r: (float(r.statistic), float(r.pvalue)))(
-                stats.spearmanr(x, y))
+            if x.size <= 8:
+                rho, p_rho = spearman_exact(x, y)
+            else:
+                sp = stats.spearmanr(x, y)
+                rho, p_rho = float(sp.statistic), float(sp.pvalue)
             row.update(slope=lr.slope, intercept=lr.intercept, r=lr.rvalue, p_pearson=lr.pvalue,
                        rho=rho, p_spearman=p_rho)
         else:

@@ -30,7 +30,7 @@ from enkf.diagnosis import CalibrationResult, curve_errors, diagnose_loop, finit
 from enkf.emulator import CurveEmulator, with_emulator_error
 
 from . import effects as fx
-from .observations import Observations, curve_on_grid
+from .observations import curve_on_grid
 
 __all__ = ["design_points", "interpolation_matrix", "EmulatedSHPB", "diagnose", "emulators_from_design",
            "errors_per_record", "simulator_params", "measured_curve", "check_errors", "record_calibrations"]
@@ -136,6 +136,19 @@ def _seed_for(seed: int, names: Sequence[str]) -> int:
     return (int(seed) * 1_000_003 + zlib.crc32(",".join(names).encode())) % (2 ** 32)
 
 
+def _emulated_esmda(model: EmulatedSHPB, names: Sequence[str], records: Sequence[str], obs, err: ObservationError,
+                    seed: int, n_members: int, esmda_steps: int):
+    """ES-MDA of ``names`` against ``obs`` of ``records`` on the emulator, from a Latin hypercube over the
+    emulator's box; returns ``(result, forward, lower, upper)``."""
+    names = list(names)
+    lo, hi = model.box(names)
+    f = model.forward(names, records)
+    rng = np.random.default_rng(seed)
+    res = assimilate(f, latin_hypercube(lo, hi, n_members, rng), obs, err, rng=rng, method="esmda",
+                     alphas=esmda_alphas(esmda_steps), transform=BoxTransform(lo, hi), names=names)
+    return res, f, lo, hi
+
+
 def diagnose(model: EmulatedSHPB, *, base_names: Sequence[str], candidates: Sequence, calib_records: Sequence[str],
              obs, obs_error: ObservationError, times, heldout_records: Sequence[str] = (), heldout_obs=None,
              heldout_times=None, heldout_error: ObservationError | None = None, seed: int = 0,
@@ -153,11 +166,8 @@ def diagnose(model: EmulatedSHPB, *, base_names: Sequence[str], candidates: Sequ
             model.box([n])  # raises for a physical candidate the emulator does not cover
 
     def calibrate(names):
-        lo, hi = model.box(names)
-        f = model.forward(names, calib_records)
-        rng = np.random.default_rng(_seed_for(seed, names))
-        res = assimilate(f, latin_hypercube(lo, hi, n_members, rng), obs, err, rng=rng, method="esmda",
-                         alphas=esmda_alphas(esmda_steps), transform=BoxTransform(lo, hi), names=names)
+        res, f, lo, hi = _emulated_esmda(model, names, calib_records, obs, err, _seed_for(seed, names),
+                                         n_members, esmda_steps)
         mean = res.params[res.alive].mean(axis=0)
         held = model.forward(names, heldout_records)(mean)[0] if heldout_records else None
         return CalibrationResult(names, res.params[res.alive], f(mean)[0], heldout=held,
@@ -193,17 +203,13 @@ def record_calibrations(model: EmulatedSHPB, base_names: Sequence[str], observat
     import pandas as pd
 
     names = list(base_names)
-    lo, hi = model.box(names)
     rows = []
     for o in observation_sets:
         for r in o.records:
-            frame = o.frame[o.frame["record"].astype(str) == r].reset_index(drop=True)
-            sub = Observations(frame, o.error_kind, {r: o.corr_time[r]} if r in o.corr_time else {})
+            sub = o.of_record(r)
             err = with_emulator_error(sub.error_model(), model.emulator_std([r]))
-            rng = np.random.default_rng(_seed_for(seed, [r, *names]))
-            res = assimilate(model.forward(names, [r]), latin_hypercube(lo, hi, n_members, rng), sub.values, err,
-                             rng=rng, method="esmda", alphas=esmda_alphas(esmda_steps),
-                             transform=BoxTransform(lo, hi), names=names)
+            res, *_ = _emulated_esmda(model, names, [r], sub.values, err, _seed_for(seed, [r, *names]),
+                                      n_members, esmda_steps)
             P = res.params[res.alive]
             row = {"record": r}
             for j, n in enumerate(names):

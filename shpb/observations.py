@@ -144,6 +144,12 @@ class Observations:
     def grid(self, record: str) -> np.ndarray:
         return self.time[self.record_slice(record)]
 
+    def of_record(self, record: str) -> "Observations":
+        """The observations of one record, with its own error model (e.g. to calibrate on it alone)."""
+        frame = self.frame.iloc[self.record_slice(record)].reset_index(drop=True)
+        corr = {record: self.corr_time[record]} if record in self.corr_time else {}
+        return Observations(frame, self.error_kind, corr, {})
+
     def error_model(self) -> ObservationError:
         """The :class:`enkf.covariance.ObservationError` ``R`` of the whole vector (records independent).
 
