@@ -1,13 +1,12 @@
 """diagnosis/: the discrepancy loop on the emulated FDEM design (shpb.diagnose, enkf.diagnosis)."""
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
 from enkf.diagnosis import covariate_trends, report_to_json, write_report
 from shpb import effects as fx
-from shpb.diagnose import (EmulatedSHPB, diagnose, emulators_from_design, errors_per_record, record_calibrations,
-                           record_covariates)
+from shpb.diagnose import (EmulatedSHPB, diagnose, emulators_from_design, errors_per_record, model_grid,
+                           record_calibrations, record_covariates)
 from shpb.observations import read_curve, read_observations
 from shpb.workflow_io import atomic_write_csv, atomic_write_json, read_json
 
@@ -16,8 +15,7 @@ d = e["diagnosis"]
 meta = read_json(inp.design_meta)
 names = meta["names"]
 X = pd.read_csv(inp.design)[names].to_numpy(float)
-dt = e["simulation"]["sample_dt"] or 5.0e-7
-model_t = np.arange(0.0, e["simulation"]["t_end"] + 1e-12, dt)
+model_t = model_grid(e["simulation"])
 obs = read_observations(inp.obs, inp.obs_meta)
 held = read_observations(inp.heldout, inp.heldout_meta) if "heldout" in inp.keys() else None
 

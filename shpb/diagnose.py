@@ -33,7 +33,7 @@ from . import effects as fx
 from .observations import curve_on_grid
 
 __all__ = ["design_points", "interpolation_matrix", "EmulatedSHPB", "diagnose", "emulators_from_design",
-           "errors_per_record", "simulator_params", "measured_curve", "check_errors", "record_calibrations"]
+           "errors_per_record", "model_grid", "simulator_params", "measured_curve", "check_errors", "record_calibrations"]
 
 
 def design_points(base_lower, base_upper, physical_lower, physical_upper, n: int, *, seed: int,
@@ -251,6 +251,13 @@ def physical_design_ranges(effect_names: Sequence[str], upper_override: Mapping[
                 raise ValueError(f"diagnosis.physical_upper.{full} = {top:g} must exceed the null value {p.null:g}")
             names.append(full), lo.append(p.null), hi.append(top)
     return names, np.array(lo), np.array(hi)
+
+
+def model_grid(simulation: Mapping) -> np.ndarray:
+    """The model time grid of an experiment's ``simulation`` settings (``t_end``, ``sample_dt``, default
+    0.5 us): where emulated and checked curves are compared and the measurement chain acts."""
+    dt = simulation.get("sample_dt") or 5.0e-7
+    return np.arange(0.0, simulation["t_end"] + 1e-12, dt)
 
 
 def curve_on_model_grid(curve, model_times) -> np.ndarray | None:

@@ -231,3 +231,23 @@ def plot_sensitivity(path, obs: Observations, params: pd.DataFrame, responses: n
     fig.suptitle(title)
     fig.tight_layout()
     return _save(fig, path)
+
+
+def plot_diagnosis_check(path, curves: Mapping[str, Mapping], errors: Mapping[str, Mapping],
+                         added: Sequence[str]) -> Path:
+    """The FDEM check of a discrepancy-loop answer (``shpb.diagnose.check_errors``): per record, the data
+    and the real runs at the posterior means before and after the loop, with their RMSE."""
+    fig, axes = plt.subplots(1, len(curves), figsize=(4.2 * len(curves), 3.6), squeeze=False)
+    after_label = "with " + ", ".join(added) if added else "after (nothing added)"
+    for ax, (r, c) in zip(axes[0], curves.items()):
+        ax.plot(c["time"] * 1e6, c["obs"] / 1e6, ".", ms=2, color="0.5", label="data")
+        for which, name in (("before", "base model"), ("after", after_label)):
+            if c[which] is not None:
+                rmse = errors[r][which]["rmse"] / 1e6
+                ax.plot(c["time"] * 1e6, c[which] / 1e6, label=f"FDEM, {name} (RMSE {rmse:.1f} MPa)")
+        ax.set_title(f"{r} ({c['data']})", fontsize=9)
+        ax.set_xlabel("time [us]")
+        ax.legend(fontsize=7)
+    axes[0][0].set_ylabel("stress [MPa]")
+    fig.tight_layout()
+    return _save(fig, path)

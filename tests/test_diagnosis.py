@@ -327,7 +327,7 @@ def test_record_calibrations_fit_each_record_alone_and_expose_a_rate_trend():
     assert tr.loc["a_mean", "slope"] > 0 and tr.loc["a_mean", "rho"] == pytest.approx(1.0)
 
 
-def test_fdem_check_passes_physical_parameters_to_the_simulator_and_applies_measurement_ones_in_the_chain():
+def test_fdem_check_passes_physical_parameters_to_the_simulator_and_applies_measurement_ones_in_the_chain(tmp_path):
     from shpb.diagnose import measured_curve, simulator_params
     post = {"sigma_t": {"mean": 4e7}, "face_gap.gap_m": {"mean": 2e-4}, "gauge_gain.g": {"mean": 1.1},
             "baseline.offset_Pa": {"mean": -1e6}}
@@ -351,6 +351,11 @@ def test_fdem_check_passes_physical_parameters_to_the_simulator_and_applies_meas
     errors, curves = check_errors([("heldout", obs)], runs, model_t, {"before": {}, "after": post})
     assert errors["r1"]["data"] == "heldout" and errors["r1"]["before"] is None
     assert errors["r1"]["after"]["rmse"] < 1e-3 and curves["r1"]["before"] is None
+    from shpb.diagnose import model_grid
+    from shpb.plots import plot_diagnosis_check
+    np.testing.assert_array_equal(model_grid({"t_end": 280e-6, "sample_dt": 0.5e-6}), model_t)
+    png = plot_diagnosis_check(tmp_path / "check.png", curves, errors, ["face_gap"])
+    assert png.stat().st_size > 1000
 
 
 def test_errors_per_record_split_calibration_and_heldout():
