@@ -11,6 +11,7 @@ Sees parameter matrices ``(N, n)`` and response matrices ``(N, m)``, one row per
 * :mod:`enkf.stopping`    discrepancy principle, tolerance, collapse guard, iteration budget.
 * :mod:`enkf.diagnostics` misfits and spreads as numbers, dicts and DataFrames.
 * :mod:`enkf.loop`        a reference iterate-until-stop driver for in-process forward models.
+* :mod:`enkf.emulated`    emulator-assisted ES-MDA: each analysis an ES-MDA on an emulator of all runs so far.
 
 Reference: Godinez & Rougier (2021), Appl. Sci. 11, 2898, section 4.
 """
@@ -49,3 +50,8 @@ __all__ += [
     "finite_difference_sensitivity", "rank_candidates", "report_to_json", "score_test", "structure_tests",
     "whitened_residual", "write_report",
 ]
+
+# Emulator-assisted ES-MDA (the twin experiments' analysis, issue 6).
+from .emulated import EmulatedAnalysis, emulated_esmda_update, emulator_error_model
+
+__all__ += ["EmulatedAnalysis", "emulated_esmda_update", "emulator_error_model"]

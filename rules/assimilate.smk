@@ -23,6 +23,13 @@ rule aggregate:
         "../scripts/aggregate.py"
 
 
+def earlier_iterations(wc, name):
+    """`name` of iterations 0..it-1: the runs an emulated_esmda analysis builds its emulator on."""
+    if EXPERIMENTS[wc.exp]["method"] != "emulated_esmda":
+        return []
+    return [f"results/{wc.exp}/iter_{k}/{name}" for k in range(int(wc.it))]
+
+
 checkpoint analysis:
     input:
         params="results/{exp}/iter_{it}/params.csv",
@@ -30,6 +37,8 @@ checkpoint analysis:
         responses="results/{exp}/iter_{it}/responses.csv",
         obs="results/{exp}/observations/obs.csv",
         obs_meta="results/{exp}/observations/obs.json",
+        history_params=lambda wc: earlier_iterations(wc, "params.csv"),
+        history_responses=lambda wc: earlier_iterations(wc, "responses.csv"),
     output:
         analysis="results/{exp}/iter_{it}/analysis.json",
     params:

@@ -58,7 +58,7 @@ def sim_settings(exp, preset=None):
 def inference_settings(exp):
     """Config entries an analysis depends on (a change re-runs the analyses)."""
     e = EXPERIMENTS[exp]
-    keys = ("method", "esmda", "max_iterations", "parameters", "transform", "inflation", "truncation",
+    keys = ("method", "esmda", "emulated", "max_iterations", "parameters", "transform", "inflation", "truncation",
             "max_rank", "min_alive_fraction", "localization", "seed", "ensemble_size")
     return {k: e[k] for k in keys}
 

@@ -9,6 +9,8 @@ exp = snakemake.wildcards.exp
 spec = ExperimentSpec.from_config(exp, snakemake.config["experiments"][exp])
 status, Y = read_responses(snakemake.input.responses)
 obs = read_observations(snakemake.input.obs, snakemake.input.obs_meta)
+history = [(pd.read_csv(p), read_responses(r)[1])
+           for p, r in zip(snakemake.input.history_params, snakemake.input.history_responses)]
 result = analysis_step(spec, int(snakemake.wildcards.it), pd.read_csv(snakemake.input.params), Y, status, obs,
-                       pd.read_csv(snakemake.input.prior))
+                       pd.read_csv(snakemake.input.prior), history)
 atomic_write_json(snakemake.output.analysis, result)

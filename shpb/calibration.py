@@ -32,8 +32,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from enkf import (BoxTransform, EnsembleFailure, StopCriteria, check_stop, enkf_update, esmda_alphas,
-                  esmda_update, jsonable, latin_hypercube, localization_mask, mean_misfit, misfit_table,
+from enkf import (BoxTransform, EnsembleFailure, StopCriteria, check_stop, emulated_esmda_update, enkf_update,
+                  esmda_alphas, esmda_update, jsonable, latin_hypercube, localization_mask, mean_misfit, misfit_table,
                   posterior_dict)
 
 from .observations import Observations
@@ -71,6 +71,9 @@ class ExperimentSpec:
     min_alive_fraction: float = 0.5
     unrelated: Mapping[str, Sequence[Sequence[float]]] = field(default_factory=dict)
     truth: Mapping[str, float] | None = None
+    inner_members: int = 400
+    inner_steps: int = 8
+    temper_base: float = 4.0
 
     @classmethod
     def from_config(cls, name: str, exp: Mapping) -> "ExperimentSpec":
@@ -84,6 +87,7 @@ class ExperimentSpec:
         else:
             alphas = ()
             max_it = int(exp["max_iterations"])
+        emulated = exp.get("emulated") or {}
         stop = exp.get("stopping", {})
         criteria = StopCriteria(chi2_target=stop.get("chi2_target"), nrmse_tol=stop.get("nrmse_tol"),
                                 collapse_fraction=float(stop.get("collapse_fraction", 1e-3)), max_iterations=max_it)
@@ -96,7 +100,10 @@ class ExperimentSpec:
                    max_rank=exp.get("max_rank"),
                    min_alive_fraction=float(exp.get("min_alive_fraction", 0.5)),
                    unrelated=dict(exp.get("localization") or {}),
-                   truth=None if truth is None else {p: float(truth[p]) for p in truth})
+                   truth=None if truth is None else {p: float(truth[p]) for p in truth},
+                   inner_members=int(emulated.get("inner_members", 400)),
+                   inner_steps=int(emulated.get("inner_steps", 8)),
+                   temper_base=float(emulated.get("temper_base", 4.0)))
 
     @property
     def transform(self) -> BoxTransform:
@@ -138,9 +145,15 @@ def decide(spec: ExperimentSpec, k: int, misfit: Mapping, n_obs: int, spread, pr
     """The stop decision after ``k`` analyses (:func:`enkf.check_stop` with the experiment's rule).
 
     ES-MDA: the convergence tests are taken only once its ``alpha`` schedule is complete (its posterior
-    is defined only there) and the schedule is the iteration budget. EnKF: every iteration.
+    is defined only there) and the schedule is the iteration budget. Emulated ES-MDA: likewise once its
+    tempering is done (every iteration if ``temper_base`` is 1). EnKF: every iteration.
     """
-    allow = spec.method == "enkf" or k >= len(spec.alphas)
+    if spec.method == "esmda":
+        allow = k >= len(spec.alphas)
+    elif spec.method == "emulated_esmda":
+        allow = k >= spec.max_iterations or spec.temper_base == 1.0
+    else:
+        allow = True
     d = check_stop(k, chi2_per_obs=_nan(misfit.get("chi2_per_obs")), nrmse=_nan(misfit.get("nrmse")),
                    n_obs=n_obs, spread=spread, prior_spread=prior_spread, criteria=spec.criteria,
                    allow_convergence=allow)
@@ -152,7 +165,8 @@ def _nan(v) -> float:
 
 
 def analysis_step(spec: ExperimentSpec, k: int, params: pd.DataFrame, responses: np.ndarray,
-                  member_status: pd.DataFrame, obs: Observations, prior_params: pd.DataFrame) -> dict:
+                  member_status: pd.DataFrame, obs: Observations, prior_params: pd.DataFrame,
+                  history: Sequence[tuple[pd.DataFrame, np.ndarray]] = ()) -> dict:
     """The ``iter_<k>/analysis.json`` dict: misfits, failures, spread, decision, analysis ensemble.
 
     Parameters
@@ -161,6 +175,8 @@ def analysis_step(spec: ExperimentSpec, k: int, params: pd.DataFrame, responses:
     responses : (N, m) member curves on the observation grid (NaN rows/blocks = failed).
     member_status : one row per member: ``member, status ("ok"/"failed"), reason``.
     prior_params : ``iter_0/params.csv`` (the reference spread of the collapse guard and inflation).
+    history : ``(params, responses)`` of iterations ``0 .. k-1`` (failed members as NaN rows); used by
+        ``emulated_esmda``, whose emulator is built on every run so far.
 
     Raises
     ------
@@ -207,7 +223,11 @@ def analysis_step(spec: ExperimentSpec, k: int, params: pd.DataFrame, responses:
         alpha = spec.alphas[k]
     elif spec.method == "enkf":
         alpha = 1.0
-    if alpha is not None:
+    if spec.method == "emulated_esmda":
+        res = _emulated_analysis(spec, k, P, Y, alive, obs, history)
+        update = res.to_dict()
+        next_params = res.params.tolist()
+    elif alpha is not None:
         base = spec.truncation if spec.truncation is not None else (0.99 if spec.method == "esmda" else 1.0)
         truncation = capped_truncation(Y, alive, err, base, spec.max_rank)
         common = dict(rng=rng_for(spec.seed, "analysis", k), transform=transform,
@@ -246,6 +266,28 @@ def analysis_step(spec: ExperimentSpec, k: int, params: pd.DataFrame, responses:
         "update": update,
         "next_params": None if next_params is None else {"names": names, "values": next_params},
     })
+
+
+def _emulated_analysis(spec: ExperimentSpec, k: int, P: np.ndarray, Y: np.ndarray, alive: np.ndarray,
+                       obs: Observations, history: Sequence[tuple[pd.DataFrame, np.ndarray]]):
+    """:func:`enkf.emulated_esmda_update` on every successful run of iterations ``0..k``."""
+    if len(history) != k:
+        raise ValueError(f"{spec.name}, iteration {k}: emulated_esmda needs the runs of iterations 0..{k - 1}, "
+                         f"got {len(history)} of them")
+    names = list(spec.names)
+    X, Ys, latest = [], [], []
+    for hp, hy in history:
+        hP, hY = hp[names].to_numpy(float), np.asarray(hy, float)
+        ok = np.all(np.isfinite(hY), axis=1)
+        X.append(hP[ok]), Ys.append(hY[ok]), latest.append(np.zeros(int(ok.sum()), bool))
+    X.append(P[alive]), Ys.append(Y[alive]), latest.append(np.ones(int(alive.sum()), bool))
+    return emulated_esmda_update(np.vstack(X), np.vstack(Ys), np.concatenate(latest), obs.values, obs.error_model(),
+                                 lower=spec.lower, upper=spec.upper, n_members=spec.ensemble_size,
+                                 rng=rng_for(spec.seed, "analysis", k), times=obs.time,
+                                 groups=obs.frame["record"].to_numpy(str), inner_members=spec.inner_members,
+                                 inner_steps=spec.inner_steps,
+                                 temper=spec.temper_base ** max(0, spec.max_iterations - 1 - k),
+                                 transform_kind=spec.transform_kind, names=names)
 
 
 def capped_truncation(Y: np.ndarray, alive: np.ndarray, err, base: float, max_rank: int | None) -> float:

@@ -159,6 +159,11 @@ def test_shipped_configs_are_valid():
     (lambda c: c["experiments"]["twin"].update(diagnosis={}), "experiments.twin.diagnosis: the discrepancy loop runs on measured"),
     (lambda c: c["experiments"]["twin"].update(diagnosis={"candidates": ["seeting"]}), "experiments.twin.diagnosis.candidates"),
     (lambda c: c.update(member_time_limit_s={"fast": 0}), "member_time_limit_s.fast"),
+    (lambda c: c["experiments"]["twin"].update(method="emulated_esmda", ensemble_size=20, emulated={"inner_members": 12}),
+     "experiments.twin.emulated.inner_members: 12 is smaller than ensemble_size 20"),
+    (lambda c: c["experiments"]["twin"].update(method="emulated_esmda", localization={"E_t": [[0.0, 1.0e-5]]}),
+     "experiments.twin.localization: emulated_esmda has no localization"),
+    (lambda c: c["experiments"]["twin"].update(emulated={"temper_base": 0.5}), "experiments.twin.emulated.temper_base"),
 ])
 def test_a_bad_config_key_or_value_fails_with_a_message_naming_it(mutate, expected):
     cfg = twin_config()
@@ -304,6 +309,39 @@ def test_failed_members_are_left_out_and_their_reasons_recorded_and_too_many_fai
         analysis_step(spec, 0, params, Y, status, obs, params)
 
 
+def test_emulated_analyses_use_every_successful_run_so_far_and_recover_the_linear_twin():
+    spec, obs, model, truth = _linear_setup()
+    cfg = validate_config(twin_config(ensemble_size=20, method="emulated_esmda", max_iterations=3,
+                                      emulated={"inner_members": 200}), SCHEMA)
+    spec = ExperimentSpec.from_config("twin", cfg["experiments"]["twin"])
+    params0 = initial_ensemble(spec)
+    params, history, analyses = params0, [], []
+    for k in range(4):
+        Y = model(params[list(spec.names)].to_numpy())
+        status = pd.DataFrame({"member": params["member"], "status": "ok", "reason": ""})
+        if k == 1:
+            Y[3] = np.nan
+            status.loc[3, ["status", "reason"]] = ["failed", "numerical failure: unstable"]
+        with pytest.raises(ValueError, match="needs the runs of iterations"):
+            analysis_step(spec, k, params, Y, status, obs, params0, history[:-1] if k else [history])
+        a = analysis_step(spec, k, params, Y, status, obs, params0, history)
+        json.dumps(a, allow_nan=False)
+        analyses.append(a)
+        # every successful run so far, the failed one left out; the last analysis untempered
+        assert a["update"]["design_points"] == 20 * (k + 1) - (1 if k >= 1 else 0)
+        assert a["update"]["temper"] == 4.0 ** max(0, 2 - k)
+        K, decision = final_iteration(spec, analyses)
+        if decision is not None:
+            break
+        history.append((params, Y))
+        params = pd.DataFrame(a["next_params"]["values"], columns=a["next_params"]["names"])
+        params.insert(0, "member", range(len(params)))
+    assert K == 3 and decision["reason"] in ("discrepancy", "max_iterations")
+    post = analyses[-1]["posterior"]
+    assert post["sigma_t"]["mean"] == pytest.approx(truth[0], rel=0.02)
+    assert post["E_t"]["mean"] == pytest.approx(truth[1], rel=0.10)
+
+
 def test_the_same_seed_gives_bit_identical_analysis_files():
     spec, obs, model, _ = _linear_setup()
     p = initial_ensemble(spec)
@@ -357,9 +395,12 @@ def test_member_exit_codes_numerical_failure_is_recorded_and_a_crash_is_retried_
 # --------------------------------------------------------------------------------------------------
 # the workflow (snakemake --cores 2)
 # --------------------------------------------------------------------------------------------------
-def test_workflow_runs_end_to_end_and_a_second_run_has_nothing_to_do(tmp_path):
-    """The real simulator at the fast preset: N = 8, two ES-MDA analyses (three ensembles)."""
-    write_config(tmp_path, twin_config())
+@pytest.mark.parametrize("method", [{"method": "esmda", "esmda": {"steps": 2}},
+                                    {"method": "emulated_esmda", "max_iterations": 2, "emulated": {"inner_members": 100}}],
+                         ids=["esmda", "emulated_esmda"])
+def test_workflow_runs_end_to_end_and_a_second_run_has_nothing_to_do(tmp_path, method):
+    """The real simulator at the fast preset: N = 8, two analyses (three ensembles)."""
+    write_config(tmp_path, twin_config(**method))
     t0 = time.time()
     first = snakemake(tmp_path, "--cores", "2")
     assert first.returncode == 0, first.stderr[-4000:]
