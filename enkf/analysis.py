@@ -218,6 +218,16 @@ def esmda_update(params, responses, obs, obs_error: ObservationError, *, alpha: 
                      truncation=truncation, names=names)
 
 
+def _thin_svd(S: np.ndarray):
+    """Thin SVD by LAPACK's divide and conquer (``gesdd``), falling back to ``gesvd`` on the rare
+    matrices where ``gesdd`` fails to converge (met on an emulated ES-MDA whose members had nearly
+    collapsed onto a few points: finite, well-scaled anomalies, still ``LinAlgError``)."""
+    try:
+        return linalg.svd(S, full_matrices=False, lapack_driver="gesdd", check_finite=False)
+    except np.linalg.LinAlgError:
+        return linalg.svd(S, full_matrices=False, lapack_driver="gesvd", check_finite=False)
+
+
 def _analysis(method, params, responses, obs, obs_error, *, alpha, rng, transform, localization,
               inflation, prior_std, alive, min_alive_fraction, truncation, names) -> AnalysisResult:
     rng = as_generator(rng)
@@ -267,7 +277,7 @@ def _analysis(method, params, responses, obs, obs_error, *, alpha, rng, transfor
     whitened = obs_error.whiten(np.hstack([(Ya - y_bar).T * scale, D - Ya.T, (y_bar - d)[:, None]]))
     S, innov, w_mean = whitened[:, :n_alive], whitened[:, n_alive:2 * n_alive], whitened[:, -1]
 
-    U, s, Vt = linalg.svd(S, full_matrices=False, lapack_driver="gesdd", check_finite=False)
+    U, s, Vt = _thin_svd(S)
     r = truncation_rank(s, truncation)
     U, s, Vt = U[:, :r], s[:r], Vt[:r]
     Ut_innov = U.T @ innov  # (r, Na)

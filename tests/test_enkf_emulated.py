@@ -126,3 +126,28 @@ def test_bad_input_is_refused():
         emulated_esmda_update(X[:3], Y[:3], latest[:3], d, err, n_members=3, **kw)
     with pytest.raises(ValueError, match="observations"):
         emulated_esmda_update(X, Y[:, :50], latest, d, err, n_members=10, **kw)
+
+
+def test_the_analysis_falls_back_to_gesvd_where_gesdd_does_not_converge(monkeypatch):
+    """LAPACK's gesdd raised "SVD did not converge" on finite, well-scaled anomalies of an emulated
+    ES-MDA (a seed sweep of the twins); the analysis must then use gesvd and give the same update."""
+    import enkf.analysis as analysis
+    from enkf import esmda_update
+
+    rng = np.random.default_rng(4)
+    P = latin_hypercube(LO, HI, 30, rng)
+    d, err = twin(np.array([3.0e7, 800.0]), 2)
+    expected = esmda_update(P, splitting_disc(P), d, err, alpha=2.0, rng=9).params
+    real_svd = analysis.linalg.svd
+    calls = []
+
+    def flaky_svd(a, *args, lapack_driver="gesdd", **kwargs):
+        calls.append(lapack_driver)
+        if lapack_driver == "gesdd":
+            raise np.linalg.LinAlgError("SVD did not converge")
+        return real_svd(a, *args, lapack_driver=lapack_driver, **kwargs)
+
+    monkeypatch.setattr(analysis.linalg, "svd", flaky_svd)
+    got = esmda_update(P, splitting_disc(P), d, err, alpha=2.0, rng=9).params
+    assert calls == ["gesdd", "gesvd"]
+    np.testing.assert_allclose(got, expected, rtol=1e-9)
