@@ -129,6 +129,13 @@ def emulated_esmda_update(design_params, design_responses, latest, obs, obs_erro
                          f"got {X.shape[0]} and {int(latest.sum())}")
     rng = as_generator(rng)
 
+    # The simulator is deterministic: a repeated parameter set adds no information and would make the
+    # interpolation system singular, so keep its first run (flagged latest if any copy is).
+    _, first, inverse = np.unique(X, axis=0, return_index=True, return_inverse=True)
+    if first.size < X.shape[0]:
+        latest = np.bincount(inverse.ravel(), weights=latest.astype(float), minlength=first.size)[np.argsort(first)] > 0
+        keep = np.sort(first)
+        X, Y = X[keep], Y[keep]
     em = CurveEmulator(X, Y, lo, hi, names=names)
     emu_err, emu_info = emulator_error_model(em.loo_residuals()[latest], times, groups)
 

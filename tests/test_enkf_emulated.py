@@ -151,3 +151,17 @@ def test_the_analysis_falls_back_to_gesvd_where_gesdd_does_not_converge(monkeypa
     got = esmda_update(P, splitting_disc(P), d, err, alpha=2.0, rng=9).params
     assert calls == ["gesdd", "gesvd"]
     np.testing.assert_allclose(got, expected, rtol=1e-9)
+
+
+def test_a_repeated_run_is_used_once():
+    """A parameter set simulated twice (deterministic simulator) would make the RBF system singular."""
+    d, err = twin(np.array([3.0e7, 800.0]), 1)
+    X = latin_hypercube(LO, HI, 30, np.random.default_rng(3))
+    Y = splitting_disc(X)
+    latest = np.arange(30) >= 20
+    kw = dict(lower=LO, upper=HI, n_members=10, times=T, inner_members=100)
+    once = emulated_esmda_update(X, Y, latest, d, err, rng=1, **kw)
+    twice = emulated_esmda_update(np.vstack([X, X[25:26]]), np.vstack([Y, Y[25:26]]), np.r_[latest, True], d, err,
+                                  rng=1, **kw)
+    np.testing.assert_array_equal(once.params, twice.params)
+    assert twice.diagnostics["design_points"] == 30 and twice.diagnostics["latest_points"] == 10
