@@ -101,9 +101,9 @@ class ExperimentSpec:
                    min_alive_fraction=float(exp.get("min_alive_fraction", 0.5)),
                    unrelated=dict(exp.get("localization") or {}),
                    truth=None if truth is None else {p: float(truth[p]) for p in truth},
-                   inner_members=int(emulated.get("inner_members", 400)),
-                   inner_steps=int(emulated.get("inner_steps", 8)),
-                   temper_base=float(emulated.get("temper_base", 4.0)))
+                   inner_members=int(emulated.get("inner_members", cls.inner_members)),
+                   inner_steps=int(emulated.get("inner_steps", cls.inner_steps)),
+                   temper_base=float(emulated.get("temper_base", cls.temper_base)))
 
     @property
     def transform(self) -> BoxTransform:
@@ -275,13 +275,13 @@ def _emulated_analysis(spec: ExperimentSpec, k: int, P: np.ndarray, Y: np.ndarra
         raise ValueError(f"{spec.name}, iteration {k}: emulated_esmda needs the runs of iterations 0..{k - 1}, "
                          f"got {len(history)} of them")
     names = list(spec.names)
-    X, Ys, latest = [], [], []
-    for hp, hy in history:
-        hP, hY = hp[names].to_numpy(float), np.asarray(hy, float)
-        ok = np.all(np.isfinite(hY), axis=1)
-        X.append(hP[ok]), Ys.append(hY[ok]), latest.append(np.zeros(int(ok.sum()), bool))
-    X.append(P[alive]), Ys.append(Y[alive]), latest.append(np.ones(int(alive.sum()), bool))
-    return emulated_esmda_update(np.vstack(X), np.vstack(Ys), np.concatenate(latest), obs.values, obs.error_model(),
+    runs = [(hp[names].to_numpy(float), np.asarray(hy, float)) for hp, hy in history] + [(P, Y)]
+    ok = [np.all(np.isfinite(y), axis=1) for _, y in runs]
+    ok[-1] = ok[-1] & alive
+    X = np.vstack([p[o] for (p, _), o in zip(runs, ok)])
+    Ys = np.vstack([y[o] for (_, y), o in zip(runs, ok)])
+    latest = np.concatenate([np.full(int(o.sum()), i == k) for i, o in enumerate(ok)])
+    return emulated_esmda_update(X, Ys, latest, obs.values, obs.error_model(),
                                  lower=spec.lower, upper=spec.upper, n_members=spec.ensemble_size,
                                  rng=rng_for(spec.seed, "analysis", k), times=obs.time,
                                  groups=obs.frame["record"].to_numpy(str), inner_members=spec.inner_members,

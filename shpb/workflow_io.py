@@ -268,7 +268,7 @@ def _semantic_errors(config: Mapping, base: Path) -> list[str]:
             if abs(np.sum(1.0 / alphas) - 1.0) > 1e-6:
                 errors.append(f"{where}.esmda.alphas: sum of 1/alpha must be 1 (got {np.sum(1.0 / alphas):.6g})")
         if method == "emulated_esmda":
-            inner = (exp.get("emulated") or {}).get("inner_members", 400)
+            inner = exp["emulated"]["inner_members"]  # the schema's default is filled in before these checks
             if inner < exp.get("ensemble_size", 0):
                 errors.append(f"{where}.emulated.inner_members: {inner} is smaller than ensemble_size "
                               f"{exp['ensemble_size']} (the next ensemble is drawn from the inner ES-MDA's members)")
