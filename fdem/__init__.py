@@ -5,7 +5,7 @@ Public API: Material, Body (inputs); JointParams, ContactParams, build_model, st
 """
 from .body import Body, Material
 from .model import ContactParams, JointParams, Model, build_model, stable_time_step
-from .solver import Result, TractionBC, VelocityBC, run
+from .solver import Result, Snapshot, TractionBC, VelocityBC, run
 
 __all__ = ["Body", "Material", "ContactParams", "JointParams", "Model", "build_model",
-           "stable_time_step", "Result", "TractionBC", "VelocityBC", "run"]
+           "stable_time_step", "Result", "Snapshot", "TractionBC", "VelocityBC", "run"]

@@ -66,18 +66,39 @@ def _apply_velocity_bc(v, mass, vel_nodes, vel_dir, vel_hist, hv):
 
 
 @njit(cache=True)
+def _snapshot(x, Dmax, broken, out_x, out_D):
+    """Copy the coordinates and each joint's damage (larger of its two Gauss points, 1 if broken)."""
+    for i in range(x.shape[0]):
+        out_x[i, 0] = x[i, 0]
+        out_x[i, 1] = x[i, 1]
+    for j in range(Dmax.shape[0]):
+        d = Dmax[j, 0] if Dmax[j, 0] > Dmax[j, 1] else Dmax[j, 1]
+        out_D[j] = 1.0 if (broken[j] or d > 1.0) else d
+
+
+@njit(cache=True)
 def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
              jn, jarea, kn, kt, ft, fs, dn, dtm, tanphi, jedges, sa, sb, sc, Dmax, broken, jrate,
              edges, edge_tri, edge_active, edge_dlim, edge_thick, tri_edges, edge_joint,
              node_body, node_vertex, node_tri, node_thick, body_fracturable, n_bodies,
-             p_c, mu_c, buffer, use_contact,
+             p_c, mu_tab, buffer, use_contact,
              vel_nodes, vel_dir, vel_hist, tr_nodes, tr_dir, tr_area, tr_imp, tr_hist,
              hist_ptr, hist_t, hist_v, alpha_mass,
              eg_ptr, eg_el, ng_ptr, ng_nodes, x0,
              dt, n_steps, sample_every,
              out_t, out_energy, out_bforce, out_stress, out_nodes, out_broken, out_pen,
-             energy_guard):
+             energy_guard, j_onset, j_break, snap_steps, snap_x, snap_D, track, peak_x, peak_D,
+             peak_info):
     """Advance the model n_steps steps of size dt from t = 0 and record samples.
+
+    Fracture record: j_onset[j] / j_break[j] receive the time [s] at which joint j first reached its
+    strength (damage > 0) and broke (-1 if never). Snapshots: at the steps listed (ascending) in
+    snap_steps the deformed coordinates go to snap_x[k] and each joint's damage max(D) (1 once broken)
+    to snap_D[k]. track = (body, direction, sign) with body >= 0 keeps a snapshot of the sampled state
+    where sign * (contact force on that body) is largest (the peak of a force curve) in peak_x /
+    peak_D, with peak_info = (time, force, step, drop, frozen, floor): with drop > 0 the search stops
+    once the force has fallen below (1 - drop) x its running maximum, that maximum being above floor
+    [N] (the first peak, not a later one; the floor keeps noise before the load arrives out).
 
     Returns (status, samples written, steps done, energy state (8,), contact rebuilds).
     """
@@ -89,8 +110,13 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
     newly = np.empty(max(jn.shape[0], 1), np.int64)
     newly_dam = np.empty(max(jn.shape[0], 1), np.int64)
     jdif = np.ones((jn.shape[0], 2))
+    slip_p = np.zeros((jn.shape[0], 2))
+    kappa = np.zeros((jn.shape[0], 2))
     bforce = np.zeros((n_bodies, 2))
-    in_contact = np.zeros(n, np.bool_)
+    contact_edge = -np.ones(n, np.int64)
+    contact_d = np.zeros(n)
+    stick_edge = -np.ones(n, np.int64)
+    stick_u = np.zeros((n, 2))
     E = np.zeros(8)
     # Contact state
     snodes = surface_nodes(edges, edge_active, n)
@@ -115,11 +141,12 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
         E[7] += _apply_velocity_bc(v, mass, vel_nodes, vel_dir, vel_hist, hv)
     Us, Pd = triangle_forces(x, v, tri, dminv, vol0, lam, mu, eta, f)
     Psi, dis, nnew, ndam = joint_forces(x, v, jn, jarea, kn, kt, ft, fs, dn, dtm, tanphi, sa, sb,
-                                        sc, Dmax, broken, f, newly, newly_dam, jrate, jdif)
-    Uc, Pf, pen = contact_forces(x, v, inv_mass, pair_node, pair_edge, pair_node.shape[0],
+                                        sc, Dmax, broken, f, newly, newly_dam, jrate, jdif, slip_p,
+                                        kappa)
+    Uc, Pf, pen = contact_forces(x, v, pair_node, pair_edge, pair_node.shape[0],
                                  node_normal, edges, edge_tri, edge_joint, broken, Dmax, edge_dlim, edge_thick, node_thick, node_body,
-                                 node_tri, tri, node_vertex, body_fracturable, p_c, mu_c, dt, f, bforce,
-                                 in_contact)
+                                 node_tri, tri, node_vertex, body_fracturable, p_c, mu_tab, dt, f, bforce,
+                                 contact_edge, contact_d, stick_edge, stick_u)
     tr_F = np.zeros(tr_nodes.shape[0])
     for k in range(tr_nodes.shape[0]):
         nn = tr_nodes[k]
@@ -128,6 +155,7 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
         f[nn, d] += F
         tr_F[k] = F
     scale_max = 0.0
+    isnap = 0
     ns = 0
     status = STATUS_OK
     step = 0
@@ -175,8 +203,13 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
             bforce[:, :] = 0.0
             Us, Pd = triangle_forces(x, v, tri, dminv, vol0, lam, mu, eta, f)
             Psi, dis, nnew, ndam = joint_forces(x, v, jn, jarea, kn, kt, ft, fs, dn, dtm, tanphi, sa,
-                                                sb, sc, Dmax, broken, f, newly, newly_dam, jrate, jdif)
+                                                sb, sc, Dmax, broken, f, newly, newly_dam, jrate, jdif,
+                                                slip_p, kappa)
             E[4] += dis
+            for k in range(ndam):
+                j_onset[newly_dam[k]] = t
+            for k in range(nnew):
+                j_break[newly[k]] = t
             # A joint that starts to soften exposes all edges of its two triangles to contact while
             # they still fit together, so no overlap can build up unseen before the faces part.
             for k in range(ndam):
@@ -193,13 +226,13 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
                     if not edge_active[ed]:
                         edge_active[ed] = True
                         pending_faces = True
-            Uc, Pf, pen = contact_forces(x, v, inv_mass, pair_node, pair_edge, pair_node.shape[0],
+            Uc, Pf, pen = contact_forces(x, v, pair_node, pair_edge, pair_node.shape[0],
                                          node_normal, edges, edge_tri, edge_joint, broken, Dmax, edge_dlim, edge_thick, node_thick,
                                          node_body, node_tri, tri, node_vertex, body_fracturable,
-                                         p_c, mu_c, dt, f, bforce, in_contact)
+                                         p_c, mu_tab, dt, f, bforce, contact_edge, contact_d, stick_edge, stick_u)
             if pen > max_pen:
                 max_pen = pen
-            E[6] += Pf * dt
+            E[6] += Pf
             if nh > 0:
                 _hist_eval(hist_ptr, hist_t, hist_v, cursor, t, hv)
             # Work of the boundary tractions over the drift: trapezoidal in force, times the
@@ -228,6 +261,19 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
                 v[i, 1] += 0.5 * dt * f[i, 1] * inv_mass[i]
             if nh > 0:
                 E[7] += _apply_velocity_bc(v, mass, vel_nodes, vel_dir, vel_hist, hv)
+        while isnap < snap_steps.shape[0] and snap_steps[isnap] == step:
+            _snapshot(x, Dmax, broken, snap_x[isnap], snap_D[isnap])
+            isnap += 1
+        if step % sample_every == 0 and track[0] >= 0 and peak_info[4] == 0.0:
+            fpk = track[2] * bforce[track[0], track[1]]
+            if peak_info[2] < 0.0 or fpk > peak_info[1]:
+                peak_info[0] = t
+                peak_info[1] = fpk
+                peak_info[2] = step
+                _snapshot(x, Dmax, broken, peak_x, peak_D)
+            elif (peak_info[3] > 0.0 and peak_info[1] > peak_info[5]
+                  and fpk < (1.0 - peak_info[3]) * peak_info[1]):
+                peak_info[4] = 1.0
         if step % sample_every == 0 and ns < out_t.shape[0]:
             KE = 0.0
             for i in range(n):

@@ -87,24 +87,41 @@ class ContactParams:
     """Penalty contact: penalty [Pa] (force = penalty * contact width * penetration), Coulomb
     friction coefficient, and the neighbour-search buffer [m] (None: 0.3 x the smallest surface
     triangle altitude). pair_penalty overrides the penalty for given body pairs,
-    {(body_a, body_b): penalty}, e.g. a compliant seating layer between a bar and the specimen."""
+    {(body_a, body_b): penalty}, e.g. a compliant seating layer between a bar and the specimen.
+    pair_friction overrides the friction coefficient the same way; (body, body) is the friction of
+    that body's own crack faces once its joints have broken, which is a property of the fractured
+    rock, not of the bar-specimen interface."""
 
     penalty: float
     friction: float = 0.0
     buffer: float | None = None
     pair_penalty: dict = field(default_factory=dict)
+    pair_friction: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if not (np.isfinite(self.friction) and self.friction >= 0):
+            raise ValueError(f"contact friction must be finite and >= 0, got {self.friction!r}")
 
     def table(self, body_names) -> np.ndarray:
         """Symmetric per-body-pair penalty table [Pa]."""
-        t = np.full((len(body_names), len(body_names)), float(self.penalty))
-        for (a, b), val in self.pair_penalty.items():
-            if a not in body_names or b not in body_names:
-                raise KeyError(f"pair_penalty names unknown bodies {(a, b)}; bodies are {body_names}")
-            if not val > 0:
-                raise ValueError(f"pair penalty for {(a, b)} must be > 0 Pa, got {val}")
-            i, j = body_names.index(a), body_names.index(b)
-            t[i, j] = t[j, i] = float(val)
-        return t
+        return _pair_table(body_names, self.penalty, self.pair_penalty, "pair penalty", positive=True)
+
+    def friction_table(self, body_names) -> np.ndarray:
+        """Symmetric per-body-pair Coulomb friction coefficients [-]."""
+        return _pair_table(body_names, self.friction, self.pair_friction, "pair friction", positive=False)
+
+
+def _pair_table(body_names, default, pairs, what, positive) -> np.ndarray:
+    t = np.full((len(body_names), len(body_names)), float(default))
+    for (a, b), val in pairs.items():
+        if a not in body_names or b not in body_names:
+            raise KeyError(f"{what} names unknown bodies {(a, b)}; bodies are {body_names}")
+        ok = np.isfinite(val) and (val > 0 if positive else val >= 0)
+        if not ok:
+            raise ValueError(f"{what} for {(a, b)} must be {'> 0' if positive else '>= 0'}, got {val}")
+        i, j = body_names.index(a), body_names.index(b)
+        t[i, j] = t[j, i] = float(val)
+    return t
 
 
 @dataclass

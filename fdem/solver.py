@@ -39,6 +39,16 @@ class TractionBC:
 
 
 @dataclass
+class Snapshot:
+    """State of the model at one time: deformed coordinates x (n_nodes, 2) [m] and each joint's
+    damage D (n_joints,) in [0, 1] (1 = broken)."""
+
+    time: float
+    x: np.ndarray
+    D: np.ndarray
+
+
+@dataclass
 class Result:
     """Sampled histories of a run. Stresses [Pa] are area-weighted means of Cauchy stress
     (sxx, syy, sxy) over element sets; node probes are mean (ux, uy, vx, vy); body forces are the
@@ -63,6 +73,10 @@ class Result:
     Dmax: np.ndarray
     joint_broken: np.ndarray
     body_names: list = field(default_factory=list)
+    joint_onset_t: np.ndarray | None = None
+    joint_break_t: np.ndarray | None = None
+    snapshots: list = field(default_factory=list)
+    peak: Snapshot | None = None
 
     def energy_balance_error(self) -> np.ndarray:
         """(sum of stored + dissipated energies - initial energy - external work), per sample [J]."""
@@ -123,7 +137,8 @@ def _resolve(sets, probes, kind):
 
 def run(model: Model, t_end: float, *, dt: float | None = None, safety: float = DEFAULT_SAFETY,
         sample_dt: float | None = None, velocity_bcs=(), traction_bcs=(), stress_probes=(),
-        node_probes=(), x_init=None, v_init=None, energy_guard: float = 10.0) -> Result:
+        node_probes=(), x_init=None, v_init=None, energy_guard: float = 10.0,
+        snapshot_times=(), track_peak=None, peak_drop: float = 0.0, peak_floor: float = 0.0) -> Result:
     """Run an explicit dynamic simulation from t = 0 to t_end [s].
 
     dt: time step (default: stable_time_step(model, safety)); sample_dt: output interval
@@ -131,6 +146,14 @@ def run(model: Model, t_end: float, *, dt: float | None = None, safety: float = 
     model, or (name, indices) pairs. energy_guard: the run stops with status 'failed' when the
     energy balance error exceeds this multiple of (external work + initial energy), the signature
     of a numerical instability. The model itself is not modified.
+    snapshot_times: times [s] at which the deformed mesh and the joint damage are kept (each taken at
+    the first step at or after it; Result.snapshots). track_peak = (body name, direction, sign): keep
+    the sampled state at which sign * (contact force on that body along direction) is largest
+    (Result.peak), e.g. the peak of the transmitted force; peak_drop > 0 keeps the first peak: the
+    search stops once the force has fallen by that fraction below its running maximum, once that
+    maximum exceeds peak_floor [N] (a specimen that splits and then carries load again has its
+    failure peak first). Result.joint_onset_t / joint_break_t give,
+    per joint, when it first reached its strength and when it broke (-1: never).
     """
     if not (np.isfinite(t_end) and t_end > 0):
         raise ValueError(f"t_end must be > 0 s, got {t_end}")
@@ -193,6 +216,23 @@ def run(model: Model, t_end: float, *, dt: float | None = None, safety: float = 
             np.min(model.edge_dlim[model.edge_active0]) * 2.0)
     sa, sb, sc = model.softening
     inv_mass = 1.0 / model.mass
+    snap_t = np.sort(np.asarray(snapshot_times, float).reshape(-1))
+    if snap_t.size and not (np.all(np.isfinite(snap_t)) and snap_t[0] >= 0.0):
+        raise ValueError(f"snapshot times must be finite and >= 0 s, got {snapshot_times!r}")
+    snap_steps = np.minimum(np.ceil(snap_t / dt - 1e-9), n_steps).astype(np.int64)
+    snap_x = np.zeros((snap_steps.size, model.n_nodes, 2))
+    snap_D = np.zeros((snap_steps.size, model.n_joints))
+    track = np.array([-1, 0, 1], np.int64)
+    if track_peak is not None:
+        name, direction, sign = track_peak
+        track[:] = (model.body_index(name), int(direction), 1 if sign >= 0 else -1)
+    peak_x = np.zeros((model.n_nodes, 2))
+    peak_D = np.zeros(model.n_joints)
+    if not (0.0 <= peak_drop < 1.0):
+        raise ValueError(f"peak_drop must be in [0, 1), got {peak_drop}")
+    peak_info = np.array([0.0, 0.0, -1.0, float(peak_drop), 0.0, float(peak_floor)])
+    j_onset = -np.ones(model.n_joints)
+    j_break = -np.ones(model.n_joints)
 
     t0 = time.perf_counter()
     status, ns, steps, E, rebuilds = run_loop(
@@ -203,14 +243,15 @@ def run(model: Model, t_end: float, *, dt: float | None = None, safety: float = 
         model.node_body, model.node_vertex, model.node_tri, model.node_thick,
         model.body_fracturable, nb,
         c.table(model.body_names) if use_contact else np.zeros((nb, nb)),
-        float(c.friction if use_contact else 0.0), float(buffer), use_contact,
+        c.friction_table(model.body_names) if use_contact else np.zeros((nb, nb)), float(buffer), use_contact,
         cat(vel_nodes, np.int64), cat(vel_dir, np.int64), cat(vel_hist, np.int64),
         cat(tr_nodes, np.int64), cat(tr_dir, np.int64), cat(tr_area, float), cat(tr_imp, float),
         cat(tr_hist, np.int64), hist_ptr, hist_t, hist_v, float(model.alpha_mass),
         eg_ptr, eg_el, ng_ptr, ng_nodes, model.x0,
         float(dt), n_steps, sample_every,
         out_t, out_energy, out_bforce, out_stress, out_nodes, out_broken, out_pen,
-        float(energy_guard))
+        float(energy_guard), j_onset, j_break, snap_steps, snap_x, snap_D, track, peak_x, peak_D,
+        peak_info)
     wall = time.perf_counter() - t0
     msg = {STATUS_OK: "completed",
            STATUS_NONFINITE: f"non-finite state at t = {out_t[max(ns - 1, 0)]:.3e} s (numerical instability)",
@@ -223,4 +264,7 @@ def run(model: Model, t_end: float, *, dt: float | None = None, safety: float = 
         penetration=out_pen[:ns], status="ok" if status == STATUS_OK else "failed", message=msg,
         dt=float(dt), steps=int(steps), wall_s=wall, updates_per_s=updates / wall if wall > 0 else 0.0,
         contact_rebuilds=int(rebuilds), x=x, v=v, Dmax=Dmax, joint_broken=broken,
-        body_names=list(model.body_names))
+        body_names=list(model.body_names), joint_onset_t=j_onset, joint_break_t=j_break,
+        snapshots=[Snapshot(float(min(k, steps) * dt), snap_x[i], snap_D[i])
+                   for i, k in enumerate(snap_steps) if k <= steps],
+        peak=(Snapshot(float(peak_info[0]), peak_x, peak_D) if peak_info[2] >= 0 else None))

@@ -22,6 +22,18 @@ def _parse_params(items):
     return out
 
 
+def _parse_snapshots(text):
+    if text is None:
+        return None
+    text = text.strip()
+    try:
+        if "," not in text and "." not in text and "e" not in text.lower():
+            return int(text)
+        return [float(t) for t in text.split(",") if t.strip()]
+    except ValueError:
+        raise ValueError(f"--snapshots expects a count N or comma-separated times in s, got {text!r}") from None
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m shpb", description=__doc__)
     sub = ap.add_subparsers(dest="command", required=True)
@@ -35,13 +47,18 @@ def main(argv=None) -> int:
                      "reaches the specimen [s]")
     sim.add_argument("--sample-dt", type=float, default=0.5e-6, help="output interval [s]")
     sim.add_argument("--out", required=True, help="output folder")
+    sim.add_argument("--snapshots", metavar="N|T1,T2,...",
+                     help="write the mesh with joint damage (VTK) at N times spread over the window or at "
+                     "the given times [s] after the wave reaches the specimen, plus the failure peak and "
+                     "the window's end with PNG damage maps, to OUT/snapshots/")
     args = ap.parse_args(argv)
 
     from .simulate import simulate
     try:
         params = _parse_params(args.param)
         out = simulate(args.geometry, args.preset, params=params, record=args.record,
-                       out_dir=args.out, t_end=args.t_end, sample_dt=args.sample_dt)
+                       out_dir=args.out, t_end=args.t_end, sample_dt=args.sample_dt,
+                       snapshots=_parse_snapshots(args.snapshots))
     except (ValueError, FileNotFoundError, KeyError) as exc:
         print(f"python -m shpb simulate: error: {exc}", file=sys.stderr)
         return 2

@@ -232,7 +232,7 @@ def brazilian_disc(preset: str | Preset = "standard", *,
                    incident_gauge_m: float | None = None, transmission_gauge_m: float | None = None,
                    incident_length_m: float | None = None, transmission_length_m: float | None = None,
                    enforce_window: bool = True, flat_half_angle_deg: float = 0.0,
-                   face_gap_m: float = 0.0) -> Geometry:
+                   face_gap_m: float = 0.0, bar_face_h_m: float | None = None) -> Geometry:
     """Brazilian disc between an incident and a transmission bar (the paper's set-up), 2D along x.
 
     diameter_m, thickness_m: disc diameter and real thickness [m] (the plane-stress thickness).
@@ -248,6 +248,9 @@ def brazilian_disc(preset: str | Preset = "standard", *,
         half-angle alpha (chord x = +-R cos(alpha)); the bars then touch the flats.
     face_gap_m: initial gap between the incident bar's face and the specimen [m] (``face_gap`` effect);
         the gauge distance stays measured from the bar's face.
+    bar_face_h_m: with flats, segment length of the bars' end faces where they meet them (|y| <=
+        1.5 R sin(alpha)) [m] (default: half the specimen's element size, so that each specimen edge on a loaded flat is
+        pressed by bar nodes, not by one bar node every few specimen elements).
     """
     p = get_preset(preset)
     _check_positive(diameter_m=diameter_m, thickness_m=thickness_m, bar_diameter_m=bar_diameter_m,
@@ -277,7 +280,10 @@ def brazilian_disc(preset: str | Preset = "standard", *,
                     element_sets={"centre": centre})
 
     incident, transmission, gauge_x = _bars(p, bar, bar_diameter_m, x_front - _gap(face_gap_m), x_back,
-                                            L_i, L_t, d_i, d_t, odd_face=True)
+                                            L_i, L_t, d_i, d_t, odd_face=True,
+                                            face_h=None if alpha == 0.0 else
+                                            (0.5 * p.specimen_h_m if bar_face_h_m is None else bar_face_h_m,
+                                             1.5 * R * np.sin(alpha)))
     return Geometry(
         kind="brazilian_disc", preset=p.name, bodies=[incident, specimen, transmission],
         incident_bar=incident.name, specimen=specimen.name, transmission_bar=transmission.name,
@@ -559,17 +565,41 @@ def _split(height: float, h: float, odd: bool) -> np.ndarray:
     return y
 
 
-def _mesh_bar(length: float, height: float, p: Preset, odd_face: bool) -> tuple[np.ndarray, np.ndarray]:
+def _split_face(height: float, h_coarse: float, h_fine: float, y_fine: float) -> np.ndarray:
+    """Face stations: segments of about h_fine on |y| <= y_fine (an odd number, so that y = 0 falls
+    inside a segment), about h_coarse beyond."""
+    y_fine = min(y_fine, 0.5 * height)
+    n = max(1, int(round(2.0 * y_fine / h_fine)))
+    n += 1 - n % 2
+    mid = np.linspace(-y_fine, y_fine, n + 1)
+    rest = 0.5 * height - y_fine
+    if rest <= 0.25 * h_fine:
+        mid[0], mid[-1] = -0.5 * height, 0.5 * height
+        return mid
+    m = max(1, int(round(rest / h_coarse)))
+    out = np.linspace(y_fine, 0.5 * height, m + 1)[1:]
+    y = np.concatenate([-out[::-1], mid, out])
+    y[0], y[-1] = -0.5 * height, 0.5 * height
+    return y
+
+
+def _mesh_bar(length: float, height: float, p: Preset, odd_face: bool,
+              face_h: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Bar strip in local coordinates (s, y): s in [0, length] is the distance from the specimen face.
 
     Refined to ``bar_near_h_m`` near s = 0 and graded to ``bar_h_m`` (``_bar_size``). With ``odd_face`` the
     face s = 0 is split into an odd number of segments so that y = 0 (a disc's contact point) falls
-    inside an edge, not on a node.
+    inside an edge, not on a node. ``face_h = (h, y_f)``: segments of about h on |y| <= y_f of the face
+    (default: ``bar_near_h_m`` everywhere); the mesh grades from them.
+    Returns (nodes, triangles, indices of the face nodes).
     """
     st = _graded_stations(length, p)
-    y_face = _split(height, p.bar_near_h_m, odd_face)
-    y_end = _split(height, float(_bar_size(np.array([length]), p)[0]), False)
     y0, y1 = -0.5 * height, 0.5 * height
+    if face_h is None:
+        y_face = _split(height, p.bar_near_h_m, odd_face)
+    else:
+        y_face = _split_face(height, p.bar_near_h_m, min(face_h[0], p.bar_near_h_m), face_h[1])
+    y_end = _split(height, float(_bar_size(np.array([length]), p)[0]), False)
     v = np.concatenate([
         np.column_stack([st[:-1], np.full(len(st) - 1, y0)]),               # bottom, s increasing
         np.column_stack([np.full(len(y_end) - 1, length), y_end[:-1]]),      # far end, upwards
@@ -583,36 +613,51 @@ def _mesh_bar(length: float, height: float, p: Preset, odd_face: bool) -> tuple[
     for _ in range(6):
         nodes, tris = out["vertices"], out["triangles"]
         target = p.max_area(_bar_size(nodes[tris][:, :, 0], p).min(axis=1))
+        if face_h is not None:
+            target = np.minimum(target, p.max_area(_face_size(nodes[tris], p, face_h[0], face_h[1])))
         if np.all(_triangle_areas(nodes, tris) <= target):
             break
         out = triangle.triangulate({"vertices": nodes, "segments": out["segments"], "triangles": tris,
                                     "triangle_max_area": target}, f"rpq{MIN_ANGLE_DEG:g}YaQ")
-    return _ccw(out["vertices"], out["triangles"])
+    nodes, tris = _ccw(out["vertices"], out["triangles"])
+    return nodes, tris, np.flatnonzero(nodes[:, 0] == 0.0)
+
+
+def _face_size(tri_nodes: np.ndarray, p: Preset, h_face: float, y_fine: float) -> np.ndarray:
+    """Element size near a finely split face: the face's segment length on it (|y| <= y_fine),
+    growing with the distance from that stretch (twice as fast) so that it does not force the whole
+    bar end to its size."""
+    s_min = np.maximum(tri_nodes[:, :, 0].min(axis=1), 0.0)
+    y_out = np.maximum(np.abs(tri_nodes[:, :, 1]).min(axis=1) - y_fine, 0.0)
+    return h_face + 2.0 * np.maximum(s_min, y_out)
 
 
 def _bars(p: Preset, bar: Material, D: float, x_front: float, x_back: float, L_i: float, L_t: float,
-          d_i: float, d_t: float, odd_face: bool) -> tuple[Body, Body, tuple[float, float]]:
+          d_i: float, d_t: float, odd_face: bool,
+          face_h: tuple[float, float] | None = None) -> tuple[Body, Body, tuple[float, float]]:
     """Incident bar on [x_front - L_i, x_front] and transmission bar on [x_back, x_back + L_t]."""
     t = bar_thickness(D)
     # Incident bar: x = x_front - s (a mirror image, so reverse the triangles to keep them CCW).
-    s_nodes, tris = _mesh_bar(L_i, D, p, odd_face)
+    s_nodes, tris, face = _mesh_bar(L_i, D, p, odd_face, face_h)
     x_load = x_front - L_i
     nodes = np.column_stack([x_front - s_nodes[:, 0], s_nodes[:, 1]])
     nodes[s_nodes[:, 0] == L_i, 0] = x_load
+    nodes[face, 0] = x_front
     tris = tris[:, [0, 2, 1]].copy()
     xg_i = x_front - d_i
     incident = Body("incident_bar", nodes, tris, bar, thickness=t,
                     node_sets={"load_end": np.flatnonzero(nodes[:, 0] == x_load),
-                               "specimen_face": np.flatnonzero(nodes[:, 0] == x_front)},
+                               "specimen_face": face},
                     element_sets={"gauge": _gauge_set(nodes, tris, xg_i, float(_bar_size(np.array([d_i]), p)[0]))})
     # Transmission bar: x = x_back + s.
-    s_nodes, tris = _mesh_bar(L_t, D, p, odd_face)
+    s_nodes, tris, face = _mesh_bar(L_t, D, p, odd_face, face_h)
     x_end = x_back + L_t
     nodes = np.column_stack([x_back + s_nodes[:, 0], s_nodes[:, 1]])
     nodes[s_nodes[:, 0] == L_t, 0] = x_end
+    nodes[face, 0] = x_back
     xg_t = x_back + d_t
     transmission = Body("transmission_bar", nodes, tris, bar, thickness=t,
-                        node_sets={"specimen_face": np.flatnonzero(nodes[:, 0] == x_back),
+                        node_sets={"specimen_face": face,
                                    "free_end": np.flatnonzero(nodes[:, 0] == x_end)},
                         element_sets={"gauge": _gauge_set(nodes, tris, xg_t,
                                                           float(_bar_size(np.array([d_t]), p)[0]))})

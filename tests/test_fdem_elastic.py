@@ -27,7 +27,8 @@ def _forces(model, x):
     Psi, dis, _, _ = joint_forces(x, np.zeros_like(x), model.jn, model.jarea, model.kn, model.kt, model.ft, model.fs,
                                model.dn, model.dt, model.tanphi, *model.softening, Dmax, broken,
                                f, np.zeros(model.n_joints, np.int64), np.zeros(model.n_joints, np.int64),
-                                  model.jrate, np.ones((model.n_joints, 2)))
+                                  model.jrate, np.ones((model.n_joints, 2)), np.zeros((model.n_joints, 2)),
+                                  np.zeros((model.n_joints, 2)))
     return f, U, Psi
 
 

@@ -80,6 +80,10 @@ class _Joint:
         self.broken = np.zeros(1, np.bool_)
         self.nB = self.model.jn[0, 2:]
         self.nA = self.model.jn[0, :2]
+        self.slip_p = np.zeros((1, 2))
+        self.kappa = np.zeros((1, 2))
+        self.dissipated = 0.0
+        self.stored = 0.0
 
     def traction(self, o, s):
         """Mean (normal, shear) traction [Pa] on side B for a uniform gap (o, s)."""
@@ -90,10 +94,11 @@ class _Joint:
         n = np.array([t[1], -t[0]])
         x[self.nB] += o * n + s * t
         f = np.zeros_like(x)
-        joint_forces(x, np.zeros_like(x), self.m.jn, self.m.jarea, self.m.kn, self.m.kt, self.m.ft, self.m.fs,
+        self.stored, diss, _, _ = joint_forces(x, np.zeros_like(x), self.m.jn, self.m.jarea, self.m.kn, self.m.kt, self.m.ft, self.m.fs,
                      self.m.dn, self.m.dt, self.m.tanphi, *self.m.softening, self.Dmax,
                      self.broken, f, np.zeros(1, np.int64), np.zeros(1, np.int64),
-                     self.m.jrate, np.ones((1, 2)))
+                     self.m.jrate, np.ones((1, 2)), self.slip_p, self.kappa)
+        self.dissipated += diss
         F = -f[self.nB].sum(axis=0) / self.m.jarea[0]
         return float(F @ n), float(F @ t)
 
@@ -113,10 +118,49 @@ def test_opening_past_peak_reduces_shear_capacity_by_coupling_rule():
     taus = [j.traction(o1, s)[1] for s in np.linspace(0.0, 1.0 * s_p, 50)]
     assert max(np.abs(taus)) == pytest.approx(jp.sigma_t * zeta, rel=1e-9)
     assert max(np.abs(taus)) < 0.6 * jp.sigma_t
-    # Slipping further grows the coupled damage D = sqrt(D1^2 + (excess slip / delta_t)^2).
+    # Slipping further grows the coupled damage D = sqrt(D1^2 + (kappa / delta_t)^2), kappa the slip
+    # beyond the elastic branch (plastic slip: s minus the elastic slip tau / k_t).
     ds = 0.2 * jp.delta_t_max
-    j.traction(o1, s_p + ds)
-    assert j.Dmax[0, 0] == pytest.approx(np.hypot(D1, 0.2), rel=1e-9)
+    _, tau = j.traction(o1, s_p + ds)
+    kappa = s_p + ds - tau / j.m.kt[0]
+    assert j.kappa[0] == pytest.approx([kappa, kappa], rel=1e-9)
+    assert j.Dmax[0, 0] == pytest.approx(np.hypot(D1, kappa / jp.delta_t_max), rel=1e-9)
+    # kappa exceeds ds by the elastic slip given up, (1 - zeta) sigma_t / k_t: 0.3 % of ds here
+    assert kappa / jp.delta_t_max == pytest.approx(0.2, rel=5e-3)
+
+
+def test_shear_slip_is_plastic_so_a_compression_slip_cycle_dissipates():
+    """Slide out under light compression, squeeze, slide back under strong compression, release. A
+    secant shear cap that follows the Mohr-Coulomb capacity, tau = f_s(sigma_c) sign(s), would push the
+    joint back with the strong-compression capacity after resisting with the light one, returning
+    more work than it took; plastic slip resists in both directions."""
+    jp = JointParams(sigma_n=8e6, sigma_t=20e6, E_n=60.0, E_t=3000.0, friction_angle_deg=50.0)
+    j = _Joint(jp)
+    kn = j.m.kn[0]
+    o_hi, o_lo = -60e6 / kn, -1e6 / kn
+    s_max = 0.05 * jp.delta_t_max
+    path = ([(o_lo * u, 0.0) for u in np.linspace(0, 1, 20)]
+            + [(o_lo, s) for s in np.linspace(0, s_max, 200)]
+            + [(o_lo + (o_hi - o_lo) * u, s_max) for u in np.linspace(0, 1, 50)]
+            + [(o_hi, s) for s in np.linspace(s_max, 0, 200)]
+            + [(o_hi + (o_lo - o_hi) * u, 0.0) for u in np.linspace(0, 1, 50)])
+    work = 0.0
+    prev_t, prev_g = j.traction(*path[0]), np.array(path[0])
+    stored0, diss0 = j.stored, j.dissipated
+    for g in path[1:]:
+        t = j.traction(*g)
+        # work done on the joint: mean traction x gap increment (per unit area)
+        work += 0.5 * (np.array(t) + np.array(prev_t)) @ (np.array(g) - prev_g)
+        prev_t, prev_g = t, np.array(g)
+    area = j.m.jarea[0]
+    dissipated = (j.dissipated - diss0) / area
+    # all the work went into dissipation (the path ends where it started; the residual elastic slip
+    # energy is what the joint still stores)
+    assert work == pytest.approx(dissipated + (j.stored - stored0) / area, rel=0.01)
+    # ... and the joint took work in both directions: sliding back under 60 MPa compression costs the
+    # frictional capacity f = sigma_t + tan(phi) 60 MPa (the secant cap would have returned it)
+    f_hi = jp.sigma_t + np.tan(np.radians(50.0)) * 60e6
+    assert work > 0.8 * f_hi * s_max
 
 
 def test_unloading_and_reloading_does_not_restore_strength():
@@ -171,7 +215,7 @@ def test_rate_dependent_strength_raises_the_peak_by_the_DIF_and_keeps_the_fractu
         jdif = j.jdif
         joint_forces(x, vel, m.jn, m.jarea, m.kn, m.kt, m.ft, m.fs, m.dn, m.dt, m.tanphi,
                      *m.softening, j.Dmax, j.broken, f, np.zeros(1, np.int64), np.zeros(1, np.int64),
-                     m.jrate, jdif)
+                     m.jrate, jdif, j.slip_p, j.kappa)
         return float((-f[j.nB].sum(axis=0) / m.jarea[0]) @ n)
 
     j.jdif = np.ones((1, 2))

@@ -1,0 +1,100 @@
+"""Pictures of a fracture: the deformed mesh with joint damage as VTK (ParaView) and a PNG damage map.
+
+Written by ``python -m shpb simulate ... --snapshots`` and by the workflow's forecast run. Each VTK file
+(``.vtu``, written with meshio) holds every triangle of the model at the snapshot's coordinates, with
+cell data ``body`` (index into the model's bodies) and ``damage`` (a triangle's largest joint damage),
+and every joint as a line cell between its first pair of nodes with ``damage`` in [0, 1] and
+``broken`` (0/1); point data ``displacement`` [m]. Files are written to a temporary name and renamed.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+
+def _replace_into(path: Path, write) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}-", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def triangle_damage(model, D: np.ndarray) -> np.ndarray:
+    """Largest damage of the joints on each triangle's edges (0 for triangles without joints)."""
+    out = np.zeros(model.n_triangles)
+    if model.n_joints:
+        tA = model.edge_tri[model.jedges[:, 0]]
+        tB = model.edge_tri[model.jedges[:, 1]]
+        np.maximum.at(out, tA, D)
+        np.maximum.at(out, tB, D)
+    return out
+
+
+def write_vtk(path, model, snapshot) -> Path:
+    """The model at one snapshot as an unstructured VTK file (see module docstring)."""
+    import meshio
+
+    path = Path(path)
+    x = np.asarray(snapshot.x)
+    pts = np.column_stack([x, np.zeros(len(x))])
+    disp = np.column_stack([x - model.x0, np.zeros(len(x))])
+    D = np.clip(np.asarray(snapshot.D, float), 0.0, 1.0)
+    cells = [("triangle", model.tri)]
+    cell_data = {"body": [model.tri_body.astype(np.int32)], "damage": [triangle_damage(model, D)],
+                 "broken": [np.zeros(model.n_triangles, np.int32)]}
+    if model.n_joints:
+        cells.append(("line", model.jn[:, :2]))
+        cell_data["body"].append(model.j_body.astype(np.int32))
+        cell_data["damage"].append(D)
+        cell_data["broken"].append((D >= 1.0).astype(np.int32))
+    mesh = meshio.Mesh(pts, cells, point_data={"displacement": disp}, cell_data=cell_data)
+    _replace_into(path, lambda tmp: mesh.write(tmp, file_format="vtu"))
+    return path
+
+
+def damage_map(path, model, geometry, snapshot, title: str = "") -> Path:
+    """PNG of the specimen at one snapshot: deformed triangles, joints coloured by damage, broken joints
+    black, the bars' end faces for reference. Axes in mm, the specimen's frame."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.collections import LineCollection
+    from matplotlib.figure import Figure
+
+    path = Path(path)
+    x = np.asarray(snapshot.x) * 1e3
+    D = np.clip(np.asarray(snapshot.D, float), 0.0, 1.0)
+    spec = model.body_index(geometry.specimen)
+    fig = Figure(figsize=(6.4, 5.6))
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot(1, 1, 1)
+    for b, colour in ((model.body_index(geometry.incident_bar), "0.55"),
+                      (model.body_index(geometry.transmission_bar), "0.55"), (spec, "0.85")):
+        tris = model.tri[model.tri_body == b]
+        ax.triplot(x[:, 0], x[:, 1], tris, color=colour, lw=0.25)
+    sel = np.flatnonzero((model.j_body == spec) & (D > 0.0))
+    if sel.size:
+        segs = np.stack([x[model.jn[sel, 0]], x[model.jn[sel, 1]]], axis=1)
+        broken = D[sel] >= 1.0
+        lc = LineCollection(segs[~broken], array=D[sel][~broken], cmap="YlOrRd", linewidths=1.2)
+        lc.set_clim(0.0, 1.0)
+        ax.add_collection(lc)
+        ax.add_collection(LineCollection(segs[broken], colors="k", linewidths=1.8))
+        fig.colorbar(lc, ax=ax, label="joint damage D (black: broken)", shrink=0.8)
+    R = 0.5e3 * geometry.specimen_dims["diameter_m"]
+    half = 1.15 * max(R, 0.5e3 * geometry.specimen_dims.get("length_m", 0.0))
+    ax.set_xlim(-half, half)
+    ax.set_ylim(-1.15 * R, 1.15 * R)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [mm] (load axis)")
+    ax.set_ylabel("y [mm]")
+    ax.set_title(title, fontsize=9)
+    fig.tight_layout()
+    _replace_into(path, lambda tmp: fig.savefig(tmp, dpi=130, format="png"))
+    return path
