@@ -23,6 +23,12 @@ BAND_Y = 0.15
 PEAK_DROP = 0.15
 #: Specimen stress [Pa] below which a dip is noise before the load arrives, not a failure.
 PEAK_FLOOR_PA = 2e6
+#: A valid test: at least this share of the broken joints in the band at the peak, and the two loaded
+#: faces within this fraction of each other's force there.
+BAND_SHARE, BALANCE = 0.7, 0.10
+#: The Table 2 reference and two more points of the box (sigma_t [Pa], E_t [J/m^2]) at which the disc
+#: must fail as a Brazilian disc: weak and brittle, strong and tough.
+CHECK_POINTS = {"reference": (45e6, 500.0), "weak_brittle": (30e6, 300.0), "strong_tough": (50e6, 700.0)}
 
 
 @dataclass(frozen=True)
@@ -60,7 +66,16 @@ class FractureSummary:
         return (self.first_joint_xy is not None and abs(self.first_joint_xy[0]) < CENTRAL_X
                 and abs(self.first_joint_xy[1]) < CENTRAL_Y)
 
+    def checks(self) -> dict:
+        """The three Brazilian-test conditions (module docstring), each True or False."""
+        return {"starts_central": bool(self.starts_central),
+                "broken_along_diameter": bool(self.broken_at_peak > 0 and self.band_fraction_at_peak >= BAND_SHARE),
+                "faces_balanced": bool(abs(self.force_ratio_at_peak - 1.0) <= BALANCE)}
+
     def to_dict(self) -> dict:
+        return {"checks": self.checks(), **self._fields()}
+
+    def _fields(self) -> dict:
         return {
             "first_joint_xy_over_R": None if self.first_joint_xy is None else [float(v) for v in self.first_joint_xy],
             "first_joint_t_s": self.first_joint_t_s, "starts_central": bool(self.starts_central),
