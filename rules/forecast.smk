@@ -18,9 +18,16 @@ rule forecast:
     output:
         curve="results/{exp}/forecast/{record}/curve.csv",
         run="results/{exp}/forecast/{record}/run.json",
+        # fracture snapshots: VTK of the mesh with joint damage at four times, the failure peak and the
+        # window's end, PNG damage maps of the peak and the end (shpb.snapshots)
+        damage_peak=report("results/{exp}/forecast/{record}/snapshots/damage_peak.png", category="{exp}",
+                           caption="../report/damage_map.rst"),
+        damage_end=report("results/{exp}/forecast/{record}/snapshots/damage_end.png", category="{exp}",
+                          caption="../report/damage_map.rst"),
     log:
         "results/{exp}/forecast/{record}/simulate.log",
     params:
+        snapshots=4,
         sim=lambda wc: sim_settings(wc.exp),
         record_file=lambda wc: records(wc.exp)[wc.record],
         max_attempts=config["member_retries"] + 1,

@@ -98,3 +98,16 @@ def damage_map(path, model, geometry, snapshot, title: str = "") -> Path:
     fig.tight_layout()
     _replace_into(path, lambda tmp: fig.savefig(tmp, dpi=130, format="png"))
     return path
+
+
+def failure_card(path, text: str) -> Path:
+    """PNG that says a run left no picture and why (a failed forecast has no fracture to show)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    path = Path(path)
+    fig = Figure(figsize=(6.4, 2.0))
+    FigureCanvasAgg(fig)
+    fig.text(0.02, 0.5, text, fontsize=9, va="center", wrap=True)
+    _replace_into(path, lambda tmp: fig.savefig(tmp, dpi=100, format="png"))
+    return path

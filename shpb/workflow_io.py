@@ -349,7 +349,7 @@ def simulator_command(spec: str | Sequence[str] | None = None) -> list[str]:
 
 def simulate_argv(command: Sequence[str], *, geometry: str, preset: str, params: Mapping[str, float],
                   out_dir: str | Path, record: str | None = None, t_end: float | None = None,
-                  sample_dt: float | None = None) -> list[str]:
+                  sample_dt: float | None = None, snapshots: int | None = None) -> list[str]:
     """The argv of one simulation (the ``python -m shpb simulate`` contract)."""
     argv = list(command) + ["--geometry", geometry, "--preset", preset]
     if record:
@@ -360,6 +360,8 @@ def simulate_argv(command: Sequence[str], *, geometry: str, preset: str, params:
         argv += ["--t-end", repr(float(t_end))]
     if sample_dt is not None:
         argv += ["--sample-dt", repr(float(sample_dt))]
+    if snapshots is not None:
+        argv += ["--snapshots", str(int(snapshots))]
     return argv + ["--out", str(out_dir)]
 
 
@@ -377,7 +379,7 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
                curve_path: str | Path, run_path: str | Path, record: str | None = None,
                t_end: float | None = None, sample_dt: float | None = None, attempt: int = 1,
                max_attempts: int = 1, log_path: str | Path | None = None, extra_run: Mapping | None = None,
-               time_limit_s: float | None = None) -> dict:
+               time_limit_s: float | None = None, snapshots: int | None = None) -> dict:
     """Run one simulation and leave ``curve_path`` and ``run_path`` behind, atomically.
 
     Exit code 0: the simulator's ``curve.csv``/``run.json`` are moved into place. Exit code 3 (numerical
@@ -393,6 +395,9 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
     member that runs too long is dropped under the failed-member policy instead of being killed by
     Slurm on every attempt, which would stop the whole run.
 
+    ``snapshots``: a count of fracture snapshots (``--snapshots``); their folder is moved next to the
+    curve, replacing an older one, before the curve and run.json.
+
     Returns the ``run.json`` dict written.
     """
     curve_path, run_path = Path(curve_path), Path(run_path)
@@ -400,7 +405,7 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
     out.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=".sim-", dir=out))
     argv = simulate_argv(command, geometry=geometry, preset=preset, params=params, out_dir=tmp, record=record,
-                         t_end=t_end, sample_dt=sample_dt)
+                         t_end=t_end, sample_dt=sample_dt, snapshots=snapshots)
     t0 = time.perf_counter()
     try:
         try:
@@ -419,6 +424,9 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
         if proc.returncode == 0 and run_json.is_file() and curve_csv.is_file():
             run = read_json(run_json)
             run.update(extra)
+            if (tmp / "snapshots").is_dir():
+                shutil.rmtree(out / "snapshots", ignore_errors=True)
+                os.replace(tmp / "snapshots", out / "snapshots")
             os.replace(curve_csv, curve_path)
             atomic_write_json(run_path, _jsonable(run))
             return run
