@@ -28,9 +28,11 @@ def member_inputs(wc):
 
 
 rule member:
-    """One FDEM simulation. A numerical failure (exit code 3) or rejected parameters (2) leave a
-    failed run.json and an empty curve (the analysis drops the member with that reason); a crash is
-    retried (`member_retries`) and recorded as failed on the last attempt."""
+    """One FDEM simulation. A numerical failure (exit code 3) or the time limit leave a failed run.json
+    and an empty curve (the analysis drops the member with that reason); rejected arguments or a missing
+    input (exit code 2) fail the job with the simulator's message and leave nothing, so a re-run after
+    the fix simulates the member; a crash is retried (`member_retries`) and recorded as failed on the
+    last attempt."""
     input:
         unpack(member_inputs),
     output:

@@ -15,5 +15,6 @@ run = run_member(command=simulator_command(sim["command"]), geometry=sim["geomet
            snapshots=snakemake.params.snapshots)
 for png in (snakemake.output.damage_peak, snakemake.output.damage_end):
     if not Path(png).is_file():
-        failure_card(png, f"No fracture snapshot: the forecast run {run.get('status', 'failed')}: "
-                          f"{run.get('reason', '')}")
+        why = (f"the forecast run failed: {run.get('reason', '')}" if run.get("status") != "ok"
+               else f"the simulator ({sim['command']}) wrote no fracture snapshots")
+        failure_card(png, f"No fracture snapshot: {why}")

@@ -16,7 +16,7 @@ class TrapezoidPulse:
     """Particle-velocity pulse of the incident wave [m/s]: linear rise, plateau, linear fall [s].
 
     Defaults: the 5 m/s striker case of SHPB Brazilian tests on Kuru granite (Saksala 2013, read
-    off figures in ../shared/notes/reference-values.md): incident stress 115 MPa with rise 120 us,
+    off the figures of Saksala et al. 2013): incident stress 115 MPa with rise 120 us,
     plateau 45 us, fall 115 us; in the paper's steel bars (rho c = 7850 x 5048) 115 MPa is a particle
     velocity of 2.9 m/s. The paper's Figure 2 velocity boundary condition has the same trapezoid
     shape. (The 10 m/s case, 225 MPa, crushes the disc at the loaded flats within the window.)

@@ -22,7 +22,7 @@ import math
 # their sources:
 # - sigma_n = 25 MPa: granite's dynamic tensile (Brazilian) strength at this test's loading rate,
 #   from the Kuru granite SHPB law sigma_td = 21 MPa + 0.017 x loading rate [GPa/s] (Saksala et al.
-#   2013, ../shared/notes/reference-values.md): 23-28 MPa at 150-400 GPa/s. The base model has no rate
+#   2013, read off its figures): 23-28 MPa at 150-400 GPa/s. The base model has no rate
 #   law (rate_strength.k = 0), so the joints carry the strength at this rate. It is also below
 #   sigma_t / tan(phi) (38 MPa at the reference), so the Mohr-Coulomb envelope, not the tension
 #   cut-off, is the material's limit in shear-compression, as in rock.

@@ -1,9 +1,11 @@
-"""Where the shared (not version-controlled) data live.
+"""Where the measured data live: ``<repo>/data`` (shipped with the repository), or a folder of the user's.
 
-The measured SHPB records are kept outside the repository, in ``../shared`` beside the checkout
-(``<repo>/../shared/data/measured/...``). Set the environment variable ``FDEM_SHARED_DIR`` to point
-somewhere else. Every function here raises :class:`FileNotFoundError` with a message that names the
-path it looked at and how to fix it; nothing returns a silent ``None``.
+``data/`` holds one folder per source (``freiburg-rae-rock-shpb``, ``lanl-hoppybar-examples``,
+``yao-shpb-shtb-metals-epoxy``), each with its ``PROVENANCE.md``. Set the environment variable
+``FDEM_DATA_DIR`` to a folder laid out the same way to use your own data instead (e.g. the full
+Freiburg set with more lithologies). Records named in a config are paths of their own and do not go
+through here. Every function raises :class:`FileNotFoundError` naming the path it looked at and the
+variable that sets it; nothing returns a silent ``None``.
 """
 
 from __future__ import annotations
@@ -12,19 +14,21 @@ import os
 from pathlib import Path
 
 __all__ = [
-    "ENV_SHARED_DIR",
+    "ENV_DATA_DIR",
     "repository_root",
-    "shared_data_dir",
-    "measured_data_dir",
+    "data_dir",
     "freiburg_data_dir",
     "freiburg_raw_files",
+    "lanl_data_dir",
+    "yao_data_dir",
+    "data_file",
     "FREIBURG_LITHOLOGIES",
 ]
 
-#: Environment variable that overrides the location of the shared directory.
-ENV_SHARED_DIR = "FDEM_SHARED_DIR"
+#: Environment variable that replaces ``<repo>/data`` as the measured-data folder.
+ENV_DATA_DIR = "FDEM_DATA_DIR"
 
-#: Lithology codes of the Freiburg (Rae et al. 2021) raw records held in the shared data.
+#: Lithology codes of the Freiburg (Rae et al. 2021) raw records shipped in data/.
 FREIBURG_LITHOLOGIES = ("CaMa", "SaLi", "SeeSst")
 
 
@@ -33,44 +37,51 @@ def repository_root() -> Path:
     return Path(__file__).resolve().parents[1]
 
 
-def shared_data_dir() -> Path:
-    """The shared directory: ``$FDEM_SHARED_DIR`` if set, else ``<repo>/../shared``.
-
-    Raises
-    ------
-    FileNotFoundError
-        If the directory does not exist, with the path tried and how to set it.
-    """
-    env = os.environ.get(ENV_SHARED_DIR)
+def _origin() -> tuple[Path, str]:
+    env = os.environ.get(ENV_DATA_DIR)
     if env:
-        path = Path(env).expanduser().resolve()
-        origin = f"environment variable {ENV_SHARED_DIR}={env!r}"
-    else:
-        path = repository_root().parent / "shared"
-        origin = f"default location beside the checkout (set {ENV_SHARED_DIR} to override)"
+        return Path(env).expanduser().resolve(), f"set by the environment variable {ENV_DATA_DIR}={env!r}"
+    return repository_root() / "data", f"the repository's data folder (set {ENV_DATA_DIR} to use another)"
+
+
+def data_dir() -> Path:
+    """The measured-data folder: ``$FDEM_DATA_DIR`` if set, else ``<repo>/data``."""
+    path, origin = _origin()
     if not path.is_dir():
-        raise FileNotFoundError(
-            f"shared data directory not found: {path} ({origin}). The measured SHPB records "
-            f"are expected under <shared>/data/measured/; put the shared folder there or point "
-            f"{ENV_SHARED_DIR} at it."
-        )
+        raise FileNotFoundError(f"measured-data folder not found: {path} ({origin})")
     return path
 
 
-def measured_data_dir() -> Path:
-    """``<shared>/data/measured``: one folder per lab, each with a PROVENANCE.md."""
-    path = shared_data_dir() / "data" / "measured"
+def _source_dir(name: str) -> Path:
+    path = data_dir() / name
     if not path.is_dir():
-        raise FileNotFoundError(f"measured-data directory not found: {path}")
+        raise FileNotFoundError(f"data folder {name!r} not found: {path} ({_origin()[1]})")
     return path
 
 
 def freiburg_data_dir() -> Path:
-    """``<shared>/data/measured/freiburg-rae-rock-shpb`` (Rae et al., Freiburg rock SHPB)."""
-    path = measured_data_dir() / "freiburg-rae-rock-shpb"
+    """``<data>/freiburg-rae-rock-shpb`` (Rae et al., Freiburg rock SHPB)."""
+    return _source_dir("freiburg-rae-rock-shpb")
+
+
+def lanl_data_dir() -> Path:
+    """``<data>/lanl-hoppybar-examples`` (LANL HopPyBar Kolsky-bar examples)."""
+    return _source_dir("lanl-hoppybar-examples")
+
+
+def yao_data_dir() -> Path:
+    """``<data>/yao-shpb-shtb-metals-epoxy/impact_compression`` (H. Yao's SHPB compression records)."""
+    path = _source_dir("yao-shpb-shtb-metals-epoxy") / "impact_compression"
     if not path.is_dir():
-        raise FileNotFoundError(f"Freiburg SHPB data directory not found: {path}")
+        raise FileNotFoundError(f"data folder not found: {path} ({_origin()[1]})")
     return path
+
+
+def data_file(path: Path) -> Path:
+    """``path`` if it is a file, else FileNotFoundError naming it and where the data folder comes from."""
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"data file not found: {path} ({_origin()[1]})")
+    return Path(path)
 
 
 def freiburg_raw_files(lithologies: tuple[str, ...] | list[str] = FREIBURG_LITHOLOGIES) -> list[Path]:
@@ -87,6 +98,7 @@ def freiburg_raw_files(lithologies: tuple[str, ...] | list[str] = FREIBURG_LITHO
         folder = root / lith
         found = sorted(folder.glob("*.txt"))
         if not found:
-            raise FileNotFoundError(f"no Freiburg raw records (*.txt) for lithology {lith!r} in {folder}")
+            raise FileNotFoundError(f"no Freiburg raw records (*.txt) for lithology {lith!r} in {folder} "
+                                    f"({_origin()[1]})")
         files.extend(found)
     return files

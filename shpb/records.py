@@ -5,7 +5,7 @@ incident and the transmission bar (volts, or strain when the lab exported strain
 :class:`~shpb.reduction.BarSetup` that converts them (bar E, rho, diameter, gauge distances,
 volts-to-strain factors, sign of compression). The reduction itself lives in :mod:`shpb.reduction`.
 
-Formats read here (see the PROVENANCE.md of each folder under ``<shared>/data/measured``):
+Formats read here (see the PROVENANCE.md of each folder under ``data/``):
 
 * Freiburg (Rae et al. 2021) DAQ ASCII export, ``;``-delimited, 11 header lines, decimal separator
   ``.`` or ``,``: :func:`read_freiburg_raw`; specimen spreadsheets ``Rae2021/<lith>.xlsx``:
@@ -456,7 +456,8 @@ def rock_properties(lithology: str, xlsx_path: str | Path | None = None, variant
     """E [Pa], nu [-], rho [kg/m^3] (and their sigmas) of one lithology.
 
     ``lithology`` is a code (``CaMa``, ``SaLi``, ``SeeSst``, ...) or a name (``Carrara Marble``),
-    case-insensitive. ``xlsx_path`` defaults to the shared ``PetrophysicalProperties.xlsx``.
+    case-insensitive. ``xlsx_path`` defaults to ``data/freiburg-rae-rock-shpb/PetrophysicalProperties.xlsx``
+    (``shpb.paths``; a missing file raises FileNotFoundError naming it and ``FDEM_DATA_DIR``).
     For the gneiss pass ``variant="Parallel"`` or ``"Perpendicular"``.
 
     Raises
@@ -465,9 +466,9 @@ def rock_properties(lithology: str, xlsx_path: str | Path | None = None, variant
         If the lithology (and variant) is not in the sheet.
     """
     if xlsx_path is None:
-        from .paths import freiburg_data_dir
+        from .paths import data_file, freiburg_data_dir
 
-        xlsx_path = freiburg_data_dir() / "PetrophysicalProperties.xlsx"
+        xlsx_path = data_file(freiburg_data_dir() / "PetrophysicalProperties.xlsx")
     table = read_petrophysical_properties(xlsx_path)
     key = lithology.strip().lower()
     sel = table[(table["code"].str.lower() == key) | (table["lithology"].str.strip().str.lower() == key)]

@@ -167,12 +167,11 @@ def other_lab_checks() -> pd.DataFrame:
     Columns: ``record``, ``reader``, ``peak_stress_Pa``, ``expected_Pa`` (from the folder's
     PROVENANCE.md numbers where they give one, else NaN), ``force_balance_at_peak``.
     """
-    from .paths import measured_data_dir
+    from .paths import lanl_data_dir, yao_data_dir
     from .records import read_lanl_minikolsky, read_lanl_raw, read_yao_record
 
-    root = measured_data_dir()
-    lanl = root / "lanl-hoppybar-examples"
-    yao = root / "yao-shpb-shtb-metals-epoxy" / "impact_compression"
+    lanl = lanl_data_dir()
+    yao = yao_data_dir()
     cases = [
         ("LANL Cu 20061201_1148HE (.raw)", "read_lanl_raw",
          lambda: read_lanl_raw(lanl / "LANLstandard" / "Cu" / "20061201_1148HE_CuOFE_273K.raw"), 336e6),
@@ -228,7 +227,7 @@ def readme_section(table: pd.DataFrame, other: pd.DataFrame | None = None) -> st
     text = f"""{README_TITLE}
 
 {BEGIN}
-Every Freiburg record (Rae et al., `../shared/data/measured/freiburg-rae-rock-shpb`) reduced by
+Every Freiburg record (Rae et al., `data/freiburg-rae-rock-shpb`) reduced by
 `shpb.reduction.reduce_record` with the Freiburg bars (Ti, 110 GPa, 4430 kg/m³, 50 mm, gauges 1.25 m /
 1.00 m, 1.005e-3 strain/V). Peak specimen stress σ₂ = F_back/A_s against the spreadsheet `Strength`
 (failed, Y/Yp) or `Max. Stress` (intact, N). Acceptance (issue 4): at least 90 % of the CaMa and SeeSst

@@ -68,6 +68,12 @@ class SimulatorCrash(RuntimeError):
     """The simulator ended without the exit-code contract (crash, kill, missing outputs)."""
 
 
+class SimulatorRejected(RuntimeError):
+    """The simulator refused its arguments or could not find its input (exit code 2): a configuration
+    error, not a property of the member's parameters. The job fails with the simulator's message and
+    leaves no output, so a re-run after the fix runs it again."""
+
+
 # --------------------------------------------------------------------------------------------------
 # Atomic writes
 # --------------------------------------------------------------------------------------------------
@@ -383,12 +389,14 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
     """Run one simulation and leave ``curve_path`` and ``run_path`` behind, atomically.
 
     Exit code 0: the simulator's ``curve.csv``/``run.json`` are moved into place. Exit code 3 (numerical
-    failure, e.g. an unstable run) or 2 (arguments rejected, e.g. a parameter value out of its valid
-    range): the member is failed -- the simulation is deterministic, so running it again cannot help --
-    and a ``run.json`` with ``status: "failed"`` and the reason plus an empty curve are written.
-    Any other outcome (crash, signal, missing outputs) is a :class:`SimulatorCrash`: raised while
-    ``attempt < max_attempts`` so that Snakemake's ``retries`` re-run the job, recorded as a failed
-    member on the last attempt.
+    failure, e.g. an unstable run): the member is failed -- the simulation is deterministic, so running
+    it again cannot help -- and a ``run.json`` with ``status: "failed"`` and the reason plus an empty
+    curve are written; the analysis drops it. Exit code 2 (arguments rejected, an input file missing):
+    a configuration error, raised as :class:`SimulatorRejected` with the simulator's message and no
+    output written, so the Snakemake job fails and a re-run after the fix runs the member again (a
+    stored failed member would make the analysis refuse on every re-run). Any other outcome (crash,
+    signal, missing outputs) is a :class:`SimulatorCrash`: raised while ``attempt < max_attempts`` so
+    that Snakemake's ``retries`` re-run the job, recorded as a failed member on the last attempt.
 
     ``time_limit_s``: the simulator is killed after this wall time and the member is failed at once
     (``reason`` starts with ``time limit``). The limit sits below the job's scheduler wall time, so a
@@ -430,11 +438,13 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
             os.replace(curve_csv, curve_path)
             atomic_write_json(run_path, _jsonable(run))
             return run
-        if proc.returncode in (2, 3):
+        if proc.returncode == 2:
+            raise SimulatorRejected(f"the simulator rejected its arguments or input (exit code 2): "
+                                    f"{_tail(proc.stderr, 600) or 'no message'}\n  command: {shlex.join(argv)}")
+        if proc.returncode == 3:
             run = read_json(run_json) if run_json.is_file() else {}
             reason = run.get("reason") or _tail(proc.stderr) or f"exit code {proc.returncode}"
-            kind = "numerical failure" if proc.returncode == 3 else "arguments rejected"
-            run.update({"status": "failed", "reason": f"{kind}: {reason}", "geometry": geometry,
+            run.update({"status": "failed", "reason": f"numerical failure: {reason}", "geometry": geometry,
                         "preset": preset, "params": dict(params)}, **extra)
             run.setdefault("wall_s", wall)
             atomic_write_text(curve_path, failed_curve_text())

@@ -83,7 +83,7 @@ def test_overlap_measure_finds_a_node_pushed_into_another_piece():
 
 
 def test_reference_strength_is_granites_at_this_loading_rate():
-    """Kuru granite in SHPB Brazilian tests (Saksala et al. 2013; ../shared/notes/reference-values.md):
+    """Kuru granite in SHPB Brazilian tests (Saksala et al. 2013, read off its figures):
     sigma_td = 21 MPa + 0.017 x loading rate [GPa/s], with peaks of 25-40 MPa under these pulses. The
     model's loading rate is the slope of its Brazilian stress between 20 % and 80 % of the peak;
     the peak must lie within 40 % of the law there (the scatter of the measured strengths about it)

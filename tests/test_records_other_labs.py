@@ -1,7 +1,6 @@
 """Records from other labs read into the same RawRecord and reduced by the same code.
 
-Numbers asserted are those of each folder's PROVENANCE.md under ``../shared/data/measured``.
-Needs ``../shared``: fails, never skips, when it is missing.
+Numbers asserted are those of each folder's PROVENANCE.md under ``data/`` (the shipped excerpts).
 """
 
 from __future__ import annotations
@@ -11,14 +10,14 @@ import math
 import numpy as np
 import pytest
 
-from shpb.paths import measured_data_dir
+from shpb.paths import lanl_data_dir, yao_data_dir
 from shpb.records import read_lanl_minikolsky, read_lanl_raw, read_yao_record
 from shpb.reduction import reduce_record
 
 
 @pytest.fixture(scope="module")
 def lanl_cu():
-    return read_lanl_raw(measured_data_dir() / "lanl-hoppybar-examples" / "LANLstandard" / "Cu"
+    return read_lanl_raw(lanl_data_dir() / "LANLstandard" / "Cu"
                          / "20061201_1148HE_CuOFE_273K.raw")
 
 
@@ -60,10 +59,11 @@ def test_lanl_cu_reduces_to_336_MPa(lanl_cu):
 
 
 def test_lanl_mini_kolsky_pmma():
-    raw = read_lanl_minikolsky(measured_data_dir() / "lanl-hoppybar-examples" / "mini-Kolsky" / "PMMA-13"
+    raw = read_lanl_minikolsky(lanl_data_dir() / "mini-Kolsky" / "PMMA-13"
                                / "PMMA_13_Input.dat")
-    assert raw.n_samples == 50_000 and raw.dt == pytest.approx(8e-9)
-    assert raw.incident.shape == (2, 50_000) and raw.transmitted.shape == (2, 50_000)
+    # the shipped excerpt: the first 20,000 of 50,000 samples (-80 to +80 us, PROVENANCE.md)
+    assert raw.n_samples == 20_000 and raw.dt == pytest.approx(8e-9)
+    assert raw.incident.shape == (2, 20_000) and raw.transmitted.shape == (2, 20_000)
     assert raw.bar.diameter == pytest.approx(2.381e-3, rel=1e-3)
     assert raw.bar.rho == pytest.approx(2810.0) and raw.bar.c0 == pytest.approx(5051, abs=2)
     assert raw.bar.strain_per_volt_incident == pytest.approx(9.52e-4, rel=1e-3)
@@ -80,9 +80,9 @@ def test_lanl_mini_kolsky_pmma():
 
 
 def test_yao_voltage_and_microstrain_files_give_the_same_record():
-    base = measured_data_dir() / "yao-shpb-shtb-metals-epoxy" / "impact_compression" / "steel_945" / "sample_01"
-    volt = read_yao_record(base / "raw_voltage.xls", strain_per_volt=4.96e-4)
-    micro = read_yao_record(base / "raw_microstrain.xls")
+    base = yao_data_dir() / "steel_945" / "sample_02"
+    volt = read_yao_record(base / "raw_voltage.xlsx", strain_per_volt=4.96e-4)
+    micro = read_yao_record(base / "raw_microstrain.xlsx")
     assert volt.unit == "V" and micro.unit == "strain"
     assert volt.n_samples == micro.n_samples == 20_000
     assert volt.dt == pytest.approx(32e-9, rel=1e-3)
@@ -97,11 +97,15 @@ def test_yao_voltage_and_microstrain_files_give_the_same_record():
     # compression negative in the file -> positive specimen stress; steel flows near 1 GPa
     assert 0.6e9 < rv.peak_stress < 1.5e9
     with pytest.raises(ValueError, match="strain_per_volt"):
-        read_yao_record(base / "raw_voltage.xls")
+        read_yao_record(base / "raw_voltage.xlsx")
+    # the old BIFF .xls of sample_01 reads through xlrd into the same kind of record
+    xls = read_yao_record(yao_data_dir() / "steel_945" / "sample_01" / "raw_voltage.xls", strain_per_volt=4.96e-4)
+    assert xls.n_samples == 20_000 and xls.dt == pytest.approx(32e-9, rel=1e-3)
+    assert 0.6e9 < reduce_record(xls).peak_stress < 1.5e9
 
 
 def test_yao_rounded_time_column_is_rebuilt():
-    path = (measured_data_dir() / "yao-shpb-shtb-metals-epoxy" / "impact_compression" / "epoxy_resin"
+    path = (yao_data_dir() / "epoxy_resin"
             / "sample_01" / "raw_voltage.csv")
     raw = read_yao_record(path, strain_per_volt=5.01e-4)
     assert any("rebuilt" in n for n in raw.notes)

@@ -1,6 +1,7 @@
 """Readers of measured SHPB records: Freiburg DAQ files and spreadsheets, paths, errors.
 
-Tests that read ``../shared`` fail (never skip) with a clear FileNotFoundError when it is missing.
+The records are those shipped in ``data/`` (each folder's PROVENANCE.md); a missing file fails with a
+FileNotFoundError naming it and ``FDEM_DATA_DIR``, never a skip.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from shpb.paths import ENV_SHARED_DIR, freiburg_data_dir, freiburg_raw_files, shared_data_dir
+from shpb.paths import ENV_DATA_DIR, data_dir, freiburg_data_dir, freiburg_raw_files
 from shpb.records import (
     freiburg_specimen,
     read_freiburg_metadata,
@@ -225,18 +226,27 @@ def test_petrophysical_properties_in_si_units():
         rock_properties("Granitoid")
 
 
-def test_shared_dir_honours_env_var_and_explains_a_missing_dir(monkeypatch, tmp_path):
-    monkeypatch.setenv(ENV_SHARED_DIR, str(tmp_path))
-    assert shared_data_dir() == tmp_path.resolve()
-    monkeypatch.setenv(ENV_SHARED_DIR, str(tmp_path / "missing"))
+def test_data_dir_honours_env_var_and_a_missing_file_names_its_path_and_the_variable(monkeypatch, tmp_path):
+    (tmp_path / "freiburg-rae-rock-shpb").mkdir()
+    monkeypatch.setenv(ENV_DATA_DIR, str(tmp_path))
+    assert data_dir() == tmp_path.resolve()
+    assert freiburg_data_dir() == tmp_path.resolve() / "freiburg-rae-rock-shpb"
     with pytest.raises(FileNotFoundError) as err:
-        shared_data_dir()
-    assert "missing" in str(err.value) and ENV_SHARED_DIR in str(err.value)
+        rock_properties("CaMa")  # the user's folder has no PetrophysicalProperties.xlsx
+    assert "PetrophysicalProperties.xlsx" in str(err.value) and ENV_DATA_DIR in str(err.value)
+    with pytest.raises(FileNotFoundError) as err:
+        freiburg_raw_files(["CaMa"])
+    assert str(tmp_path) in str(err.value) and "CaMa" in str(err.value)
+    monkeypatch.setenv(ENV_DATA_DIR, str(tmp_path / "missing"))
+    with pytest.raises(FileNotFoundError) as err:
+        data_dir()
+    assert "missing" in str(err.value) and ENV_DATA_DIR in str(err.value)
 
 
-def test_default_shared_dir_is_beside_the_checkout(monkeypatch):
-    monkeypatch.delenv(ENV_SHARED_DIR, raising=False)
-    expected = Path(__file__).resolve().parents[1].parent / "shared"
-    assert shared_data_dir() == expected, (
-        f"the shared data must be at {expected} (or set {ENV_SHARED_DIR}); these tests never skip"
-    )
+def test_default_data_dir_is_the_repositorys_own(monkeypatch):
+    """Without the variable the product reads the data shipped in the repository, nothing beside it."""
+    monkeypatch.delenv(ENV_DATA_DIR, raising=False)
+    repo = Path(__file__).resolve().parents[1]
+    assert data_dir() == repo / "data"
+    for path in freiburg_raw_files():
+        assert repo / "data" in path.parents

@@ -3,7 +3,7 @@
 Acceptance of issue 4: the peak specimen stress matches the spreadsheet ``Strength`` / ``Max. Stress``
 within 5 % for at least 90 % of the CaMa and SeeSst records. All records (SaLi included) are reduced
 and the table is printed (``pytest -s`` shows it; ``python -m shpb.reduction_table`` prints it too).
-Needs ``../shared``: fails, never skips, when it is missing.
+Reads the full Freiburg set shipped in ``data/freiburg-rae-rock-shpb``.
 """
 
 from __future__ import annotations

@@ -14,17 +14,14 @@ from shpb.simulate import simulate
 FREIBURG = "freiburg-rae-rock-shpb/Rae2021/SHPBdata/CaMa/CaMa_SHPB_005_Ti25_60b_Al12b_0_001.txt"
 
 
-def _shared_record():
-    from shpb.paths import shared_data_dir
-    path = shared_data_dir() / "data" / "measured" / FREIBURG
-    if not path.is_file():
-        raise FileNotFoundError(f"measured record {path} is missing (../shared must sit beside the repo)")
-    return path
+def _marble_record():
+    from shpb.paths import data_dir, data_file
+    return data_file(data_dir() / FREIBURG)
 
 
 def _measured_reduced():
     from shpb.observations import reduce_measured_record
-    red = reduce_measured_record(_shared_record())
+    red = reduce_measured_record(_marble_record())
     return red[0] if isinstance(red, tuple) else red
 
 
@@ -165,7 +162,7 @@ def test_unstable_run_stops_with_failed_status(tmp_path):
 def test_measured_record_drives_the_cylinder_model():
     """CaMa_005: the injected wave arrives at the specimen face on the record's own time base, and
     at plausible marble parameters the simulated peak is within a factor 2 of the measured one."""
-    out = simulate("cylinder", "fast", record=_shared_record(), t_end=250e-6)
+    out = simulate("cylinder", "fast", record=_marble_record(), t_end=250e-6)
     red = out.extra["setup"]["measured"]
     g = out.extra["setup"]["geometry"]
     c = out.curve
@@ -218,7 +215,7 @@ def test_reflected_wave_lines_up_with_the_measured_one_once_the_records_face_gap
     shifts = np.arange(-20e-6, 20e-6 + 1e-12, 0.5e-6)
 
     def best_shift(params):
-        out = simulate("cylinder", "fast", record=_shared_record(), t_end=340e-6, params=params)
+        out = simulate("cylinder", "fast", record=_marble_record(), t_end=340e-6, params=params)
         assert out.run["status"] == "ok", out.run["reason"]
         t_f, e_r = _reflected_at_face(out)
         rms = [np.sqrt(np.mean((np.interp(grid - L, t_f, e_r) - data) ** 2)) for L in shifts]

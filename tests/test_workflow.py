@@ -34,8 +34,8 @@ from enkf import EnsembleFailure
 from shpb.calibration import ExperimentSpec, analysis_step, final_iteration, initial_ensemble, rng_for
 from shpb.observations import (ObservationFileError, Observations, check_record, curve_on_grid,
                                measured_observations, observation_grid, read_observations, twin_observations)
-from shpb.workflow_io import (ConfigError, load_yaml, member_ids, read_responses, run_member, validate_config,
-                              write_responses)
+from shpb.workflow_io import (ConfigError, SimulatorRejected, load_yaml, member_ids, read_responses, run_member,
+                              validate_config, write_responses)
 
 REPO = Path(__file__).resolve().parents[1]
 SCHEMA = REPO / "config" / "schema.yaml"
@@ -66,18 +66,22 @@ STAND_IN = textwrap.dedent('''
     Injected failures (environment): STAND_IN_FAIL_BELOW: sigma_t below it -> exit 3 with a failed
     run.json; STAND_IN_CRASH_ONCE_BELOW: sigma_t below it -> crash (exit 1) on the first call only
     (a marker file per parameter set); STAND_IN_SLEEP: seconds per run; STAND_IN_HANG_RANGE "lo,hi":
-    sigma_t inside it -> hang (sleep 10 min) on every call.
+    sigma_t inside it -> hang (sleep 10 min) on every call; STAND_IN_REJECT: exit 2 with a message, as the
+    real simulator does when it cannot find an input file.
     """
     import argparse, hashlib, json, os, sys, time
     import numpy as np
     ap = argparse.ArgumentParser()
-    for a in ("--geometry", "--preset", "--record", "--out"):
+    for a in ("--geometry", "--preset", "--record", "--out", "--snapshots"):
         ap.add_argument(a)
     ap.add_argument("--param", action="append", default=[])
     ap.add_argument("--t-end", type=float, default=1.0e-4)
     ap.add_argument("--sample-dt", type=float, default=1.0e-6)
     a = ap.parse_args()
     p = {k: float(v) for k, v in (s.split("=") for s in a.param)}
+    if os.environ.get("STAND_IN_REJECT"):
+        print("python -m shpb simulate: error: " + os.environ["STAND_IN_REJECT"], file=sys.stderr)
+        sys.exit(2)
     time.sleep(float(os.environ.get("STAND_IN_SLEEP", "0")))
     st, et = p["sigma_t"], p["E_t"]
     hang = [float(v) for v in os.environ.get("STAND_IN_HANG_RANGE", "1,-1").split(",")]
@@ -139,7 +143,7 @@ def test_shipped_configs_are_valid():
     cfg = validate_config(merged, SCHEMA, base_dir=REPO)
     truths = [cfg["experiments"][e]["observations"].get("truth") for e in cfg["run"]]
     assert len({(t["sigma_t"], t["E_t"]) for t in truths}) == 3  # the paper's three reference points
-    diag = load_yaml(REPO / "config" / "diagnosis.yaml")  # (its sandstone records are in ../shared)
+    diag = load_yaml(REPO / "config" / "diagnosis.yaml")
     merged = {**base, **diag, "experiments": {**base["experiments"], **diag["experiments"]}}
     cfg = validate_config(merged, SCHEMA, base_dir=REPO)
     for e in cfg["run"]:
@@ -396,6 +400,16 @@ def test_member_exit_codes_numerical_failure_is_recorded_and_a_crash_is_retried_
                       max_attempts=2)
     assert last["status"] == "failed" and "crashed on every attempt" in last["reason"] and "boom" in last["reason"]
     assert sorted(p.name for p in (tmp_path / "c").iterdir()) == ["curve.csv", "run.json"]  # no temp left
+    # exit 2 (arguments rejected, an input missing) is a configuration error: the job fails with the
+    # simulator's message and nothing is left behind, so that a re-run after the fix runs the member
+    os.environ["STAND_IN_REJECT"] = "rock properties file data/x.xlsx not found"
+    try:
+        with pytest.raises(SimulatorRejected, match="exit code 2.*rock properties file data/x.xlsx not found"):
+            run_member(params={"sigma_t": 30e6, "E_t": 500.0}, curve_path=tmp_path / "rej/curve.csv",
+                       run_path=tmp_path / "rej/run.json", **common)
+    finally:
+        del os.environ["STAND_IN_REJECT"]
+    assert not (tmp_path / "rej").exists() or list((tmp_path / "rej").iterdir()) == []
 
 
 # --------------------------------------------------------------------------------------------------
@@ -475,6 +489,25 @@ def test_a_failed_member_is_retried_then_dropped_with_its_reason_in_analysis_jso
     assert sorted(f["member"] for f in summary["failed_members"]["0"]) == sorted([failed_member, hung])
 
 
+def test_a_rejected_argument_fails_the_run_and_a_rerun_after_the_fix_runs_those_members(tmp_path):
+    """Exit code 2 of the simulator (a missing input, a rejected argument) is not a failed member: the
+    run stops with the simulator's message and stores nothing for those members, so the re-run after
+    the cause is fixed simulates them and finishes (a stored failed member would refuse again)."""
+    cfg = twin_config(ensemble_size=4, esmda={"steps": 1})
+    cfg["simulator"] = write_stand_in(tmp_path)
+    write_config(tmp_path, cfg)
+    first = snakemake(tmp_path, "--cores", "2", env={"STAND_IN_REJECT": "measured record data/missing.txt not found"})
+    assert first.returncode != 0
+    assert "exit code 2" in first.stderr and "measured record data/missing.txt not found" in first.stderr
+    members = tmp_path / "results/twin/iter_0/members"
+    assert not list(members.glob("*/synthetic/run.json")) if members.exists() else True
+    fixed = snakemake(tmp_path, "--cores", "2")
+    assert fixed.returncode == 0, fixed.stderr[-4000:]
+    runs = [json.loads(p.read_text()) for p in members.glob("*/synthetic/run.json")]
+    assert len(runs) == 4 and all(r["status"] == "ok" for r in runs)
+    assert json.loads((tmp_path / "results/twin/summary.json").read_text())["failed_members"] == {}
+
+
 def test_a_killed_run_resumes_without_redoing_finished_members(tmp_path):
     cfg = twin_config(ensemble_size=12, esmda={"steps": 1})
     cfg["simulator"] = write_stand_in(tmp_path)
@@ -536,3 +569,38 @@ def test_the_rank_cap_keeps_exactly_that_many_singular_values():
         assert res.rank == cap
     assert capped_truncation(Y, alive, err, 0.99, None) == 0.99
     assert capped_truncation(Y, alive, err, 0.5, 19) == 0.5  # the cap never keeps more than base would
+
+
+def test_a_measured_experiment_runs_from_a_fresh_clone_with_nothing_beside_it(tmp_path):
+    """A clone of the committed repository in an empty folder (no ../shared, no FDEM_DATA_DIR), its own
+    code first on the path: a small measured calibration (cylinder, fast, CaMa_005, three members, one
+    analysis) runs to its summary with the data the repository ships. A data file the product needs but
+    did not commit fails here. (Uncommitted changes are not in the clone: commit before relying on it.)"""
+    if not (REPO / ".git").exists():
+        pytest.fail(f"{REPO} is not a git checkout: this test clones it to prove a fresh clone runs")
+    clone = tmp_path / "empty" / "fdem-enkf-shpb"
+    subprocess.run(["git", "clone", "--quiet", str(REPO), str(clone)], check=True, timeout=120)
+    assert sorted(p.name for p in clone.parent.iterdir()) == ["fdem-enkf-shpb"]
+    record = "data/freiburg-rae-rock-shpb/Rae2021/SHPBdata/CaMa/CaMa_SHPB_005_Ti25_60b_Al12b_0_001.txt"
+    cfg = {"run": ["marble_fresh"], "experiments": {"marble_fresh": {
+        "kind": "measured", "geometry": "cylinder", "preset": "fast", "seed": 5, "ensemble_size": 3,
+        "method": "esmda", "esmda": {"steps": 1}, "max_rank": 2,
+        "parameters": {"sigma_t": [1.0e7, 1.2e8], "E_t": [100.0, 5000.0]},
+        "simulation": {"t_end": 1.4e-4, "sample_dt": 1.0e-6},
+        "observations": {"t_end": 1.4e-4, "dt": 2.0e-6, "records": [record], "error": {"kind": "ar1"}}}}}
+    (clone / "fresh.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    env = {k: v for k, v in os.environ.items() if k not in ("FDEM_DATA_DIR", "FDEM_SHARED_DIR")}
+    env["PYTHONPATH"] = str(clone)
+    out = subprocess.run([sys.executable, "-m", "snakemake", "--cores", "2", "--configfile", "fresh.yaml"],
+                         cwd=clone, capture_output=True, text=True, timeout=600, env=env)
+    assert out.returncode == 0, out.stderr[-4000:]
+    res = clone / "results" / "marble_fresh"
+    summary = json.loads((res / "summary.json").read_text())
+    assert set(summary["posterior"]) == {"sigma_t", "E_t"}
+    assert all(np.isfinite(v["mean"]) for v in summary["posterior"].values())
+    assert summary["n_simulations"] == 2 * 3 + 1 and not summary["failed_members"]
+    run = json.loads((res / "forecast" / "CaMa_SHPB_005" / "run.json").read_text())
+    assert run["status"] == "ok" and Path(run["record"]).name == Path(record).name
+    assert (res / "forecast" / "CaMa_SHPB_005" / "snapshots" / "damage_peak.png").is_file()
+    assert not (clone.parent / "shared").exists()
+
