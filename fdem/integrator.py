@@ -13,6 +13,7 @@ from numba import njit
 
 from .contact import build_pairs, surface_nodes
 from .kernels import contact_forces, joint_forces, triangle_cauchy, triangle_forces
+from .softening import z
 
 # Columns of the energy record.
 ENERGY_NAMES = ("kinetic", "strain", "joint_elastic", "contact", "joint_dissipated",
@@ -112,6 +113,11 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
     jdif = np.ones((jn.shape[0], 2))
     slip_p = np.zeros((jn.shape[0], 2))
     kappa = np.zeros((jn.shape[0], 2))
+    # z(Dmax) per joint, kept up to date by joint_forces (a model handed in with damage starts from it)
+    zeta_j = np.ones(jn.shape[0])
+    for j in range(jn.shape[0]):
+        if Dmax[j, 0] > 0.0:
+            zeta_j[j] = z(Dmax[j, 0], sa, sb, sc)
     bforce = np.zeros((n_bodies, 2))
     contact_edge = -np.ones(n, np.int64)
     contact_d = np.zeros(n)
@@ -142,7 +148,7 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
     Us, Pd = triangle_forces(x, v, tri, dminv, vol0, lam, mu, eta, f)
     Psi, dis, nnew, ndam = joint_forces(x, v, jn, jarea, kn, kt, ft, fs, dn, dtm, tanphi, sa, sb,
                                         sc, Dmax, broken, f, newly, newly_dam, jrate, jdif, slip_p,
-                                        kappa)
+                                        kappa, zeta_j)
     Uc, Pf, pen = contact_forces(x, v, pair_node, pair_edge, pair_node.shape[0],
                                  node_normal, edges, edge_tri, edge_joint, broken, Dmax, edge_dlim, edge_thick, node_thick, node_body,
                                  node_tri, tri, node_vertex, body_fracturable, p_c, mu_tab, dt, f, bforce,
@@ -204,7 +210,7 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
             Us, Pd = triangle_forces(x, v, tri, dminv, vol0, lam, mu, eta, f)
             Psi, dis, nnew, ndam = joint_forces(x, v, jn, jarea, kn, kt, ft, fs, dn, dtm, tanphi, sa,
                                                 sb, sc, Dmax, broken, f, newly, newly_dam, jrate, jdif,
-                                                slip_p, kappa)
+                                                slip_p, kappa, zeta_j)
             E[4] += dis
             for k in range(ndam):
                 j_onset[newly_dam[k]] = t

@@ -133,7 +133,7 @@ def _psi_branch(u, k, fmax):
 
 @njit(cache=True)
 def joint_forces(x, v, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax, broken, f,
-                 newly_broken, newly_damaged, jrate, jdif, slip_p, kappa):
+                 newly_broken, newly_damaged, jrate, jdif, slip_p, kappa, zeta_j):
     """Cohesive 4-node joints (Munjiza's combined single and smeared crack, paper Appendix A).
 
     Nodes (a1, a2, b1, b2): a1->a2 is the edge of triangle A in its counter-clockwise order, b1/b2 the
@@ -180,7 +180,9 @@ def joint_forces(x, v, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax
 
     Joints whose damage first becomes positive are listed in newly_damaged, so that the integrator
     can expose their triangles to contact before the faces separate. History arrays have two columns
-    (one per Gauss point, kept for the layout); both hold the joint's value.
+    (one per Gauss point, kept for the layout); both hold the joint's value. zeta_j caches z(Dmax) per
+    joint (1 while undamaged): the softening curve's exponential and power are then evaluated only
+    when the damage grows, not for every damaged joint at every step.
 
     Returns (stored joint energy [J], dissipated energy this call [J], number newly broken,
     number newly damaged).
@@ -233,7 +235,7 @@ def joint_forces(x, v, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax
         sig_c = k_n * o if o < 0.0 else 0.0
         f_s = fs[jj] * dif - tanphi[jj] * sig_c
         dm = Dmax[jj, 0]
-        zeta = 1.0 if dm <= 0.0 else z(dm, a, b, c)
+        zeta = zeta_j[jj]
         # shear: elastic trial, then return to the capacity zeta f_s (plastic slip)
         tau = k_t * (s - slip_p[jj, 0])
         cap = zeta * f_s
@@ -262,6 +264,7 @@ def joint_forces(x, v, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax
             dissipated += W * (zeta - zeta_new) * (psi_n + psi_b)
             Dmax[jj, 0] = D
             Dmax[jj, 1] = D
+            zeta_j[jj] = zeta_new
             zeta = zeta_new
         psi = W * (zeta * (psi_n + psi_b) + 0.5 * sig_c * o + 0.5 * tau * tau / k_t)
         if Dmax[jj, 0] >= 1.0:

@@ -28,7 +28,7 @@ def _forces(model, x):
                                model.dn, model.dt, model.tanphi, *model.softening, Dmax, broken,
                                f, np.zeros(model.n_joints, np.int64), np.zeros(model.n_joints, np.int64),
                                   model.jrate, np.ones((model.n_joints, 2)), np.zeros((model.n_joints, 2)),
-                                  np.zeros((model.n_joints, 2)))
+                                  np.zeros((model.n_joints, 2)), np.ones(model.n_joints))
     return f, U, Psi
 
 

@@ -82,6 +82,7 @@ class _Joint:
         self.nA = self.model.jn[0, :2]
         self.slip_p = np.zeros((1, 2))
         self.kappa = np.zeros((1, 2))
+        self.zeta = np.ones(1)
         self.dissipated = 0.0
         self.stored = 0.0
 
@@ -97,7 +98,7 @@ class _Joint:
         self.stored, diss, _, _ = joint_forces(x, np.zeros_like(x), self.m.jn, self.m.jarea, self.m.kn, self.m.kt, self.m.ft, self.m.fs,
                      self.m.dn, self.m.dt, self.m.tanphi, *self.m.softening, self.Dmax,
                      self.broken, f, np.zeros(1, np.int64), np.zeros(1, np.int64),
-                     self.m.jrate, np.ones((1, 2)), self.slip_p, self.kappa)
+                     self.m.jrate, np.ones((1, 2)), self.slip_p, self.kappa, self.zeta)
         self.dissipated += diss
         F = -f[self.nB].sum(axis=0) / self.m.jarea[0]
         return float(F @ n), float(F @ t)
@@ -215,7 +216,7 @@ def test_rate_dependent_strength_raises_the_peak_by_the_DIF_and_keeps_the_fractu
         jdif = j.jdif
         joint_forces(x, vel, m.jn, m.jarea, m.kn, m.kt, m.ft, m.fs, m.dn, m.dt, m.tanphi,
                      *m.softening, j.Dmax, j.broken, f, np.zeros(1, np.int64), np.zeros(1, np.int64),
-                     m.jrate, jdif, j.slip_p, j.kappa)
+                     m.jrate, jdif, j.slip_p, j.kappa, j.zeta)
         return float((-f[j.nB].sum(axis=0) / m.jarea[0]) @ n)
 
     j.jdif = np.ones((1, 2))
