@@ -19,11 +19,13 @@ rule forecast:
         curve="results/{exp}/forecast/{record}/curve.csv",
         run="results/{exp}/forecast/{record}/run.json",
         # fracture snapshots: VTK of the mesh with joint damage at four times, the failure peak and the
-        # window's end, PNG damage maps of the peak and the end (shpb.snapshots)
+        # window's end, PNG damage maps of the peak and the end, the curve next to both (shpb.snapshots)
         damage_peak=report("results/{exp}/forecast/{record}/snapshots/damage_peak.png", category="{exp}",
                            caption="../report/damage_map.rst"),
         damage_end=report("results/{exp}/forecast/{record}/snapshots/damage_end.png", category="{exp}",
                           caption="../report/damage_map.rst"),
+        overview=report("results/{exp}/forecast/{record}/snapshots/fracture.png", category="{exp}",
+                        caption="../report/fracture_overview.rst"),
     log:
         "results/{exp}/forecast/{record}/simulate.log",
     params:

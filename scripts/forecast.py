@@ -13,7 +13,7 @@ run = run_member(command=simulator_command(sim["command"]), geometry=sim["geomet
            attempt=snakemake.resources.attempt, time_limit_s=snakemake.resources.time_limit_s, max_attempts=snakemake.params.max_attempts,
            extra_run={"forecast": True, "record": snakemake.wildcards.record},
            snapshots=snakemake.params.snapshots)
-for png in (snakemake.output.damage_peak, snakemake.output.damage_end):
+for png in (snakemake.output.damage_peak, snakemake.output.damage_end, snakemake.output.overview):
     if not Path(png).is_file():
         why = (f"the forecast run failed: {run.get('reason', '')}" if run.get("status") != "ok"
                else f"the simulator ({sim['command']}) wrote no fracture snapshots")

@@ -269,7 +269,7 @@ def simulate(geometry: str, preset: str = "fast", params: dict | None = None, re
     if out_dir is not None:
         if snapshots is not None:
             info["snapshots"] = _write_snapshots(Path(out_dir) / "snapshots", model, g, res, arrival,
-                                                 to_stress)
+                                                 to_stress, curve)
         write_outputs(out_dir, curve, info)
     return SimulationOutput(curve=curve, run=info, extra={"result": res, "setup": setup})
 
@@ -282,9 +282,10 @@ def _stress_factor(g) -> float:
     return 1.0 / (np.pi * dims["diameter_m"] ** 2 / 4.0)
 
 
-def _write_snapshots(folder: Path, model, g, res, arrival: float, to_stress: float) -> list[dict]:
-    """VTK of every snapshot plus the failure peak; PNG damage maps of the peak and the end."""
-    from .snapshots import damage_map, write_vtk
+def _write_snapshots(folder: Path, model, g, res, arrival: float, to_stress: float, curve) -> list[dict]:
+    """VTK of every snapshot plus the failure peak; PNG damage maps of the peak and the end, and the
+    curve next to both (fracture.png)."""
+    from .snapshots import damage_map, fracture_overview, write_vtk
 
     written = []
     for snap in res.snapshots:
@@ -303,4 +304,8 @@ def _write_snapshots(folder: Path, model, g, res, arrival: float, to_stress: flo
         vtk = write_vtk(folder / f"{name}.vtu", model, snap)
         png = damage_map(folder / f"damage_{name}.png", model, g, snap, title)
         written.append({"time_s": t_rel, "what": name, "vtk": vtk.name, "png": png.name})
+    if ends:
+        png = fracture_overview(folder / "fracture.png", model, g, curve,
+                                [(what, snap, snap.time - arrival) for _, snap, what in ends])
+        written.append({"what": "overview", "png": png.name})
     return written

@@ -60,20 +60,13 @@ def write_vtk(path, model, snapshot) -> Path:
     return path
 
 
-def damage_map(path, model, geometry, snapshot, title: str = "") -> Path:
-    """PNG of the specimen at one snapshot: deformed triangles, joints coloured by damage, broken joints
-    black, the bars' end faces for reference. Axes in mm, the specimen's frame."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
+def _draw_damage(fig, ax, model, geometry, snapshot, title: str = "") -> None:
+    """Deformed triangles, the specimen's damaged joints coloured by damage, broken ones black."""
     from matplotlib.collections import LineCollection
-    from matplotlib.figure import Figure
 
-    path = Path(path)
     x = np.asarray(snapshot.x) * 1e3
     D = np.clip(np.asarray(snapshot.D, float), 0.0, 1.0)
     spec = model.body_index(geometry.specimen)
-    fig = Figure(figsize=(6.4, 5.6))
-    FigureCanvasAgg(fig)
-    ax = fig.add_subplot(1, 1, 1)
     for b, colour in ((model.body_index(geometry.incident_bar), "0.55"),
                       (model.body_index(geometry.transmission_bar), "0.55"), (spec, "0.85")):
         tris = model.tri[model.tri_body == b]
@@ -95,8 +88,52 @@ def damage_map(path, model, geometry, snapshot, title: str = "") -> Path:
     ax.set_xlabel("x [mm] (load axis)")
     ax.set_ylabel("y [mm]")
     ax.set_title(title, fontsize=9)
+
+
+def damage_map(path, model, geometry, snapshot, title: str = "") -> Path:
+    """PNG of the specimen at one snapshot: deformed triangles, joints coloured by damage, broken joints
+    black, the bars' end faces for reference. Axes in mm, the specimen's frame."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    path = Path(path)
+    fig = Figure(figsize=(6.4, 5.6))
+    FigureCanvasAgg(fig)
+    _draw_damage(fig, fig.add_subplot(1, 1, 1), model, geometry, snapshot, title)
     fig.tight_layout()
     _replace_into(path, lambda tmp: fig.savefig(tmp, dpi=130, format="png"))
+    return path
+
+
+def fracture_overview(path, model, geometry, curve, frames) -> Path:
+    """PNG of a run's curve next to its fracture: the specimen stress and the two faces' stresses
+    against time with the snapshot times marked, and one damage map per frame.
+
+    curve: the run's curve (``time_s``, ``stress_Pa``, ``stress_front_Pa``, ``stress_back_Pa``);
+    frames: [(label, snapshot, time on the curve's axis [s])], e.g. the failure peak and the end."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    path = Path(path)
+    fig = Figure(figsize=(5.2 * (1 + len(frames)), 4.6))
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot(1, 1 + len(frames), 1)
+    t_us = curve["time_s"].to_numpy() * 1e6
+    ax.plot(t_us, curve["stress_Pa"].to_numpy() / 1e6, "k", lw=1.5, label="specimen (back face)")
+    ax.plot(t_us, curve["stress_front_Pa"].to_numpy() / 1e6, "C0--", lw=1.0, label="front face")
+    ax.plot(t_us, curve["stress_back_Pa"].to_numpy() / 1e6, "C3:", lw=1.0, label="back face")
+    for label, _, t in frames:
+        ax.axvline(t * 1e6, color="0.5", lw=0.8)
+        ax.text(t * 1e6, ax.get_ylim()[1], f" {label}", fontsize=8, va="top", rotation=90)
+    ax.set_xlabel("time after the incident wave's arrival [us]")
+    ax.set_ylabel("stress [MPa]")
+    ax.legend(fontsize=8, loc="lower left")
+    ax.set_title(f"{geometry.kind}, {geometry.preset}", fontsize=9)
+    for k, (label, snap, t) in enumerate(frames):
+        _draw_damage(fig, fig.add_subplot(1, 1 + len(frames), k + 2), model, geometry, snap,
+                     f"{label}: t = {t * 1e6:.1f} us, {int(np.sum(np.asarray(snap.D) >= 1.0))} joints broken")
+    fig.tight_layout()
+    _replace_into(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
     return path
 
 

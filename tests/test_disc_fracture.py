@@ -163,7 +163,8 @@ def test_cli_snapshots_write_vtk_and_damage_maps(tmp_path):
     assert D_lines.shape[0] == run["n_joints"]
     assert 0.0 <= D_lines.min() and D_lines.max() <= 1.0
     assert int(broken.sum()) == run["fracture"]["broken_at_peak"]
-    for name in ("damage_peak.png", "damage_end.png"):
+    assert names["overview"]["png"] == "fracture.png"
+    for name in ("damage_peak.png", "damage_end.png", "fracture.png"):
         png = (out / "snapshots" / name).read_bytes()
         assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 20_000
     bad = subprocess.run([sys.executable, "-m", "shpb", "simulate", "--geometry", "brazilian_disc",
