@@ -3,7 +3,7 @@
 A Brazilian test measures tensile strength only when the crack starts at the centre and runs along the
 loaded diameter while the two loaded faces carry the same force (Li & Wong 2013, review; Dai et al.
 2010 for the dynamic case). These numbers say whether a simulated disc did that; ``run.json`` carries
-them (``fracture``) and the tests and ``benchmarks/bench_disc_fracture.py`` assert them.
+them (``fracture``) and the tests and ``benchmarks/bench_shpb.py`` assert them.
 
 Coordinates are those of the reference (undeformed) mesh, in units of the specimen radius R, with the
 load along x and the specimen centre at the origin. A joint's position is its midpoint.

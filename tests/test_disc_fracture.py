@@ -1,5 +1,5 @@
 """The Brazilian disc fails as a Brazilian disc (fast preset; standard and paper in
-benchmarks/bench_disc_fracture.py): the crack starts in the centre and runs along the loaded diameter,
+benchmarks/bench_shpb.py): the crack starts in the centre and runs along the loaded diameter,
 the two loaded faces carry the same force at the failure peak, the strength is granite's at this
 loading rate, fragments do not pass through each other, and every run can be looked at."""
 import json
@@ -51,7 +51,7 @@ def test_fragments_do_not_pass_through_each_other(run):
     of the specimen element size. Independently of the contact search (shpb.fracture.overlap_depth),
     no node of the disc sits inside another piece of it at the failure peak. After the peak the
     crushed pieces under the flats do pass into each other: measured at the window's end 0-11 % of an
-    element here and 25 % at the standard preset (benchmarks/bench_disc_fracture.py); the bound of a
+    element here and 25 % at the standard preset (benchmarks/bench_shpb.py); the bound of a
     third of an element says it stays a local overlap of crushed fragments, not a piece passing
     through another (the earlier model, crushing under the flats, had 4.5 % at the peak)."""
     name, out = run

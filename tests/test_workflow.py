@@ -572,7 +572,7 @@ def test_the_rank_cap_keeps_exactly_that_many_singular_values():
 
 
 def test_a_measured_experiment_runs_from_a_fresh_clone_with_nothing_beside_it(tmp_path):
-    """A clone of the committed repository in an empty folder (no ../shared, no FDEM_DATA_DIR), its own
+    """A clone of the committed repository in an empty folder (nothing beside it, no FDEM_DATA_DIR), its own
     code first on the path: a small measured calibration (cylinder, fast, CaMa_005, three members, one
     analysis) runs to its summary with the data the repository ships. A data file the product needs but
     did not commit fails here. (Uncommitted changes are not in the clone: commit before relying on it.)"""
@@ -589,7 +589,7 @@ def test_a_measured_experiment_runs_from_a_fresh_clone_with_nothing_beside_it(tm
         "simulation": {"t_end": 1.4e-4, "sample_dt": 1.0e-6},
         "observations": {"t_end": 1.4e-4, "dt": 2.0e-6, "records": [record], "error": {"kind": "ar1"}}}}}
     (clone / "fresh.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
-    env = {k: v for k, v in os.environ.items() if k not in ("FDEM_DATA_DIR", "FDEM_SHARED_DIR")}
+    env = {k: v for k, v in os.environ.items() if k != "FDEM_DATA_DIR"}
     env["PYTHONPATH"] = str(clone)
     out = subprocess.run([sys.executable, "-m", "snakemake", "--cores", "2", "--configfile", "fresh.yaml"],
                          cwd=clone, capture_output=True, text=True, timeout=600, env=env)
