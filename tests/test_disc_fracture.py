@@ -170,3 +170,45 @@ def test_cli_snapshots_write_vtk_and_damage_maps(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "shpb", "simulate", "--geometry", "brazilian_disc",
                           "--snapshots", "1e-3", "--out", str(tmp_path / "bad")], capture_output=True, text=True)
     assert bad.returncode == 2 and "--snapshots" in bad.stderr
+
+
+def test_hondros_field_tends_to_the_point_load_solution_on_the_loaded_diameter():
+    """As the loaded arcs shrink to points, Hondros' field on the diameter becomes the point-load
+    solution (Timoshenko & Goodier): sigma_theta = 1 and sigma_r = -(4 / (1 - rho^2) - 1), in units
+    of 2F/(pi D t). Tolerance 0.1 % at alpha = 0.05 degrees (measured: 6e-5 for sigma_theta, 1e-5 for
+    sigma_r; a wrong sign or factor in either term is off by tens of per cent). At 2 alpha = 20
+    degrees the centre's tension is (sin 2a - a) / a = 0.9596."""
+    from shpb.disc_theory import hondros_on_diameter
+
+    rho = np.array([0.0, 0.3, 0.6, 0.8])
+    s_r, s_th = hondros_on_diameter(rho, np.radians(0.05))
+    assert s_th == pytest.approx(np.ones_like(rho), rel=1e-3)
+    assert s_r == pytest.approx(-(4.0 / (1.0 - rho**2) - 1.0), rel=1e-3)
+    a = np.radians(10.0)
+    s_r0, s_th0 = hondros_on_diameter(0.0, a)
+    assert s_th0 == pytest.approx((np.sin(2 * a) - a) / a, rel=1e-12)
+    assert s_th0 == pytest.approx(0.9596, abs=1e-4)
+
+
+def test_onset_theory_puts_the_weakest_joint_off_centre_below_the_strength_ratio():
+    """The joint law's onset criterion on Hondros' field (README, "Where this falls short"): the centre's
+    joint along the diameter starts in tension at sigma_n / sigma_theta(0); with the default
+    sigma_n = 25 MPa and phi = 54 degrees, the weakest place at the reference (sigma_t 45 MPa) lies
+    off-centre near 0.55 R, in shear, about 8 % below the centre, while at the strong-tough point
+    (50 MPa) the centre is weakest; with sigma_n = 15 MPa the centre is weakest at all three points."""
+    from shpb.disc_theory import hondros_on_diameter, joint_onset, onset_along_diameter
+
+    a, phi = np.radians(10.0), np.radians(54.0)
+    p0, th0, mode0 = joint_onset(0.0, a, 25e6, 45e6, phi)
+    assert (th0, mode0) == (0.0, "tension")
+    assert p0 == pytest.approx(25e6 / hondros_on_diameter(0.0, a)[1], rel=1e-12)
+
+    def weakest(sigma_n, sigma_t):
+        return min(onset_along_diameter(a, sigma_n, sigma_t, phi), key=lambda r: r["onset_brazilian_stress_Pa"])
+
+    w = weakest(25e6, 45e6)
+    assert w["mode"] == "shear" and 0.45 <= w["x_over_R"] <= 0.6
+    assert 0.90 < w["onset_brazilian_stress_Pa"] / p0 < 0.95
+    assert weakest(25e6, 50e6)["x_over_R"] == 0.0
+    for sigma_t in (30e6, 45e6, 50e6):
+        assert weakest(15e6, sigma_t)["x_over_R"] == 0.0
