@@ -20,12 +20,15 @@ import math
 # Brazilian disc, granite (Godinez & Rougier 2021): E, nu, rho from Table 1; sigma_t and E_t are
 # the twin experiment's reference values (Table 2). The paper gives none of the others; ours, with
 # their sources:
-# - sigma_n = 25 MPa: granite's dynamic tensile (Brazilian) strength at this test's loading rate,
-#   from the Kuru granite SHPB law sigma_td = 21 MPa + 0.017 x loading rate [GPa/s] (Saksala et al.
-#   2013, read off its figures): 23-28 MPa at 150-400 GPa/s. The base model has no rate
-#   law (rate_strength.k = 0), so the joints carry the strength at this rate. It is also below
-#   sigma_t / tan(phi) (38 MPa at the reference), so the Mohr-Coulomb envelope, not the tension
-#   cut-off, is the material's limit in shear-compression, as in rock.
+# - sigma_n = 15 MPa: the quasi-static tensile (Brazilian) strength of Kuru granite, between the two
+#   laboratories' values for it: about 13 MPa (Saksala et al. 2013, section 2.2) and 16.9 MPa
+#   (Wessling & Kajberg 2022, Table 5), both as read via a secondary summary. The joints carry the
+#   material's strength; the dynamic apparent strength comes out of the model (inertia and the
+#   crack's run time): its peak Brazilian stress at its loading rate, 31-33 MPa at about 400 GPa/s,
+#   lies within 20 % of the Kuru SHPB law sigma_td = 21 MPa + 0.017 x rate [GPa/s] (28 MPa there).
+#   A tensile strength this far below the shear capacity also makes the disc's centre, not an
+#   inclined joint off it, the first place to fail at every point of the Table 2 box
+#   (shpb.disc_theory; 25 MPa put the weakest joint in shear at 0.55 R on the standard mesh).
 # - E_n = 100 J/m^2: granite's mode I fracture energy K_Ic^2 / E with K_Ic = 1.5-2 MPa m^0.5
 #   (65-115 J/m^2).
 # - phi_deg = 54: Mohr-Coulomb friction angle of intact granite, the Hoek, Carranza-Torres & Corkum
@@ -36,7 +39,7 @@ import math
 # - mu_crack = 0.85: Coulomb friction of crack faces once joints have broken, Byerlee's (1978) rule for
 #   rock surfaces at normal stresses below 200 MPa.
 BRAZILIAN_DEFAULTS = {
-    "sigma_n": 25e6, "sigma_t": 45e6, "E_n": 100.0, "E_t": 500.0,
+    "sigma_n": 15e6, "sigma_t": 45e6, "E_n": 100.0, "E_t": 500.0,
     "a": 0.63, "b": 1.8, "c": 6.0,
     "E": 35e9, "nu": 0.16, "rho": 2550.0,
     "phi_deg": 54.0, "mu_crack": 0.85, "penalty_factor": 10.0, "contact_penalty_factor": 2.0,

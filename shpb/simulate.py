@@ -221,7 +221,7 @@ def simulate(geometry: str, preset: str = "fast", params: dict | None = None, re
               traction_bcs=setup["traction_bcs"],
               stress_probes=setup["stress_probes"],
               snapshot_times=[arrival + t for t in snap_t] + ([t_total] if snapshots is not None else []),
-              track_peak=(g.transmission_bar, 0, 1), peak_drop=PEAK_DROP,
+              track_peak=(g.transmission_bar, 0, 1), peak_drop=PEAK_DROP[g.kind],
               peak_floor=PEAK_FLOOR_PA / to_stress)
     bar = g.bar_material
     F_front = -res.body_force_of(g.incident_bar)[:, 0]

@@ -92,21 +92,24 @@ def _peak(params):
 
 
 def test_brazilian_peak_rises_with_shear_strength_and_post_peak_follows_E_t():
-    """Paper Table 2 box: sigma_t 4-60 MPa, E_t 200-2400 J/m^2 (fast preset, failure peak). Measured
-    here: peaks 16.4 / 32.8 / 41.3 MPa at sigma_t 4 / 30 / 60 MPa (E_t 500), about 0.45 MPa per MPa
-    below the tensile strength sigma_n = 25 MPa's reach and 0.3 above it; E_t 200 -> 2400 J/m^2 raises
-    the peak from 35.6 to 40.6 MPa, delays it by 15 us and leaves 29 MPa at the end of the window
-    instead of 6 (the split halves slide apart against the mode II softening)."""
+    """Paper Table 2 box: sigma_t 4-60 MPa, E_t 200-2400 J/m^2 (fast preset, failure peak = the first
+    load maximum, shpb.fracture.PEAK_DROP). Measured here: peaks 11.1 / 29.1 / 33.7 MPa at sigma_t
+    4 / 30 / 60 MPa (E_t 500): steep while the shear capacity is below the tensile strength's reach
+    (sigma_n 15 MPa), flat above; E_t 200 -> 2400 J/m^2 raises the first peak from 30.3 to 33.4 MPa and
+    delays it by 9 us, and the split halves of the tough disc then carry more than the split load
+    (45.7 MPa at the end of the window, against 5.8 MPa left by the brittle one): mode II softening
+    governs how the halves slide apart."""
     peaks = [_peak({"sigma_t": s})[0] for s in (4e6, 30e6, 60e6)]
     assert peaks[0] < peaks[1] < peaks[2]
     slope = (peaks[2] - peaks[0]) / 56e6
     assert 0.3 < slope < 0.6
+    assert (peaks[2] - peaks[1]) / 30e6 < 0.5 * (peaks[1] - peaks[0]) / 26e6
     p_lo, t_lo, c_lo = _peak({"E_t": 200.0})
     p_hi, t_hi, c_hi = _peak({"E_t": 2400.0})
-    assert p_hi > 1.1 * p_lo
-    assert t_hi - t_lo > 10e-6
+    assert p_hi > 1.05 * p_lo
+    assert t_hi - t_lo > 5e-6
     # post-peak: the stress left at the end of the window
-    assert c_hi.stress_Pa.iloc[-1] > 0.5 * p_hi > 3 * c_lo.stress_Pa.iloc[-1]
+    assert c_hi.stress_Pa.iloc[-1] > p_hi and c_lo.stress_Pa.iloc[-1] < 0.25 * p_lo
     # the disc fractures at the paper's reference values: a peak, then a drop inside the window
     p_ref, t_ref, c_ref = _peak({"sigma_t": 45e6, "E_t": 500.0})
     assert 0 < t_ref < c_ref.time_s.iloc[-1] - 30e-6
