@@ -95,8 +95,9 @@ def test_reference_strength_is_granites_at_this_loading_rate():
     """Kuru granite in SHPB Brazilian tests (Saksala et al. 2013, read off its figures):
     sigma_td = 21 MPa + 0.017 x loading rate [GPa/s], with peaks of 25-40 MPa under these pulses. The
     model's loading rate is the slope of its Brazilian stress between 20 % and 80 % of the peak;
-    the peak must lie within 40 % of the law there (the scatter of the measured strengths about it)
-    and inside 25-40 MPa."""
+    the peak must lie within 25 % of the law there: the two laboratories that tested Kuru granite
+    differ by 17 % (Wessling & Kajberg 2022 against the law) and one laboratory's tests at this rate
+    scatter by about +-7 %. Measured: 33.2 MPa at 402 GPa/s, 19 % above the law's 27.8 MPa."""
     out = simulate("brazilian_disc", "fast")
     c = out.curve
     f = out.run["fracture"]
@@ -108,7 +109,7 @@ def test_reference_strength_is_granites_at_this_loading_rate():
     rate_GPa_s = 0.6 * peak / (t80 - t20) / 1e9
     law = 21e6 + 0.017e6 * rate_GPa_s
     assert 100 < rate_GPa_s < 1000
-    assert peak == pytest.approx(law, rel=0.4)
+    assert peak == pytest.approx(law, rel=0.25)
     assert 25e6 <= peak <= 40e6
 
 
