@@ -3,7 +3,7 @@
 For each position, the lowest Brazilian stress at which some joint angle starts to damage, the angle
 and the mode; per sigma_t, the weakest place and its onset relative to the centre's.
 
-Prints one JSON object. Usage: python benchmarks/disc_onset_theory.py [--sigma-n 25e6]
+Prints one JSON object. Usage: python benchmarks/disc_onset_theory.py [--sigma-n 15e6] (default: the model's)
 [--sigma-t 45e6,30e6,50e6] [--phi 54] [--half-angle 10]
 """
 from __future__ import annotations
@@ -18,7 +18,8 @@ from shpb.disc_theory import onset_along_diameter
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--sigma-n", type=float, default=25e6)
+    from shpb.parameters import BRAZILIAN_DEFAULTS
+    ap.add_argument("--sigma-n", type=float, default=BRAZILIAN_DEFAULTS["sigma_n"])
     ap.add_argument("--sigma-t", default="45e6,30e6,50e6")
     ap.add_argument("--phi", type=float, default=54.0)
     ap.add_argument("--half-angle", type=float, default=10.0)
