@@ -3,8 +3,10 @@ import numpy as np
 import pandas as pd
 
 from shpb import plots
-from shpb.calibration import ExperimentSpec
+from enkf import posterior_dict
+from shpb.calibration import ExperimentSpec, final_iteration
 from shpb.observations import read_curve, read_observations
+from shpb.verdict import calibration_verdict
 from shpb.workflow_io import read_json, read_responses
 
 inp, out, exp = snakemake.input, snakemake.output, snakemake.wildcards.exp
@@ -20,7 +22,14 @@ plots.plot_ensemble_curves(out.ensemble_curves, obs, Ys, title)
 forecast = {r: read_curve(p) for r, p in zip(obs.records, inp.forecast_curves)}
 plots.plot_forecast(out.forecast, obs, np.nanmean(Ys[0][alive[0]], axis=0), forecast, title,
                     posterior_mean=np.nanmean(Ys[-1][alive[-1]], axis=0))
-plots.plot_misfit(out.misfit, [{"iteration": a["iteration"], **a["misfit"]} for a in analyses],
-                  [a["misfit_per_record"] for a in analyses], spec.criteria.target(obs.m), title)
+K, decision = final_iteration(spec, analyses)
+K = min(K, len(analyses) - 1)
+misfits = [{"iteration": a["iteration"], **a["misfit"]} for a in analyses[:K + 1]]
+verdict = None if decision is None else calibration_verdict(
+    misfits=misfits, decision=decision, posterior=posterior_dict(params[K][list(spec.names)].to_numpy(float),
+                                                                 list(spec.names), alive[K]),
+    lower=spec.lower, upper=spec.upper, names=spec.names)
+plots.plot_misfit(out.misfit, misfits, [a["misfit_per_record"] for a in analyses[:K + 1]],
+                  spec.criteria.target(obs.m), title, verdict=verdict)
 chi2 = np.array([m["chi2_per_obs"] if m["chi2_per_obs"] is not None else np.nan for m in analyses[0]["members"]])
 plots.plot_sensitivity(out.sensitivity, obs, params[0], Ys[0], spec.names, chi2, spec.truth, title)

@@ -37,6 +37,7 @@ from enkf import (BoxTransform, EnsembleFailure, StopCriteria, check_stop, emula
                   posterior_dict)
 
 from .observations import Observations
+from .verdict import calibration_verdict
 
 __all__ = ["PURPOSES", "rng_for", "ExperimentSpec", "initial_ensemble", "analysis_step", "decide", "capped_truncation",
            "final_iteration", "linear_sensitivity", "record_misfits", "summary"]
@@ -402,8 +403,10 @@ def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], 
             final_params: pd.DataFrame, final_alive, forecast_misfit: Mapping, n_simulations: int,
             wall_s: float | None, simulation_wall_s: float, sensitivity: Mapping | None = None) -> dict:
     """``summary.json`` (DESIGN section 6): experiment, iterations, converged, stop_reason,
-    n_simulations, posterior, truth (twins), misfit per iteration, wall_s, and per-record before/after
-    misfits (before = prior ensemble mean, after = forecast with the posterior mean)."""
+    n_simulations, posterior, truth (twins), misfit per iteration, wall_s, per-record before/after
+    misfits (before = prior ensemble mean, after = forecast with the posterior mean), and the
+    ``verdict`` (shpb.verdict: ok, box_limited, worse_than_prior or not_converged, with the numbers and
+    what to do next)."""
     names = list(spec.names)
     K = int(decision["iteration"])
     P = final_params[names].to_numpy(float)
@@ -437,6 +440,8 @@ def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], 
         "wall_s": wall_s,
         "simulation_wall_s": simulation_wall_s,
     }
+    out["verdict"] = calibration_verdict(misfits=out["misfit"], decision=decision, posterior=post,
+                                         lower=spec.lower, upper=spec.upper, names=names)
     if spec.truth is not None:
         out["truth"] = {p: spec.truth[p] for p in names}
         out["accuracy"] = {

@@ -162,8 +162,10 @@ def plot_forecast(path, obs: Observations, prior_mean: np.ndarray, forecast: Map
 
 
 def plot_misfit(path, misfit: Sequence[Mapping], per_record: Sequence[Mapping[str, Mapping]] | None = None,
-                chi2_target: float | None = None, title: str = "") -> Path:
-    """RMSE [MPa] and chi^2 per observation of the ensemble-mean response per iteration."""
+                chi2_target: float | None = None, title: str = "", verdict: Mapping | None = None) -> Path:
+    """RMSE [MPa] and chi^2 per observation of the ensemble-mean response per iteration; with a
+    ``verdict`` (shpb.verdict), the best iteration ringed and the verdict and next step written under
+    the panels."""
     its = [int(m["iteration"]) for m in misfit]
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.5))
     a1.plot(its, [m["rmse_Pa"] * 1e-6 for m in misfit], "o-", color="k", label="all records")
@@ -180,9 +182,23 @@ def plot_misfit(path, misfit: Sequence[Mapping], per_record: Sequence[Mapping[st
         ax.grid(alpha=0.3)
     a1.set_ylabel("RMSE of the ensemble mean [MPa]")
     a2.set_ylabel("$\\chi^2$ per observation")
+    if verdict is not None:
+        c = verdict["chi2_per_obs"]
+        a2.semilogy([c["best_iteration"]], [c["best"]], "o", ms=12, mfc="none", color="tab:red",
+                    label=f"best (iteration {c['best_iteration']})")
     a2.legend(fontsize=8)
     fig.suptitle(title)
-    fig.tight_layout()
+    if verdict is not None:
+        import textwrap
+
+        ratio = c.get("final_over_prior")
+        head = f"verdict: {verdict['verdict']}" + (f" (chi^2 final / prior = {ratio:.3g})" if ratio is not None else "")
+        body = textwrap.fill("next: " + verdict["next_step"], 130)
+        fig.tight_layout(rect=(0, 0.14, 1, 1))
+        fig.text(0.01, 0.01, head + "\n" + body, fontsize=7.5, va="bottom",
+                 color="tab:red" if verdict["verdict"] != "ok" else "k")
+    else:
+        fig.tight_layout()
     return _save(fig, path)
 
 

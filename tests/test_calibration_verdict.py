@@ -1,0 +1,71 @@
+"""The calibration's verdict (shpb.verdict): a fit made worse, a parameter pinned to its box, a stop rule
+not met, each named with its numbers and what to do next; a clean calibration says ok."""
+import math
+
+import pytest
+
+from shpb.verdict import PIN_FRACTION, calibration_verdict, pinned_parameters
+
+NAMES = ("sigma_t", "E_t")
+LOWER, UPPER = (4e6, 200.0), (60e6, 2400.0)
+
+
+def _misfits(*chi2):
+    return [{"iteration": k, "chi2_per_obs": c, "rmse_Pa": 1e6 * math.sqrt(c)} for k, c in enumerate(chi2)]
+
+
+def _post(st, et):
+    return {"sigma_t": {"mean": st}, "E_t": {"mean": et}}
+
+
+def _decision(converged, reason="discrepancy", target=1.02):
+    return {"converged": converged, "reason": reason, "values": {"chi2_target": target}}
+
+
+def test_a_clean_calibration_is_ok():
+    v = calibration_verdict(misfits=_misfits(900.0, 40.0, 3.0, 0.98), decision=_decision(True),
+                            posterior=_post(45e6, 500.0), lower=LOWER, upper=UPPER, names=NAMES)
+    assert v["verdict"] == "ok" and v["flags"] == []
+    assert v["chi2_per_obs"]["best_iteration"] == 3 and v["best_is_last"]
+    assert v["chi2_per_obs"]["final_over_prior"] == pytest.approx(0.98 / 900.0)
+
+
+def test_a_fit_worse_than_the_prior_is_named_first_with_the_best_iteration():
+    """The default run's marble calibration of 2026-11-24: chi2/obs 833 (prior) -> 3200 (final)."""
+    v = calibration_verdict(misfits=_misfits(833.0, 610.0, 1900.0, 3200.0),
+                            decision=_decision(False, "max_iterations"),
+                            posterior=_post(79.5e6 * 0.5, 998.0), lower=LOWER, upper=UPPER, names=NAMES)
+    assert v["verdict"] == "worse_than_prior"
+    assert v["flags"] == ["worse_than_prior", "not_converged"]
+    assert v["chi2_per_obs"]["best"] == 610.0 and v["chi2_per_obs"]["best_iteration"] == 1
+    assert not v["best_is_last"]
+    assert v["chi2_per_obs"]["final_over_prior"] == pytest.approx(3200.0 / 833.0)
+    assert "diagnosis" in v["next_step"]
+
+
+def test_a_mean_within_two_percent_of_a_bound_is_pinned_and_one_just_outside_is_not():
+    """E_t at 4,796 J/m^2 in a box topped at 5,000 (issue 17): 4 % of the width below it is not pinned
+    at 2 %; 1 % below it is."""
+    lo, hi = (4e6, 200.0), (60e6, 5000.0)
+    width = hi[1] - lo[1]
+    assert pinned_parameters(_post(45e6, hi[1] - 0.04 * width), lo, hi, NAMES) == {}
+    assert pinned_parameters(_post(45e6, hi[1] - 0.01 * width), lo, hi, NAMES) == {"E_t": "upper"}
+    assert pinned_parameters(_post(lo[0] + 0.5 * PIN_FRACTION * (hi[0] - lo[0]), 600.0), lo, hi, NAMES) == {
+        "sigma_t": "lower"}
+    v = calibration_verdict(misfits=_misfits(100.0, 5.0), decision=_decision(True),
+                            posterior=_post(45e6, hi[1] - 0.01 * width), lower=lo, upper=hi, names=NAMES)
+    assert v["verdict"] == "box_limited" and v["pinned_to_box"] == {"E_t": "upper"}
+    assert "widen the box" in v["next_step"] and "E_t" in v["next_step"]
+
+
+def test_a_budget_spent_above_the_target_is_not_converged_with_its_numbers():
+    v = calibration_verdict(misfits=_misfits(900.0, 40.0, 14.0), decision=_decision(False, "max_iterations"),
+                            posterior=_post(30.7e6, 281.0), lower=LOWER, upper=UPPER, names=NAMES)
+    assert v["verdict"] == "not_converged" and v["flags"] == ["not_converged"]
+    assert "max_iterations" in v["next_step"] and "14" in v["next_step"] and "1.02" in v["next_step"]
+
+
+def test_failed_iterations_do_not_count_as_best():
+    v = calibration_verdict(misfits=_misfits(50.0, float("nan"), 20.0), decision=_decision(False, "max_iterations"),
+                            posterior=_post(30e6, 300.0), lower=LOWER, upper=UPPER, names=NAMES)
+    assert v["chi2_per_obs"]["best_iteration"] == 2 and v["best_is_last"]
