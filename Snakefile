@@ -48,6 +48,7 @@ include: "rules/assimilate.smk"
 include: "rules/forecast.smk"
 include: "rules/report.smk"
 include: "rules/diagnosis.smk"
+include: "rules/sensitivity.smk"
 
 
 rule all:
@@ -56,4 +57,5 @@ rule all:
         expand("results/{exp}/plots/{plot}.png", exp=RUN, plot=PLOTS),
         expand("results/{exp}/diagnosis/report.json", exp=diagnosed_experiments()),
         expand("results/{exp}/diagnosis/check.json", exp=diagnosed_experiments()),
+        expand("results/{exp}/sensitivity/report.json", exp=SENSITIVITY_RUN),
     default_target: True
