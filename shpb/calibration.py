@@ -401,7 +401,8 @@ def linear_sensitivity(params: pd.DataFrame, names: Sequence[str], lower, upper,
 
 def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], decision: Mapping,
             final_params: pd.DataFrame, final_alive, forecast_misfit: Mapping, n_simulations: int,
-            wall_s: float | None, simulation_wall_s: float, sensitivity: Mapping | None = None) -> dict:
+            wall_s: float | None, simulation_wall_s: float, sensitivity: Mapping | None = None,
+            iteration_params: Sequence[pd.DataFrame] | None = None) -> dict:
     """``summary.json`` (DESIGN section 6): experiment, iterations, converged, stop_reason,
     n_simulations, posterior, truth (twins), misfit per iteration, wall_s, per-record before/after
     misfits (before = prior ensemble mean, after = forecast with the posterior mean), and the
@@ -442,6 +443,14 @@ def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], 
     }
     out["verdict"] = calibration_verdict(misfits=out["misfit"], decision=decision, posterior=post,
                                          lower=spec.lower, upper=spec.upper, names=names)
+    best = out["verdict"]["chi2_per_obs"]["best_iteration"]
+    if iteration_params is not None and best != K:
+        # The last ensemble is the ES-MDA posterior and stays `posterior`; when an earlier one fitted
+        # better, it is kept beside it so a worse last step loses nothing (issue 17).
+        Pb = iteration_params[best][names].to_numpy(float)
+        out["best_ensemble"] = {"iteration": int(best), "chi2_per_obs": out["misfit"][best]["chi2_per_obs"],
+                                "rmse_Pa": out["misfit"][best]["rmse_Pa"],
+                                "posterior": posterior_dict(Pb, names, np.asarray(analyses[best]["alive"], bool))}
     if spec.truth is not None:
         out["truth"] = {p: spec.truth[p] for p in names}
         out["accuracy"] = {
@@ -499,7 +508,7 @@ def experiment_outcome(*, name: str, exp: Mapping, params: Sequence[pd.DataFrame
                   final_alive=alive, forecast_misfit=fc_misfit,
                   n_simulations=(K + 1) * spec.ensemble_size * n_records + len(forecast_runs) + len(extra_runs),
                   wall_s=None if started is None or finished is None else finished - started,
-                  simulation_wall_s=sim_wall, sensitivity=sens)
+                  simulation_wall_s=sim_wall, sensitivity=sens, iteration_params=params)
     table = member_table(params[K][list(spec.names)].to_numpy(float), list(spec.names), responses=responses[K],
                          obs=obs.values, obs_error=obs.error_model(), alive=alive)
     return out, table

@@ -69,3 +69,33 @@ def test_failed_iterations_do_not_count_as_best():
     v = calibration_verdict(misfits=_misfits(50.0, float("nan"), 20.0), decision=_decision(False, "max_iterations"),
                             posterior=_post(30e6, 300.0), lower=LOWER, upper=UPPER, names=NAMES)
     assert v["chi2_per_obs"]["best_iteration"] == 2 and v["best_is_last"]
+
+
+def test_summary_keeps_an_earlier_ensemble_that_fitted_better_beside_the_posterior():
+    """Three iterations where the middle one fitted best: summary.json keeps its ensemble (mean and
+    interval of that iteration's members) as best_ensemble; the posterior stays the last ensemble."""
+    import numpy as np
+    import pandas as pd
+
+    from shpb.calibration import ExperimentSpec, summary
+
+    exp = {"kind": "measured", "geometry": "cylinder", "preset": "fast", "method": "esmda", "ensemble_size": 4,
+           "seed": 1, "parameters": {"sigma_t": [4e6, 60e6], "E_t": [200.0, 2400.0]}, "esmda": {"steps": 2}}
+    spec = ExperimentSpec.from_config("m", exp)
+    rng = np.random.default_rng(0)
+    params = [pd.DataFrame({"sigma_t": rng.uniform(10e6, 50e6, 4), "E_t": rng.uniform(300, 2000, 4)})
+              for _ in range(3)]
+    chi2 = [500.0, 120.0, 900.0]
+    analyses = [{"iteration": k, "n_alive": 4, "alive": [True] * 4, "failed_members": {},
+                 "misfit": {"rmse_Pa": 1e6 * c ** 0.5, "nrmse": 0.1, "chi2_per_obs": c},
+                 "misfit_per_record": {"r": {"rmse_Pa": 1.0, "chi2_per_obs": c}}} for k, c in enumerate(chi2)]
+    decision = {"iteration": 2, "converged": False, "reason": "max_iterations", "message": "",
+                "values": {"chi2_target": 1.02}}
+    out = summary(spec=spec, exp=exp, analyses=analyses, decision=decision, final_params=params[2],
+                  final_alive=np.ones(4, bool), forecast_misfit={"r": None}, n_simulations=13, wall_s=None,
+                  simulation_wall_s=0.0, iteration_params=params)
+    assert out["verdict"]["verdict"] == "worse_than_prior"
+    b = out["best_ensemble"]
+    assert b["iteration"] == 1 and b["chi2_per_obs"] == 120.0
+    assert b["posterior"]["sigma_t"]["mean"] == pytest.approx(params[1]["sigma_t"].mean(), rel=1e-12)
+    assert out["posterior"]["E_t"]["mean"] == pytest.approx(params[2]["E_t"].mean(), rel=1e-12)
