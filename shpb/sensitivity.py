@@ -13,7 +13,6 @@ import math
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -391,9 +390,6 @@ def plot_sensitivity_indices(path, t: np.ndarray, indices: dict, title: str = ""
     ax.grid(alpha=0.3, axis="y")
     fig.suptitle(title)
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
-    fig.savefig(tmp, dpi=120, metadata={"Software": None})
-    plt.close(fig)
-    tmp.replace(path)
+    from .plots import _save  # the workflow's atomic PNG writer
+
+    _save(fig, path)
