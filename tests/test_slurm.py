@@ -26,7 +26,7 @@ REPO = Path(__file__).resolve().parents[1]
 CLUSTER = REPO / "scripts" / "slurm_local_cluster.sh"
 PROFILES = REPO / "profiles"
 #: Rules that run one FDEM simulation each: the only ones a cluster run submits as Slurm jobs.
-SIMULATION_RULES = {"member", "truth", "forecast", "diagnosis_member", "diagnosis_check_member"}
+SIMULATION_RULES = {"member", "truth", "forecast", "diagnosis_member", "diagnosis_check_member", "sensitivity_member"}
 
 sys.path.insert(0, str(REPO / "scripts"))
 import slurm_compare  # noqa: E402
