@@ -9,14 +9,9 @@
 # `sensitivity_design`, and each job reads its row from design.csv, so SALib runs in one place only.
 from snakemake.exceptions import WorkflowError as _SensitivityWorkflowError
 
-from shpb.sensitivity import SensitivitySpec, check_config as _check_sensitivity
-from shpb.workflow_io import ConfigError as _SensitivityConfigError
+from shpb.sensitivity import SensitivitySpec
 
-try:
-    _check_sensitivity(config)
-except _SensitivityConfigError as exc:
-    raise _SensitivityWorkflowError(str(exc)) from None
-
+# The sensitivity blocks are validated with the rest of the config (shpb.workflow_io.validate_config).
 SENSITIVITY_RUN = [e for e in RUN if (EXPERIMENTS[e].get("sensitivity") or {}).get("run")]
 
 localrules: sensitivity_design, sensitivity_analysis

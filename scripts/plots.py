@@ -3,10 +3,8 @@ import numpy as np
 import pandas as pd
 
 from shpb import plots
-from enkf import posterior_dict
-from shpb.calibration import ExperimentSpec, final_iteration
+from shpb.calibration import ExperimentSpec, final_iteration, final_verdict
 from shpb.observations import read_curve, read_observations
-from shpb.verdict import calibration_verdict
 from shpb.workflow_io import read_json, read_responses
 
 inp, out, exp = snakemake.input, snakemake.output, snakemake.wildcards.exp
@@ -22,13 +20,9 @@ plots.plot_ensemble_curves(out.ensemble_curves, obs, Ys, title)
 forecast = {r: read_curve(p) for r, p in zip(obs.records, inp.forecast_curves)}
 plots.plot_forecast(out.forecast, obs, np.nanmean(Ys[0][alive[0]], axis=0), forecast, title,
                     posterior_mean=np.nanmean(Ys[-1][alive[-1]], axis=0))
-K, decision = final_iteration(spec, analyses)
-K = min(K, len(analyses) - 1)
+K = min(final_iteration(spec, analyses)[0], len(analyses) - 1)
 misfits = [{"iteration": a["iteration"], **a["misfit"]} for a in analyses[:K + 1]]
-verdict = None if decision is None else calibration_verdict(
-    misfits=misfits, decision=decision, posterior=posterior_dict(params[K][list(spec.names)].to_numpy(float),
-                                                                 list(spec.names), alive[K]),
-    lower=spec.lower, upper=spec.upper, names=spec.names)
+verdict = final_verdict(spec, analyses, params)
 plots.plot_misfit(out.misfit, misfits, [a["misfit_per_record"] for a in analyses[:K + 1]],
                   spec.criteria.target(obs.m), title, verdict=verdict)
 chi2 = np.array([m["chi2_per_obs"] if m["chi2_per_obs"] is not None else np.nan for m in analyses[0]["members"]])

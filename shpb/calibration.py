@@ -40,7 +40,7 @@ from .observations import Observations
 from .verdict import calibration_verdict
 
 __all__ = ["PURPOSES", "rng_for", "ExperimentSpec", "initial_ensemble", "analysis_step", "decide", "capped_truncation",
-           "final_iteration", "linear_sensitivity", "record_misfits", "summary"]
+           "final_iteration", "final_verdict", "linear_sensitivity", "record_misfits", "summary"]
 
 #: Independent random streams of an experiment (the ``spawn_key`` of :func:`rng_for`).
 PURPOSES = {"lhs": 1, "noise": 2, "analysis": 3}
@@ -461,6 +461,19 @@ def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], 
     if sensitivity is not None:
         out["sensitivity"] = sensitivity
     return jsonable(out)
+
+
+def final_verdict(spec: ExperimentSpec, analyses: Sequence[Mapping], params: Sequence[pd.DataFrame]) -> dict | None:
+    """The ``verdict`` block of ``summary.json`` from the stored iterations alone (for the plots, which
+    run beside the summary): None while the stored iterations never stop."""
+    K, decision = final_iteration(spec, analyses)
+    if decision is None:
+        return None
+    misfits = [{"iteration": int(a["iteration"]), **a["misfit"]} for a in analyses[:K + 1]]
+    post = posterior_dict(params[K][list(spec.names)].to_numpy(float), list(spec.names),
+                          np.asarray(analyses[K]["alive"], bool))
+    return calibration_verdict(misfits=misfits, decision=decision, posterior=post, lower=spec.lower,
+                               upper=spec.upper, names=spec.names)
 
 
 def _ratio(a: Mapping, p: str):

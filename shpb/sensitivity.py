@@ -20,7 +20,7 @@ import pandas as pd
 from enkf import jsonable
 from .workflow_io import ConfigError, experiment_records, known_parameters
 
-__all__ = ["METHODS", "FEATURES", "SensitivitySpec", "config_errors", "check_config", "design", "features",
+__all__ = ["METHODS", "FEATURES", "SensitivitySpec", "config_errors", "design", "features",
            "analyze", "recommend", "report", "tables", "plot_sensitivity_indices"]
 
 METHODS = ("efast", "sobol", "morris")
@@ -152,12 +152,6 @@ def config_errors(config: Mapping) -> list[str]:
     """Problems of every experiment's sensitivity block (after config/schema.yaml has passed)."""
     return [e for name, exp in config.get("experiments", {}).items() if exp.get("sensitivity") is not None
             for e in _experiment_errors(name, exp)]
-
-
-def check_config(config: Mapping) -> None:
-    errors = config_errors(config)
-    if errors:
-        raise ConfigError("invalid workflow config (sensitivity):\n  - " + "\n  - ".join(errors))
 
 
 def design(spec: SensitivitySpec) -> pd.DataFrame:

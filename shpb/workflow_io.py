@@ -332,6 +332,9 @@ def validate_config(config: Mapping, schema: Mapping | str | Path, *, base_dir: 
     if not errors:
         cfg = apply_defaults(cfg, schema)
         errors = _semantic_errors(cfg, Path(base_dir))
+        if not errors:
+            from .sensitivity import config_errors as sensitivity_errors  # it imports this module
+            errors = sensitivity_errors(cfg)
     if errors:
         raise ConfigError(f"invalid workflow config ({source}):\n  - " + "\n  - ".join(errors))
     return cfg

@@ -88,7 +88,9 @@ def test_summary_keeps_an_earlier_ensemble_that_fitted_better_beside_the_posteri
     chi2 = [500.0, 120.0, 900.0]
     analyses = [{"iteration": k, "n_alive": 4, "alive": [True] * 4, "failed_members": {},
                  "misfit": {"rmse_Pa": 1e6 * c ** 0.5, "nrmse": 0.1, "chi2_per_obs": c},
-                 "misfit_per_record": {"r": {"rmse_Pa": 1.0, "chi2_per_obs": c}}} for k, c in enumerate(chi2)]
+                 "misfit_per_record": {"r": {"rmse_Pa": 1.0, "chi2_per_obs": c}}, "n_obs": 50,
+                 "prior_spread_unbounded": {"sigma_t": 1.0, "E_t": 1.0}, "next_params": [[0.0, 0.0]]}
+                for k, c in enumerate(chi2)]
     decision = {"iteration": 2, "converged": False, "reason": "max_iterations", "message": "",
                 "values": {"chi2_target": 1.02}}
     out = summary(spec=spec, exp=exp, analyses=analyses, decision=decision, final_params=params[2],
@@ -99,3 +101,9 @@ def test_summary_keeps_an_earlier_ensemble_that_fitted_better_beside_the_posteri
     assert b["iteration"] == 1 and b["chi2_per_obs"] == 120.0
     assert b["posterior"]["sigma_t"]["mean"] == pytest.approx(params[1]["sigma_t"].mean(), rel=1e-12)
     assert out["posterior"]["E_t"]["mean"] == pytest.approx(params[2]["E_t"].mean(), rel=1e-12)
+    # the plots take the same verdict from the stored iterations alone
+    from shpb.calibration import final_verdict
+
+    v = final_verdict(spec, analyses, params)
+    assert v["verdict"] == out["verdict"]["verdict"] and v["flags"] == out["verdict"]["flags"]
+    assert v["chi2_per_obs"]["best_iteration"] == 1 and v["chi2_per_obs"]["final"] == 900.0

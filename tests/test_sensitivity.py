@@ -19,7 +19,7 @@ import pytest
 import yaml
 from SALib.test_functions import Ishigami
 
-from shpb.sensitivity import (FEATURES, SensitivitySpec, analyze, check_config, design, features, recommend,
+from shpb.sensitivity import (FEATURES, SensitivitySpec, analyze, design, features, recommend,
                               report, tables)
 from shpb.workflow_io import ConfigError, load_yaml, validate_config
 from test_workflow import REPO, SCHEMA, snakemake, twin_config, write_config, write_stand_in
@@ -167,7 +167,6 @@ def test_time_points_without_spread_are_nan_and_a_constant_feature_is_noted():
 
 def test_config_sensitivity_blocks_are_valid_and_a_bad_value_is_named():
     cfg = validate_config(load_yaml(REPO / "config" / "config.yaml"), SCHEMA, base_dir=REPO)
-    check_config(cfg)
     twin = SensitivitySpec.from_config("twin_ref", cfg["experiments"]["twin_ref"])
     assert twin.names == ("sigma_n", "sigma_t", "E_n", "E_t", "a", "b", "c") and twin.n_simulations == 455
     assert twin.method == "efast" and twin.record == "synthetic" and twin.seed == 2021
@@ -185,9 +184,8 @@ def test_config_sensitivity_blocks_are_valid_and_a_bad_value_is_named():
         ({"method": "sobol", "samples": 100}, "experiments.twin.sensitivity.samples: Sobol' needs a power of two"),
         ({"record": "CaMa_SHPB_005"}, "experiments.twin.sensitivity.record: 'CaMa_SHPB_005' is not a record"),
     ]:
-        cfg = validate_config(twin_config(sensitivity=block), SCHEMA)
         with pytest.raises(ConfigError) as err:
-            check_config(cfg)
+            validate_config(twin_config(sensitivity=block), SCHEMA)
         assert expected in str(err.value), str(err.value)
     defaults = validate_config(twin_config(sensitivity={}), SCHEMA)["experiments"]["twin"]
     s = SensitivitySpec.from_config("twin", defaults)
