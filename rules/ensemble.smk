@@ -3,6 +3,10 @@
 
 
 rule lhs:
+    """`parameters: auto`: the sensitivity report decides which parameters the prior spans."""
+    input:
+        unpack(lambda wc: {"sensitivity": f"results/{wc.exp}/sensitivity/report.json"}
+               if EXPERIMENTS[wc.exp]["parameters"] == "auto" else {}),
     output:
         params="results/{exp}/iter_0/params.csv",
     params:

@@ -3,5 +3,6 @@ from shpb.calibration import ExperimentSpec, initial_ensemble
 from shpb.workflow_io import atomic_write_csv
 
 exp = snakemake.wildcards.exp
-spec = ExperimentSpec.from_config(exp, snakemake.config["experiments"][exp])
+spec = ExperimentSpec.from_config(exp, snakemake.config["experiments"][exp],
+                                  sensitivity_report=snakemake.input.get("sensitivity"))
 atomic_write_csv(initial_ensemble(spec), snakemake.output.params)

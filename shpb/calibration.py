@@ -37,6 +37,7 @@ from enkf import (BoxTransform, EnsembleFailure, StopCriteria, check_stop, emula
                   posterior_dict)
 
 from .observations import Observations
+from .sensitivity import AUTO, selected_parameters
 from .verdict import calibration_verdict
 
 __all__ = ["PURPOSES", "rng_for", "ExperimentSpec", "initial_ensemble", "analysis_step", "decide", "capped_truncation",
@@ -77,8 +78,12 @@ class ExperimentSpec:
     temper_base: float = 4.0
 
     @classmethod
-    def from_config(cls, name: str, exp: Mapping) -> "ExperimentSpec":
+    def from_config(cls, name: str, exp: Mapping, sensitivity_report: Mapping | str | None = None) -> "ExperimentSpec":
+        """``parameters: auto`` takes the parameters the experiment's sensitivity report recommends
+        (``sensitivity_report``: its content or path; default ``results/<name>/sensitivity/report.json``)."""
         params = exp["parameters"]
+        if params == AUTO:
+            params = selected_parameters(name, exp, sensitivity_report)
         names = tuple(params)
         method = exp["method"]
         if method == "esmda":

@@ -20,8 +20,12 @@ import pandas as pd
 from enkf import jsonable
 from .workflow_io import ConfigError, experiment_records, known_parameters
 
-__all__ = ["METHODS", "FEATURES", "SensitivitySpec", "config_errors", "design", "features",
-           "analyze", "recommend", "report", "tables", "plot_sensitivity_indices"]
+__all__ = ["METHODS", "FEATURES", "AUTO", "SensitivitySpec", "config_errors", "design", "features",
+           "analyze", "recommend", "report", "tables", "plot_sensitivity_indices", "report_path",
+           "selected_parameters"]
+
+#: ``experiments.<name>.parameters: auto``: calibrate what the experiment's sensitivity stage recommends.
+AUTO = "auto"
 
 METHODS = ("efast", "sobol", "morris")
 # Defaults of `samples` (SALib's N): eFAST's smallest valid N (N > 4 M^2), a power of two for the
@@ -86,7 +90,8 @@ class SensitivitySpec:
         s = exp["sensitivity"]
         method, box, seed = s.get("method") or "efast", s.get("parameters") or exp["parameters"], s.get("seed")
         names = tuple(box)
-        held = {p: 0.5 * (lo + hi) for p, (lo, hi) in exp["parameters"].items() if p not in box}
+        estimated = {} if exp["parameters"] == AUTO else exp["parameters"]
+        held = {p: 0.5 * (lo + hi) for p, (lo, hi) in estimated.items() if p not in box}
         return cls(experiment=name, method=method, samples=int(s.get("samples") or DEFAULT_SAMPLES[method]),
                    names=names, lower=np.array([box[p][0] for p in names], float),
                    upper=np.array([box[p][1] for p in names], float), threshold=float(s.get("threshold", 0.05)),
@@ -118,10 +123,12 @@ def _experiment_errors(name: str, exp: Mapping) -> list[str]:
     if s is None:
         return [f"{where}: the experiment has no sensitivity block"]
     method = s.get("method") or "efast"
+    if exp.get("parameters") == AUTO and not s.get("parameters"):
+        return [f"{where}.parameters: `parameters: auto` calibrates a subset of these boxes; list the candidates"]
     if method not in METHODS:
         return [f"{where}.method: {method!r} is not one of {list(METHODS)}"]
     known = known_parameters(exp.get("geometry", ""))
-    for p, box in (s.get("parameters") or exp.get("parameters") or {}).items():
+    for p, box in (s.get("parameters") or exp.get("parameters")).items():
         if p not in known:
             errors.append(f"{where}.parameters.{p}: unknown parameter; the simulator knows {list(known)}")
             continue
@@ -152,6 +159,45 @@ def config_errors(config: Mapping) -> list[str]:
     """Problems of every experiment's sensitivity block (after config/schema.yaml has passed)."""
     return [e for name, exp in config.get("experiments", {}).items() if exp.get("sensitivity") is not None
             for e in _experiment_errors(name, exp)]
+
+
+def report_path(name: str) -> str:
+    """Where the workflow writes an experiment's sensitivity report (relative to the working directory)."""
+    return f"results/{name}/sensitivity/report.json"
+
+
+def selected_parameters(name: str, exp: Mapping, report: Mapping | str | None = None) -> dict[str, list[float]]:
+    """The estimated parameters of an experiment configured with ``parameters: auto``: those its
+    sensitivity report recommends, each with its box from ``sensitivity.parameters``; the others keep
+    the simulator's defaults (or ``fixed``). ``report``: the report's content or path (default
+    :func:`report_path`). A report drawn over other boxes than the config's (a stale report), an empty
+    recommendation or one the ensemble cannot span is a :class:`ConfigError` naming what to change."""
+    import json
+    from pathlib import Path
+
+    if isinstance(report, Mapping):
+        rep, path = report, f"the sensitivity report of {name}"
+    else:
+        path = report or report_path(name)
+        if not Path(path).is_file():
+            raise ConfigError(f"experiments.{name}.parameters: auto needs the sensitivity report {path}; "
+                              f"run `snakemake results/{name}/sensitivity/report.json` first (the workflow does)")
+        rep = json.loads(Path(path).read_text())
+    boxes = {p: [float(lo), float(hi)] for p, (lo, hi) in exp["sensitivity"]["parameters"].items()}
+    drawn = {p: [float(lo), float(hi)] for p, (lo, hi) in rep.get("parameters", {}).items()}
+    if drawn != boxes:
+        raise ConfigError(f"{path}: the report was drawn over {drawn}, but experiments.{name}.sensitivity.parameters "
+                          f"is now {boxes}; re-run the sensitivity stage")
+    chosen = [r["parameter"] for r in rep.get("recommended", [])]
+    if not chosen:
+        raise ConfigError(f"{path}: no parameter has a total index above the threshold ({rep.get('threshold')}), "
+                          f"so `experiments.{name}.parameters: auto` has nothing to calibrate; lower "
+                          f"sensitivity.threshold or list the parameters by hand")
+    n = int(exp["ensemble_size"])
+    if n <= len(chosen):
+        raise ConfigError(f"experiments.{name}.ensemble_size: {n} members cannot span the {len(chosen)} parameters "
+                          f"the sensitivity report selects ({chosen}); use more than {len(chosen)}")
+    return {p: boxes[p] for p in boxes if p in chosen}
 
 
 def design(spec: SensitivitySpec) -> pd.DataFrame:

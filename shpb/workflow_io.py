@@ -182,7 +182,14 @@ def _semantic_errors(config: Mapping, base: Path) -> list[str]:
             errors.append(f"{where}: experiment names must match {_NAME_RE.pattern} (they become folder names)")
         params = exp.get("parameters", {})
         known = known_parameters(exp.get("geometry", ""))
-        for p, box in params.items():
+        # shpb.sensitivity.AUTO: the candidates are the sensitivity boxes (checked with that block)
+        auto = params == "auto"
+        if auto:
+            params = (exp.get("sensitivity") or {}).get("parameters") or {}
+            if not params:
+                errors.append(f"{where}.parameters: auto calibrates what the sensitivity stage recommends; "
+                              f"the experiment needs a sensitivity block with its candidate parameters and boxes")
+        for p, box in ({} if auto else params).items():
             if p not in known:
                 errors.append(f"{where}.parameters.{p}: unknown parameter; the simulator knows {list(known)}")
             lo, hi = box
@@ -194,7 +201,7 @@ def _semantic_errors(config: Mapping, base: Path) -> list[str]:
             if p in params:
                 errors.append(f"{where}.fixed.{p}: also listed under parameters (estimated); choose one")
         n_members = exp.get("ensemble_size", 0)
-        if params and n_members <= len(params):
+        if params and n_members <= len(params) and not auto:
             errors.append(f"{where}.ensemble_size: {n_members} members cannot span {len(params)} parameters; "
                           f"use more than {len(params)}")
         obs = exp.get("observations", {})

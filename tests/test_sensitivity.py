@@ -251,3 +251,69 @@ def test_the_stage_runs_end_to_end_with_a_stand_in_simulator(tmp_path):
     assert (res / "plots/sensitivity_indices.png").stat().st_size > 10_000
     again = snakemake(tmp_path, "--cores", "2", "results/twin/sensitivity/report.json")
     assert again.returncode == 0 and "Nothing to be done" in again.stdout + again.stderr
+
+
+# --------------------------------------------------------------------------------------------------
+# parameters: auto
+# --------------------------------------------------------------------------------------------------
+def _auto_experiment(**sens) -> dict:
+    exp = twin_config()["experiments"]["twin"]
+    exp["parameters"] = "auto"
+    exp["sensitivity"] = {"method": "sobol", "samples": 8, "bootstrap": 50,
+                          "parameters": {"sigma_t": [2.0e7, 6.0e7], "E_t": [200.0, 2400.0], "a": [0.3, 0.9]},
+                          **sens}
+    exp["observations"]["truth"]["a"] = 0.63
+    return exp
+
+
+def test_auto_takes_the_recommended_parameters_with_their_boxes_and_refuses_a_stale_or_empty_report(tmp_path):
+    from shpb.calibration import ExperimentSpec
+
+    exp = _auto_experiment()
+    boxes = exp["sensitivity"]["parameters"]
+    rep = {"parameters": boxes, "threshold": 0.05, "recommended": [{"parameter": "E_t", "reasons": []},
+                                                                   {"parameter": "sigma_t", "reasons": []}]}
+    spec = ExperimentSpec.from_config("twin", exp, sensitivity_report=rep)
+    assert spec.names == ("sigma_t", "E_t")  # the config's order, not the report's
+    assert spec.lower.tolist() == [2.0e7, 200.0] and spec.upper.tolist() == [6.0e7, 2400.0]
+    path = tmp_path / "report.json"
+    path.write_text(json.dumps(rep))
+    assert ExperimentSpec.from_config("twin", exp, sensitivity_report=str(path)).names == ("sigma_t", "E_t")
+    stale = {**rep, "parameters": {**boxes, "E_t": [100.0, 2400.0]}}
+    with pytest.raises(ConfigError, match="re-run the sensitivity stage"):
+        ExperimentSpec.from_config("twin", exp, sensitivity_report=stale)
+    with pytest.raises(ConfigError, match="nothing to calibrate; lower sensitivity.threshold"):
+        ExperimentSpec.from_config("twin", exp, sensitivity_report={**rep, "recommended": []})
+    with pytest.raises(ConfigError, match="experiments.twin.ensemble_size: 2 members cannot span the 2 param"):
+        ExperimentSpec.from_config("twin", {**exp, "ensemble_size": 2}, sensitivity_report=rep)
+    with pytest.raises(ConfigError, match="needs the sensitivity report .*missing.json"):
+        ExperimentSpec.from_config("twin", exp, sensitivity_report=str(tmp_path / "missing.json"))
+
+
+def test_auto_without_candidates_or_with_a_truth_missing_one_is_a_config_error():
+    exp = _auto_experiment()
+    del exp["sensitivity"]["parameters"]
+    with pytest.raises(ConfigError, match="experiments.twin.parameters: auto calibrates what the sensitivity"):
+        validate_config({"experiments": {"twin": exp}}, SCHEMA)
+    exp = _auto_experiment()
+    del exp["observations"]["truth"]["a"]
+    with pytest.raises(ConfigError, match=r"experiments.twin.observations.truth: no reference value for \['a'\]"):
+        validate_config({"experiments": {"twin": exp}}, SCHEMA)
+
+
+def test_auto_calibrates_what_the_stage_recommends_end_to_end(tmp_path):
+    """The stand-in's curve depends on sigma_t (peak) and E_t (decay) and ignores `a`: the default
+    target runs the sensitivity stage first, then calibrates sigma_t and E_t only, `a` at its default."""
+    cfg = {"experiments": {"twin": _auto_experiment()}}
+    cfg["simulator"] = write_stand_in(tmp_path)
+    write_config(tmp_path, cfg)
+    out = snakemake(tmp_path, "--cores", "2")
+    assert out.returncode == 0, out.stderr[-4000:]
+    res = tmp_path / "results/twin"
+    rep = json.loads((res / "sensitivity/report.json").read_text())
+    assert [r["parameter"] for r in rep["recommended"]] == ["sigma_t", "E_t"] and rep["not_recommended"] == ["a"]
+    assert list(pd.read_csv(res / "iter_0/params.csv").columns) == ["member", "sigma_t", "E_t"]
+    summary = json.loads((res / "summary.json").read_text())
+    assert set(summary["posterior"]) == {"sigma_t", "E_t"}
+    run = json.loads((res / "iter_0/members/000/synthetic/run.json").read_text())
+    assert "a" not in run["params"]  # the simulator's default, not a calibrated value
