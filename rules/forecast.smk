@@ -1,8 +1,33 @@
-# The forecast (best-estimate) simulation with the posterior-mean parameters of the final iteration.
+# The forecast (best-estimate) simulation with the posterior-mean parameters: of the final iteration's
+# ensemble, or of the emulator MCMC sample (`posterior: emulator_mcmc`, rule posterior_sample).
+
+
+def posterior_sample_files(exp):
+    """The emulator MCMC posterior's files, for `posterior: emulator_mcmc` (shpb.posterior)."""
+    if EXPERIMENTS[exp].get("posterior", "ensemble") != "emulator_mcmc":
+        return {}
+    return {"samples": f"results/{exp}/posterior/samples.csv", "sampler": f"results/{exp}/posterior/sampler.json"}
+
+
+rule posterior_sample:
+    input:
+        params=lambda wc: iteration_files(wc.exp, "params.csv"),
+        responses=lambda wc: iteration_files(wc.exp, "responses.csv"),
+        analyses=lambda wc: iteration_files(wc.exp, "analysis.json"),
+        obs="results/{exp}/observations/obs.csv",
+        obs_meta="results/{exp}/observations/obs.json",
+    output:
+        samples="results/{exp}/posterior/samples.csv",
+        sampler="results/{exp}/posterior/sampler.json",
+    params:
+        exp=lambda wc: EXPERIMENTS[wc.exp],
+    script:
+        "../scripts/posterior_sample.py"
 
 
 rule forecast_params:
     input:
+        unpack(lambda wc: posterior_sample_files(wc.exp)),
         analyses=lambda wc: iteration_files(wc.exp, "analysis.json"),
         params=lambda wc: iteration_files(wc.exp, "params.csv")[-1],
     output:

@@ -14,6 +14,7 @@ def final_inputs(wc):
         "forecast_runs": expand("results/{exp}/forecast/{record}/run.json", exp=exp, record=recs),
         "forecast_params": f"results/{exp}/forecast/params.json",
     }
+    files.update(posterior_sample_files(exp))
     if EXPERIMENTS[exp]["kind"] == "twin":
         files["truth_run"] = f"results/{exp}/truth/synthetic/run.json"
     return files

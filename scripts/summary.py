@@ -18,7 +18,9 @@ summary, posterior = experiment_outcome(
     forecast_runs={r: read_json(p) for r, p in zip(recs, inp.forecast_runs)},
     started=os.path.getmtime(inp.params[0]), finished=time.time(),
     member_wall_s=sum(float(s["wall_s"].sum()) for s, _ in responses),
-    extra_runs=[read_json(inp.truth_run)] if "truth_run" in inp.keys() else [])
+    extra_runs=[read_json(inp.truth_run)] if "truth_run" in inp.keys() else [],
+    posterior_samples=pd.read_csv(inp.samples) if "samples" in inp.keys() else None,
+    posterior_sampler=read_json(inp.sampler) if "sampler" in inp.keys() else None)
 summary["forecast_params"] = read_json(inp.forecast_params)["params"]
 atomic_write_json(snakemake.output.summary, summary)
 atomic_write_csv(posterior, snakemake.output.posterior)

@@ -36,15 +36,18 @@ from enkf import (BoxTransform, EnsembleFailure, StopCriteria, check_stop, emula
                   esmda_alphas, esmda_update, jsonable, latin_hypercube, localization_mask, mean_misfit, misfit_table,
                   posterior_dict)
 
+from enkf.ces import interval_summary
+
 from .observations import Observations
 from .sensitivity import AUTO, selected_parameters
 from .verdict import calibration_verdict
 
 __all__ = ["PURPOSES", "rng_for", "ExperimentSpec", "initial_ensemble", "analysis_step", "decide", "capped_truncation",
+           "all_runs",
            "final_iteration", "final_verdict", "linear_sensitivity", "record_misfits", "summary"]
 
 #: Independent random streams of an experiment (the ``spawn_key`` of :func:`rng_for`).
-PURPOSES = {"lhs": 1, "noise": 2, "analysis": 3}
+PURPOSES = {"lhs": 1, "noise": 2, "analysis": 3, "posterior": 4}
 
 
 def rng_for(seed: int, purpose: str, k: int = 0) -> np.random.Generator:
@@ -76,6 +79,7 @@ class ExperimentSpec:
     inner_members: int = 400
     inner_steps: int = 8
     temper_base: float = 4.0
+    posterior: str = "ensemble"
 
     @classmethod
     def from_config(cls, name: str, exp: Mapping, sensitivity_report: Mapping | str | None = None) -> "ExperimentSpec":
@@ -109,7 +113,8 @@ class ExperimentSpec:
                    truth=None if truth is None else {p: float(truth[p]) for p in truth},
                    inner_members=int(emulated.get("inner_members", cls.inner_members)),
                    inner_steps=int(emulated.get("inner_steps", cls.inner_steps)),
-                   temper_base=float(emulated.get("temper_base", cls.temper_base)))
+                   temper_base=float(emulated.get("temper_base", cls.temper_base)),
+                   posterior=str(exp.get("posterior", cls.posterior)))
 
     @property
     def transform(self) -> BoxTransform:
@@ -281,12 +286,8 @@ def _emulated_analysis(spec: ExperimentSpec, k: int, P: np.ndarray, Y: np.ndarra
         raise ValueError(f"{spec.name}, iteration {k}: emulated_esmda needs the runs of iterations 0..{k - 1}, "
                          f"got {len(history)} of them")
     names = list(spec.names)
-    runs = [(hp[names].to_numpy(float), np.asarray(hy, float)) for hp, hy in history] + [(P, Y)]
-    ok = [np.all(np.isfinite(y), axis=1) for _, y in runs]
-    ok[-1] = ok[-1] & alive
-    X = np.vstack([p[o] for (p, _), o in zip(runs, ok)])
-    Ys = np.vstack([y[o] for (_, y), o in zip(runs, ok)])
-    latest = np.concatenate([np.full(int(o.sum()), i == k) for i, o in enumerate(ok)])
+    X, Ys, latest = all_runs(spec, [hp for hp, _ in history] + [pd.DataFrame(P, columns=names)],
+                             [hy for _, hy in history] + [Y], alive)
     return emulated_esmda_update(X, Ys, latest, obs.values, obs.error_model(),
                                  lower=spec.lower, upper=spec.upper, n_members=spec.ensemble_size,
                                  rng=rng_for(spec.seed, "analysis", k), times=obs.time,
@@ -294,6 +295,19 @@ def _emulated_analysis(spec: ExperimentSpec, k: int, P: np.ndarray, Y: np.ndarra
                                  inner_steps=spec.inner_steps,
                                  temper=spec.temper_base ** max(0, spec.max_iterations - 1 - k),
                                  transform_kind=spec.transform_kind, names=names)
+
+
+def all_runs(spec: ExperimentSpec, params: Sequence[pd.DataFrame], responses: Sequence[np.ndarray], last_alive):
+    """Every successful run of iterations ``0..K``: ``(X (k, n), Y (k, m), latest (k,) bool)``, where a run
+    counts if its curve is finite on the grid (and, in iteration ``K``, its member is alive)."""
+    names = list(spec.names)
+    runs = [(p[names].to_numpy(float), np.asarray(y, float)) for p, y in zip(params, responses)]
+    ok = [np.all(np.isfinite(y), axis=1) for _, y in runs]
+    ok[-1] = ok[-1] & np.asarray(last_alive, bool)
+    X = np.vstack([p[o] for (p, _), o in zip(runs, ok)])
+    Y = np.vstack([y[o] for (_, y), o in zip(runs, ok)])
+    latest = np.concatenate([np.full(int(o.sum()), i == len(runs) - 1) for i, o in enumerate(ok)])
+    return X, Y, latest
 
 
 def capped_truncation(Y: np.ndarray, alive: np.ndarray, err, base: float, max_rank: int | None) -> float:
@@ -407,7 +421,8 @@ def linear_sensitivity(params: pd.DataFrame, names: Sequence[str], lower, upper,
 def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], decision: Mapping,
             final_params: pd.DataFrame, final_alive, forecast_misfit: Mapping, n_simulations: int,
             wall_s: float | None, simulation_wall_s: float, sensitivity: Mapping | None = None,
-            iteration_params: Sequence[pd.DataFrame] | None = None) -> dict:
+            iteration_params: Sequence[pd.DataFrame] | None = None, posterior_samples: pd.DataFrame | None = None,
+            posterior_sampler: Mapping | None = None) -> dict:
     """``summary.json`` (DESIGN section 6): experiment, iterations, converged, stop_reason,
     n_simulations, posterior, truth (twins), misfit per iteration, wall_s, per-record before/after
     misfits (before = prior ensemble mean, after = forecast with the posterior mean), and the
@@ -416,7 +431,10 @@ def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], 
     names = list(spec.names)
     K = int(decision["iteration"])
     P = final_params[names].to_numpy(float)
-    post = posterior_dict(P, names, np.asarray(final_alive, bool))
+    post_ensemble = posterior_dict(P, names, np.asarray(final_alive, bool))
+    # posterior: emulator_mcmc reports the MCMC sample of the emulator posterior (shpb.posterior)
+    post = post_ensemble if posterior_samples is None else interval_summary(
+        posterior_samples[names].to_numpy(float), names)
     out = {
         "experiment": spec.name,
         "kind": exp["kind"],
@@ -431,6 +449,7 @@ def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], 
         "stop_reason": decision["reason"],
         "stop_message": decision["message"],
         "n_simulations": int(n_simulations),
+        "posterior_method": "ensemble" if posterior_samples is None else "emulator_mcmc",
         "posterior": post,
         "prior": {p: {"lower": float(spec.lower[j]), "upper": float(spec.upper[j])} for j, p in enumerate(names)},
         "misfit": [{"iteration": int(a["iteration"]), "n_alive": int(a["n_alive"]), **a["misfit"]}
@@ -456,11 +475,16 @@ def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], 
         out["best_ensemble"] = {"iteration": int(best), "chi2_per_obs": out["misfit"][best]["chi2_per_obs"],
                                 "rmse_Pa": out["misfit"][best]["rmse_Pa"],
                                 "posterior": posterior_dict(Pb, names, np.asarray(analyses[best]["alive"], bool))}
+    if posterior_samples is not None:
+        out["posterior_ensemble"] = post_ensemble
+        out["posterior_sampler"] = dict(posterior_sampler or {})
     if spec.truth is not None:
         out["truth"] = {p: spec.truth[p] for p in names}
         out["accuracy"] = {
             p: {"rel_error": post[p]["mean"] / spec.truth[p] - 1.0,
-                "in_90_interval": bool(post[p]["q05"] <= spec.truth[p] <= post[p]["q95"])}
+                "in_90_interval": bool(post[p]["q05"] <= spec.truth[p] <= post[p]["q95"]),
+                **({"in_50_interval": bool(post[p]["q25"] <= spec.truth[p] <= post[p]["q75"])} if "q25" in post[p]
+                   else {})}
             for p in names
         }
     if sensitivity is not None:
@@ -492,7 +516,8 @@ def experiment_outcome(*, name: str, exp: Mapping, params: Sequence[pd.DataFrame
                        analyses: Sequence[Mapping], obs: Observations, forecast_curves: Mapping[str, pd.DataFrame],
                        forecast_runs: Mapping[str, Mapping], n_records: int, started: float | None,
                        finished: float | None, member_wall_s: float = 0.0,
-                       extra_runs: Sequence[Mapping] = ()) -> tuple[dict, pd.DataFrame]:
+                       extra_runs: Sequence[Mapping] = (), posterior_samples: pd.DataFrame | None = None,
+                       posterior_sampler: Mapping | None = None) -> tuple[dict, pd.DataFrame]:
     """``(summary.json dict, posterior.csv frame)`` of a finished experiment.
 
     ``params``, ``responses``, ``analyses``: iterations 0..K of the final loop. The decision is
@@ -526,7 +551,10 @@ def experiment_outcome(*, name: str, exp: Mapping, params: Sequence[pd.DataFrame
                   final_alive=alive, forecast_misfit=fc_misfit,
                   n_simulations=(K + 1) * spec.ensemble_size * n_records + len(forecast_runs) + len(extra_runs),
                   wall_s=None if started is None or finished is None else finished - started,
-                  simulation_wall_s=sim_wall, sensitivity=sens, iteration_params=params)
+                  simulation_wall_s=sim_wall, sensitivity=sens, iteration_params=params,
+                  posterior_samples=posterior_samples, posterior_sampler=posterior_sampler)
+    if posterior_samples is not None:
+        return out, posterior_samples
     table = member_table(params[K][list(spec.names)].to_numpy(float), list(spec.names), responses=responses[K],
                          obs=obs.values, obs_error=obs.error_model(), alive=alive)
     return out, table

@@ -84,3 +84,35 @@ def test_the_same_rng_gives_the_same_sample_and_bad_input_is_named():
         emulator_posterior(X, X @ A.T + b, np.ones(20, bool), d, R, rng=7, walkers=3, **kw)
     with pytest.raises(ValueError, match="curves have 30 values, the observations 29"):
         emulator_posterior(X, X @ A.T + b, np.ones(20, bool), d[:-1], R, rng=7, **kw)
+
+
+def test_the_workflow_reports_the_emulator_posterior_with_posterior_emulator_mcmc(tmp_path):
+    """End to end with the stand-in simulator of tests/test_workflow.py (peak 0.8 sigma_t, decay set by
+    E_t): posterior.csv is the MCMC sample, summary.json's posterior its summary, the forecast runs at
+    its mean, and the last ensemble is kept as posterior_ensemble."""
+    import json
+
+    import pandas as pd
+
+    from test_workflow import snakemake, twin_config, write_config, write_stand_in
+
+    cfg = twin_config(method="emulated_esmda", posterior="emulator_mcmc", ensemble_size=10)
+    cfg["simulator"] = write_stand_in(tmp_path)
+    write_config(tmp_path, cfg)
+    out = snakemake(tmp_path, "--cores", "2")
+    assert out.returncode == 0, out.stderr[-4000:]
+    res = tmp_path / "results/twin"
+    samples = pd.read_csv(res / "posterior.csv")
+    assert list(samples.columns) == ["sample", "sigma_t", "E_t"] and len(samples) >= 1000
+    assert samples.equals(pd.read_csv(res / "posterior/samples.csv"))
+    summary = json.loads((res / "summary.json").read_text())
+    assert summary["posterior_method"] == "emulator_mcmc" and summary["posterior_sampler"]["converged_chain"]
+    assert summary["posterior"]["sigma_t"]["mean"] == pytest.approx(samples["sigma_t"].mean(), rel=1e-12)
+    assert set(summary["posterior_ensemble"]) == {"sigma_t", "E_t"}
+    fc = json.loads((res / "forecast/params.json").read_text())
+    assert fc["posterior"] == "emulator_mcmc" and fc["params"]["E_t"] == pytest.approx(samples["E_t"].mean())
+    # the stand-in's curve is linear in sigma_t: its posterior is near Gaussian, and a mean more than
+    # 3 sd from the truth would happen by chance in 0.3 % of noise draws (this draw: 1.7 sd)
+    post, truth = summary["posterior"]["sigma_t"], summary["truth"]["sigma_t"]
+    assert abs(post["mean"] - truth) < 3 * post["std"] and abs(summary["accuracy"]["sigma_t"]["rel_error"]) < 0.02
+    assert set(summary["accuracy"]["E_t"]) == {"rel_error", "in_90_interval", "in_50_interval"}

@@ -149,6 +149,12 @@ def test_shipped_configs_are_valid():
     for e in cfg["run"]:
         d = cfg["experiments"][e]["diagnosis"]
         assert d["heldout_records"] and {"seating", "rate_strength", "gauge_gain"} <= set(d["candidates"])
+    sens = load_yaml(REPO / "config" / "sensitivity.yaml")
+    merged = {**base, **sens, "experiments": {**base["experiments"], **sens["experiments"]}}
+    cfg = validate_config(merged, SCHEMA, base_dir=REPO)
+    fast = cfg["experiments"]["disc_fast"]
+    assert fast["preset"] == "fast" and fast["sensitivity"]["parameters"] == \
+        cfg["experiments"]["twin_ref"]["sensitivity"]["parameters"]  # the same boxes as the standard run
 
 
 @pytest.mark.parametrize("mutate, expected", [

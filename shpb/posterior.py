@@ -1,0 +1,47 @@
+"""The reported posterior of an experiment with ``posterior: emulator_mcmc`` (issue 18).
+
+After the loop's last iteration is simulated, every successful run of every iteration is an
+emulator design point; :func:`enkf.ces.emulator_posterior` samples the box-prior posterior on that
+emulator with ``R`` plus the emulator's leave-one-out error measured at the last iteration's runs, the
+walkers starting from the last ensemble. ``posterior.csv`` then holds the sample and ``summary.json``'s
+``posterior`` its summary; the ensembles stay what was simulated (``iter_<k>/params.csv``), and the
+last one's summary is kept as ``posterior_ensemble``.
+
+With ``posterior: ensemble`` (the default) the reported posterior is the last simulated ensemble, as
+before.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+
+from enkf.ces import EmulatorPosterior, emulator_posterior
+
+from .calibration import ExperimentSpec, all_runs, rng_for
+from .observations import Observations
+
+__all__ = ["POSTERIORS", "sample_posterior", "samples_frame"]
+
+POSTERIORS = ("ensemble", "emulator_mcmc")
+
+
+def sample_posterior(spec: ExperimentSpec, params: Sequence[pd.DataFrame], responses: Sequence[np.ndarray],
+                     last_analysis: Mapping, obs: Observations) -> EmulatorPosterior:
+    """The emulator MCMC posterior from iterations ``0..K`` (``params``/``responses``) of the final loop."""
+    alive = np.asarray(last_analysis["alive"], bool)
+    X, Y, latest = all_runs(spec, params, responses, alive)
+    if X.shape[0] < len(spec.names) + 2 or latest.sum() < 2:
+        raise ValueError(f"{spec.name}: the emulator posterior needs at least {len(spec.names) + 2} successful runs "
+                         f"and 2 in the last iteration; got {X.shape[0]} and {int(latest.sum())}")
+    return emulator_posterior(X, Y, latest, obs.values, obs.error_model(), lower=spec.lower, upper=spec.upper,
+                              times=obs.time, groups=obs.frame["record"].to_numpy(str),
+                              rng=rng_for(spec.seed, "posterior"), start=X[latest], names=list(spec.names))
+
+
+def samples_frame(post: EmulatorPosterior) -> pd.DataFrame:
+    """``posterior.csv`` of the sample: ``sample`` + one column per parameter (SI)."""
+    df = pd.DataFrame(post.samples, columns=post.names)
+    df.insert(0, "sample", np.arange(len(df)))
+    return df
