@@ -50,11 +50,13 @@ __all__ = ["EmulatedAnalysis", "emulated_esmda_update", "emulator_error_model"]
 
 
 class EmulatedAnalysis:
-    """Next ensemble ``params`` (N, n) and JSON-ready ``diagnostics``."""
+    """Next ensemble ``params`` (N, n), JSON-ready ``diagnostics`` and the measured emulator ``error``
+    (the AR(1) model of the leave-one-out residuals at the latest runs, :func:`emulator_error_model`)."""
 
-    def __init__(self, params: np.ndarray, diagnostics: dict):
+    def __init__(self, params: np.ndarray, diagnostics: dict, error: AR1Error | None = None):
         self.params = params
         self.diagnostics = diagnostics
+        self.error = error
 
     def to_dict(self) -> dict:
         return jsonable(self.diagnostics)
@@ -163,4 +165,4 @@ def emulated_esmda_update(design_params, design_responses, latest, obs, obs_erro
         "params": {name: {"mean_after": float(P_next[:, j].mean()), "std_after": float(P_next[:, j].std(ddof=1))}
                    for j, name in enumerate(names)},
     }
-    return EmulatedAnalysis(P_next, jsonable(diagnostics))
+    return EmulatedAnalysis(P_next, jsonable(diagnostics), emu_err)

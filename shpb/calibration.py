@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from enkf import (BoxTransform, EnsembleFailure, StopCriteria, check_stop, emulated_esmda_update, enkf_update,
+from enkf import (BoxTransform, DenseError, EnsembleFailure, StopCriteria, check_stop, emulated_esmda_update, enkf_update,
                   esmda_alphas, esmda_update, jsonable, latin_hypercube, localization_mask, mean_misfit, misfit_table,
                   posterior_dict)
 
@@ -167,8 +167,10 @@ def decide(spec: ExperimentSpec, k: int, misfit: Mapping, n_obs: int, spread, pr
         allow = True
     d = check_stop(k, chi2_per_obs=_nan(misfit.get("chi2_per_obs")), nrmse=_nan(misfit.get("nrmse")),
                    n_obs=n_obs, spread=spread, prior_spread=prior_spread, criteria=spec.criteria,
-                   allow_convergence=allow)
-    return d.to_dict()
+                   allow_convergence=allow).to_dict()
+    if spec.method == "emulated_esmda":
+        d["message"] += " [chi2 against R + the emulator's measured leave-one-out error]"
+    return d
 
 
 def _nan(v) -> float:
@@ -223,7 +225,6 @@ def analysis_step(spec: ExperimentSpec, k: int, params: pd.DataFrame, responses:
     misfit = mean_misfit(Y, d, err, alive)
     misfit_out = {"rmse_Pa": misfit["rmse"], "nrmse": misfit["nrmse"], "chi2_per_obs": misfit["chi2_per_obs"]}
     spread = _spread(spec, P, alive)
-    decision = decide(spec, k, misfit, obs.m, spread, prior_spread)
     members = misfit_table(Y, d, err, alive).rename(columns={"rmse": "rmse_Pa"})
     members["member"] = params["member"].to_numpy(int)
 
@@ -238,6 +239,12 @@ def analysis_step(spec: ExperimentSpec, k: int, params: pd.DataFrame, responses:
         res = _emulated_analysis(spec, k, P, Y, alive, obs, history)
         update = res.to_dict()
         next_params = res.params.tolist()
+        if res.error is not None:
+            # The stop test's yardstick (issue 18): a run of the model differs from the emulator's
+            # prediction, and from a neighbouring run, by the measured leave-one-out error, so a curve
+            # "within the noise" is within R + C_emulator, not R alone.
+            C = DenseError(err.dense() + res.error.dense(), _symmetric=True)
+            misfit_out["chi2_per_obs_model_error"] = mean_misfit(Y, d, C, alive)["chi2_per_obs"]
     elif alpha is not None:
         base = spec.truncation if spec.truncation is not None else (0.99 if spec.method == "esmda" else 1.0)
         truncation = capped_truncation(Y, alive, err, base, spec.max_rank)
@@ -255,6 +262,7 @@ def analysis_step(spec: ExperimentSpec, k: int, params: pd.DataFrame, responses:
         update["max_rank"] = spec.max_rank
         next_params = res.params.tolist()
 
+    decision = decide(spec, k, _misfit_for_decide(misfit_out), obs.m, spread, prior_spread)
     return jsonable({
         "experiment": spec.name,
         "iteration": k,
@@ -365,7 +373,9 @@ def final_iteration(spec: ExperimentSpec, analyses: Sequence[Mapping]) -> tuple[
 
 
 def _misfit_for_decide(m: Mapping) -> dict:
-    return {"rmse": m.get("rmse_Pa"), "nrmse": m.get("nrmse"), "chi2_per_obs": m.get("chi2_per_obs")}
+    # emulated_esmda: the discrepancy test against R + the measured emulator/model error
+    chi2 = m.get("chi2_per_obs_model_error", m.get("chi2_per_obs"))
+    return {"rmse": m.get("rmse_Pa"), "nrmse": m.get("nrmse"), "chi2_per_obs": chi2}
 
 
 def linear_sensitivity(params: pd.DataFrame, names: Sequence[str], lower, upper, responses: np.ndarray,

@@ -356,6 +356,60 @@ def test_emulated_analyses_use_every_successful_run_so_far_and_recover_the_linea
         history.append((params, Y))
         params = next_params(a)
     assert_recovered(K, decision, analyses[-1]["posterior"], truth)
+    # the emulator of a linear model is exact: its error adds nothing and the fit is at the noise level
+    m = analyses[-1]["misfit"]
+    assert m["chi2_per_obs_model_error"] <= m["chi2_per_obs"] * (1 + 1e-9)
+    assert decision["reason"] == "discrepancy" and decision["converged"]
+
+
+def test_a_rugged_model_matching_within_noise_and_model_error_stops_converged():
+    """The linear twin plus a roughness of 6 noise sd per run (smooth in time, a deterministic function
+    of the parameters, as the disc's fragment pattern): the ensemble-mean curve cannot come within R
+    alone (the mean of 20 rough curves keeps ~1.3 sd of roughness), but it does within R plus the
+    emulator's measured leave-one-out error, which holds the roughness: converged by discrepancy."""
+    spec, obs, smooth, truth = _linear_setup()
+    t = obs.time
+    sigma = float(obs.error_model().std[0])
+
+    def model(P):
+        P = np.atleast_2d(P)
+        out = smooth(P)
+        for i, p in enumerate(P):
+            seed = int.from_bytes(np.asarray(p, float).tobytes()[:8], "little") % 2**32
+            z = np.random.default_rng(seed).standard_normal(t.size + 10)
+            out[i] += 6.0 * sigma * np.convolve(z, np.ones(10) / np.sqrt(10), "valid")[:t.size]
+        return out
+
+    cfg = validate_config(twin_config(ensemble_size=20, method="emulated_esmda", max_iterations=3,
+                                      emulated={"inner_members": 200}), SCHEMA)
+    spec = ExperimentSpec.from_config("twin", cfg["experiments"]["twin"])
+    params0 = params = initial_ensemble(spec)
+    history, analyses = [], []
+    for k in range(4):
+        Y = model(params[list(spec.names)].to_numpy())
+        status = pd.DataFrame({"member": params["member"], "status": "ok", "reason": ""})
+        analyses.append(analysis_step(spec, k, params, Y, status, obs, params0, history))
+        K, decision = final_iteration(spec, analyses)
+        if decision is not None:
+            break
+        history.append((params, Y))
+        params = next_params(analyses[-1])
+    m = analyses[-1]["misfit"]
+    target = 1 + 2 * np.sqrt(2 / obs.m)
+    assert K == 3 and m["chi2_per_obs"] > target >= m["chi2_per_obs_model_error"]
+    assert decision["reason"] == "discrepancy" and "emulator's measured" in decision["message"]
+    # The last ensemble misses the truth here (sigma_t 41.7 MPa [38.5, 44.2], E_t 784 [566, 1018]); the
+    # MCMC posterior on the smoothed emulator of all 80 runs holds it (5 of 5 seeds, 3-7, measured)
+    from enkf.ces import emulator_posterior
+    from shpb.calibration import all_runs
+
+    runs = [p for p, _ in history] + [params]
+    X, Yall, latest = all_runs(spec, runs, [y for _, y in history] + [Y], np.ones(20, bool))
+    post = emulator_posterior(X, Yall, latest, obs.values, obs.error_model(), lower=spec.lower, upper=spec.upper,
+                              times=t, rng=1, names=spec.names)
+    assert post.diagnostics["converged_chain"] and post.diagnostics["emulator"]["smoothing"] > 0
+    s = post.summary
+    assert all(s[p]["q05"] <= v <= s[p]["q95"] for p, v in zip(("sigma_t", "E_t"), truth)), s
 
 
 def test_the_same_seed_gives_bit_identical_analysis_files():
