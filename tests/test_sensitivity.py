@@ -108,19 +108,23 @@ def test_recommend_picks_the_parameters_above_the_threshold_and_not_the_dummy():
     rec = recommend(ind, 0.05)
     assert [r["parameter"] for r in rec] == ["x1", "x2", "x3"]
     assert all(r["reasons"] for r in rec) and "on peak_stress_Pa" in rec[0]["reasons"][0]
-    # hand-made indices: a above the threshold on a feature only, b over time only, c below, d undefined
-    t = np.array([0.0, 1e-6, 2e-6])
-    nan = np.full(4, np.nan)
-    hand = {"names": ["a", "b", "c", "d"], "total": "ST", "time": {"t": t, "indices": {
-        "ST": np.array([[0.01, 0.02, 0.04, np.nan], [0.0, 0.30, 0.01, np.nan], [0.02, 0.05, 0.049, np.nan]]),
-        "ST_conf": np.full((3, 4), 0.01)}},
-        "features": {"peak_stress_Pa": {"indices": {"ST": np.array([0.8, 0.01, 0.03, np.nan]),
-                                                    "ST_conf": np.full(4, 0.1)}},
+    # hand-made indices: a above the threshold on a feature only, b for the whole curve (variance-weighted:
+    # (1 * 0.02 + 4 * 0.30 + 1 * 0.05) / 6 = 0.2117), c below, d undefined; e reaches 0.9 at a time point of
+    # almost no variance (weight 1e-4 of the others): a share of nothing, not recommended
+    t = np.array([0.0, 1e-6, 2e-6, 3e-6])
+    nan = np.full(5, np.nan)
+    hand = {"names": ["a", "b", "c", "d", "e"], "total": "ST", "time": {
+        "t": t, "std": np.array([1.0, 2.0, 1.0, 0.01]), "analysed": np.ones(4, bool), "indices": {
+            "ST": np.array([[0.01, 0.02, 0.04, np.nan, 0.0], [0.0, 0.30, 0.01, np.nan, 0.0],
+                            [0.02, 0.05, 0.049, np.nan, 0.0], [0.0, 0.0, 0.0, np.nan, 0.9]]),
+            "ST_conf": np.full((4, 5), 0.01)}},
+        "features": {"peak_stress_Pa": {"indices": {"ST": np.array([0.8, 0.01, 0.03, np.nan, 0.0]),
+                                                    "ST_conf": np.full(5, 0.1)}},
                      "time_to_peak_s": {"indices": {"ST": nan, "ST_conf": nan}}}}
     rec = recommend(hand, 0.05)
     assert [r["parameter"] for r in rec] == ["a", "b"]
     assert rec[0]["reasons"] == ["ST = 0.800 +- 0.100 on peak_stress_Pa"]
-    assert rec[1]["reasons"] == ["max ST over time = 0.300 +- 0.010 at t = 1.0 us"]
+    assert rec[1]["reasons"] == ["ST of the whole curve (variance-weighted over time) = 0.212"]
     out = report(spec, ind)
     assert [r["parameter"] for r in out["recommended"]] == ["x1", "x2", "x3"] and out["not_recommended"] == ["x4"]
     json.dumps(out, allow_nan=False)  # JSON-ready
