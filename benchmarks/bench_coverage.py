@@ -9,6 +9,9 @@ last ensemble simulated too (the workflow's iterations 0..3). Two posteriors per
 * ``ensemble``: the last simulated ensemble (what ``summary.json`` reported before issue 18);
 * ``ces``: the emcee sample of the emulator posterior on all 100 runs (:mod:`enkf.ces`).
 
+and the stop test of the workflow (chi2 of the ensemble-mean curve against R + the emulator's measured
+error) at every iteration: in how many twins it passes, and from which iteration.
+
 Prints one JSON object: per twin the truth, the errors of the posterior means and whether the 50 % and
 90 % central intervals contain the truth; per posterior the coverage fractions, the share of twins
 within 2 % (sigma_t) / 10 % (E_t), and the wall time. The goal (issue 18): 90 % intervals cover in
@@ -80,6 +83,34 @@ def _scores(summary: dict, truth: np.ndarray) -> dict:
     return out
 
 
+def stopping(run: dict) -> dict:
+    """The workflow's stop test at each iteration k (shpb.calibration.analysis_step, emulated_esmda): the
+    chi2 per observation of iteration k's ensemble-mean curve against R + the emulator's leave-one-out
+    AR(1) error at iteration k's runs (emulator of runs 0..k), next to the chi2 against R alone. The
+    workflow takes the test after the untempered last analysis (k = 3)."""
+    from enkf import DenseError, DiagonalError
+    from enkf.emulated import emulator_error_model
+    from enkf.emulator import CurveEmulator
+
+    X, Y, it, d = run["X"], run["Y"], run["iteration"], run["d"]
+    R = DiagonalError(run["sigma"])
+    target = 1.0 + 2.0 * np.sqrt(2.0 / d.size)
+    out = []
+    for k in range(1, int(it.max()) + 1):
+        upto, latest = it <= k, (it == k)[it <= k]
+        em = CurveEmulator(X[upto], Y[upto], LOWER, UPPER)
+        emu, _ = emulator_error_model(em.loo_residuals()[latest], GRID)
+        r = Y[it == k].mean(axis=0) - d
+        C = DenseError(R.dense() + emu.dense(), _symmetric=True)
+        out.append({"iteration": k, "chi2_per_obs": float(R.chi2(r) / d.size),
+                    "chi2_per_obs_model_error": float(C.chi2(r) / d.size)})
+    last = out[-1]
+    return {"target": target, "per_iteration": out, "converged": bool(last["chi2_per_obs_model_error"] <= target),
+            "converged_without_model_error": bool(last["chi2_per_obs"] <= target),
+            "first_passing_iteration": next((o["iteration"] for o in out if o["chi2_per_obs_model_error"] <= target),
+                                            None)}
+
+
 def posteriors(run: dict) -> dict:
     from enkf import DiagonalError
 
@@ -93,7 +124,8 @@ def posteriors(run: dict) -> dict:
     return {"ensemble": _scores(interval_summary(X[last], NAMES), truth),
             "ces": {**_scores(ces.summary, truth), "sampler": {k: ces.diagnostics[k] for k in (
                 "steps", "autocorr_time", "acceptance_fraction", "effective_samples", "converged_chain",
-                "emulator_error", "emulated_mean_chi2_per_obs")}, "wall_s": ces_s}}
+                "emulator_error", "emulator", "emulated_mean_chi2_per_obs")}, "wall_s": ces_s},
+            "stopping": stopping(run)}
 
 
 def aggregate(rows: list[dict], method: str) -> dict:
@@ -136,7 +168,12 @@ def main():
         "benchmark": "posterior_interval_coverage", "preset": "fast", "twins": args.twins, "n_members": 25,
         "analyses": 3, "noise": "1 % of the peak, white", "truth_design": "LHS of the central 80 % of the box",
         "goal": {"coverage_90": [0.80, 0.97], "coverage_50": [0.35, 0.65], "within_bar": 0.90},
-        "ensemble": aggregate(rows, "ensemble"), "ces": aggregate(rows, "ces"), "runs": rows,
+        "ensemble": aggregate(rows, "ensemble"), "ces": aggregate(rows, "ces"),
+        "stopping": {"converged_at_last_iteration": float(np.mean([r["stopping"]["converged"] for r in rows])),
+                     "converged_without_model_error": float(np.mean([r["stopping"]["converged_without_model_error"]
+                                                                     for r in rows])),
+                     "first_passing_iteration": [r["stopping"]["first_passing_iteration"] for r in rows]},
+        "runs": rows,
         "simulation_wall_s": sim_s, "wall_s": time.perf_counter() - t0, "cores": args.cores,
     }, indent=2))
 
