@@ -117,13 +117,13 @@ def test_incident_wave_at_gauge_of_cama_005():
 
 
 def test_readme_section_is_replaced_in_place(tmp_path, table):
-    readme = tmp_path / "README.md"
+    readme = tmp_path / "measured-records.md"
     readme.write_text("# title\n\nintro\n\n## Other section\n\nkeep me\n")
     update_readme(readme, readme_section(table.head(3)))
     first = readme.read_text()
     assert first.startswith("# title\n\nintro\n\n## Other section\n\nkeep me\n")
-    assert first.count("## Measured records: reduction check") == 1
+    assert first.count("# Measured records: reduction check") == 1
     update_readme(readme, readme_section(table.head(5)))
     second = readme.read_text()
-    assert second.count("## Measured records: reduction check") == 1
+    assert second.count("# Measured records: reduction check") == 1
     assert second.count("| CaMa_SHPB_") == 5 and "keep me" in second
