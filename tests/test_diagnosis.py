@@ -597,7 +597,7 @@ def test_report_is_json_ready_and_written_with_tables_and_plots(tmp_path):
 
 
 def test_plotted_curves_break_between_concatenated_records():
-    from enkf.diagnosis import _split_records
+    from enkf.diagnosis.report import _split_records
     t, y = _split_records([0.0, 1.0, 2.0, 0.0, 1.0], [5.0, 6.0, 7.0, 8.0, 9.0])
     np.testing.assert_array_equal(np.isnan(t), [False, False, False, True, False, False])
     np.testing.assert_array_equal(y[~np.isnan(y)], [5.0, 6.0, 7.0, 8.0, 9.0])
