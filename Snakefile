@@ -2,7 +2,7 @@
 # observation grid -> checkpoint analysis (ES-MDA / paper EnKF) -> next iteration or stop -> forecast
 # with the posterior mean -> plots, tables, summary.json. See README.md, "Running the workflow".
 #
-# The config is validated (config/schema.yaml + shpb.workflow_io.validate_config) and the measured
+# The config is validated (config/schema.yaml + calibration.workflow_io.validate_config) and the measured
 # observation files are read and reduced before any job runs; a bad key, value or file stops here with
 # a message naming it.
 from pathlib import Path
@@ -10,8 +10,8 @@ from pathlib import Path
 from snakemake.exceptions import WorkflowError
 from snakemake.utils import min_version
 
-from shpb.observations import ObservationFileError, check_record
-from shpb.workflow_io import ConfigError, validate_config
+from calibration.observations import ObservationFileError, check_record
+from calibration.workflow_io import ConfigError, validate_config
 
 min_version("9.0")
 

@@ -39,7 +39,7 @@ from scipy.stats import qmc
 from bench_twin_seeds import GRID, LOWER, UPPER, _simulate
 from enkf import emulated_esmda_update, latin_hypercube
 from enkf.ces import emulator_posterior, interval_summary
-from shpb.observations import twin_observations
+from calibration.observations import twin_observations
 
 NAMES = ("sigma_t", "E_t")
 BAR = {"sigma_t": 0.02, "E_t": 0.10}
@@ -84,7 +84,7 @@ def _scores(summary: dict, truth: np.ndarray) -> dict:
 
 
 def stopping(run: dict) -> dict:
-    """The workflow's stop test at each iteration k (shpb.calibration.analysis_step, emulated_esmda): the
+    """The workflow's stop test at each iteration k (calibration.experiment.analysis_step, emulated_esmda): the
     chi2 per observation of iteration k's ensemble-mean curve against R + the emulator's leave-one-out
     AR(1) error at iteration k's runs (emulator of runs 0..k), next to the chi2 against R alone. The
     workflow takes the test after the untempered last analysis (k = 3)."""

@@ -25,8 +25,8 @@ import numpy as np
 import pandas as pd
 
 from enkf import BoxTransform, emulated_esmda_update, esmda_alphas, esmda_update, latin_hypercube
-from shpb.calibration import capped_truncation
-from shpb.observations import curve_on_grid, observation_grid, twin_observations
+from calibration.experiment import capped_truncation
+from calibration.observations import curve_on_grid, observation_grid, twin_observations
 
 LOWER, UPPER = np.array([4.0e6, 200.0]), np.array([6.0e7, 2400.0])
 REFERENCES = {"twin_ref": (4.5e7, 500.0), "twin_b": (3.0e7, 800.0), "twin_c": (4.0e7, 1200.0)}

@@ -1,10 +1,10 @@
 # Shared names and the input functions that walk the checkpoint loop. No science here: the stop
-# decision is shpb.calibration.final_iteration, re-taken from the stored analyses with the current
+# decision is calibration.experiment.final_iteration, re-taken from the stored analyses with the current
 # stopping rule, so that changing a tolerance never invalidates finished iterations (re-run the final
 # targets with `-R summary forecast_params plots` to apply it).
-from shpb.calibration import ExperimentSpec
-from shpb.calibration import final_iteration as _final_iteration
-from shpb.workflow_io import experiment_records, member_ids, read_json
+from calibration.experiment import ExperimentSpec
+from calibration.experiment import final_iteration as _final_iteration
+from calibration.workflow_io import experiment_records, member_ids, read_json
 
 EXPERIMENTS = config["experiments"]
 RUN = config["run"] or list(EXPERIMENTS)

@@ -1,8 +1,8 @@
 # Closing the loop (README, "Closing the loop"): after a measured experiment's calibration, a design of
 # FDEM runs around its posterior (one job per design point and record, calibration and held-out
-# records), then the discrepancy loop (shpb.diagnose on enkf.diagnosis) on an emulator of those runs:
+# records), then the discrepancy loop (calibration.diagnose on enkf.diagnosis) on an emulator of those runs:
 # residual structure, candidate ranking, re-calibration, accept/reject, error before and after.
-from shpb.workflow_io import record_name
+from calibration.workflow_io import record_name
 
 
 def diagnosis_cfg(exp):

@@ -3,7 +3,7 @@
 
 
 def posterior_sample_files(exp):
-    """The emulator MCMC posterior's files, for `posterior: emulator_mcmc` (shpb.posterior)."""
+    """The emulator MCMC posterior's files, for `posterior: emulator_mcmc` (calibration.posterior)."""
     if EXPERIMENTS[exp].get("posterior", "ensemble") != "emulator_mcmc":
         return {}
     return {"samples": f"results/{exp}/posterior/samples.csv", "sampler": f"results/{exp}/posterior/sampler.json"}

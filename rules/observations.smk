@@ -1,5 +1,5 @@
 # Observations: a twin's reference simulation plus noise, or measured records reduced to the specimen
-# stress on the observation grid (shpb.observations).
+# stress on the observation grid (calibration.observations).
 
 
 rule truth:

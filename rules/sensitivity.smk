@@ -1,4 +1,4 @@
-# Global sensitivity analysis (issue 19, shpb.sensitivity): SALib's design over an experiment's
+# Global sensitivity analysis (issue 19, calibration.sensitivity): SALib's design over an experiment's
 # `sensitivity.parameters` boxes -> one FDEM simulation per design row, an ordinary job exactly like
 # `rule member` -> indices per time point and per curve feature, and the parameters worth calibrating.
 # Target: results/<experiment>/sensitivity/report.json (in the default target with sensitivity.run).
@@ -9,9 +9,9 @@
 # `sensitivity_design`, and each job reads its row from design.csv, so SALib runs in one place only.
 from snakemake.exceptions import WorkflowError as _SensitivityWorkflowError
 
-from shpb.sensitivity import SensitivitySpec
+from calibration.sensitivity import SensitivitySpec
 
-# The sensitivity blocks are validated with the rest of the config (shpb.workflow_io.validate_config).
+# The sensitivity blocks are validated with the rest of the config (calibration.workflow_io.validate_config).
 SENSITIVITY_RUN = [e for e in RUN if (EXPERIMENTS[e].get("sensitivity") or {}).get("run")]
 
 localrules: sensitivity_design, sensitivity_analysis

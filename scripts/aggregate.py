@@ -3,8 +3,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from shpb.observations import read_curve, read_observations, response_matrix
-from shpb.workflow_io import combine_member_runs, member_ids, read_json, write_responses
+from calibration.observations import read_curve, read_observations, response_matrix
+from calibration.workflow_io import combine_member_runs, member_ids, read_json, write_responses
 
 obs = read_observations(snakemake.input.obs, snakemake.input.obs_meta)
 members = pd.read_csv(snakemake.input.params)["member"].tolist()

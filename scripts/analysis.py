@@ -1,9 +1,9 @@
 """iter_<k>/analysis.json: misfit, failed members, stop decision and the next ensemble (checkpoint)."""
 import pandas as pd
 
-from shpb.calibration import ExperimentSpec, analysis_step
-from shpb.observations import read_observations
-from shpb.workflow_io import atomic_write_json, read_responses
+from calibration.experiment import ExperimentSpec, analysis_step
+from calibration.observations import read_observations
+from calibration.workflow_io import atomic_write_json, read_responses
 
 exp = snakemake.wildcards.exp
 spec = ExperimentSpec.from_config(exp, snakemake.config["experiments"][exp])

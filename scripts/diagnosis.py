@@ -1,14 +1,14 @@
-"""diagnosis/: the discrepancy loop on the emulated FDEM design (shpb.diagnose, enkf.diagnosis)."""
+"""diagnosis/: the discrepancy loop on the emulated FDEM design (calibration.diagnose, enkf.diagnosis)."""
 from pathlib import Path
 
 import pandas as pd
 
 from enkf.diagnosis import covariate_trends, report_to_json, write_report
 from shpb import effects as fx
-from shpb.diagnose import (EmulatedSHPB, diagnose, emulators_from_design, errors_per_record, model_grid,
+from calibration.diagnose import (EmulatedSHPB, diagnose, emulators_from_design, errors_per_record, model_grid,
                            record_calibrations, record_covariates)
-from shpb.observations import read_curve, read_observations
-from shpb.workflow_io import atomic_write_csv, atomic_write_json, read_json
+from calibration.observations import read_curve, read_observations
+from calibration.workflow_io import atomic_write_csv, atomic_write_json, read_json
 
 inp, out, e = snakemake.input, snakemake.output, snakemake.params.exp
 d = e["diagnosis"]

@@ -2,10 +2,10 @@
 from pathlib import Path
 
 
-from shpb.diagnose import check_errors, model_grid
-from shpb.observations import read_curve, read_observations
-from shpb.plots import plot_diagnosis_check
-from shpb.workflow_io import atomic_write_json, read_json
+from calibration.diagnose import check_errors, model_grid
+from calibration.observations import read_curve, read_observations
+from calibration.plots import plot_diagnosis_check
+from calibration.workflow_io import atomic_write_json, read_json
 
 inp, out, e = snakemake.input, snakemake.output, snakemake.params.exp
 rep = read_json(inp.report)

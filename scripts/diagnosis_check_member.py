@@ -1,6 +1,6 @@
 """One FDEM run at the loop's posterior mean, before or after (rules/diagnosis.smk, diagnosis_check_member)."""
-from shpb.diagnose import simulator_params
-from shpb.workflow_io import read_json, run_member, simulator_command
+from calibration.diagnose import simulator_params
+from calibration.workflow_io import read_json, run_member, simulator_command
 
 sim, wc = snakemake.params.sim, snakemake.wildcards
 post = read_json(snakemake.input.report)[f"params_{wc.which}"]

@@ -2,9 +2,9 @@
 import numpy as np
 import pandas as pd
 
-from shpb.calibration import ExperimentSpec
-from shpb.diagnose import base_design_box, design_points, physical_design_ranges
-from shpb.workflow_io import atomic_write_csv, atomic_write_json
+from calibration.experiment import ExperimentSpec
+from calibration.diagnose import base_design_box, design_points, physical_design_ranges
+from calibration.workflow_io import atomic_write_csv, atomic_write_json
 
 e, exp = snakemake.params.exp, snakemake.wildcards.exp
 d = e["diagnosis"]

@@ -1,5 +1,5 @@
 """diagnosis/heldout/obs.csv + obs.json: the held-out records reduced like the calibration records."""
-from shpb.observations import measured_observations
+from calibration.observations import measured_observations
 
 o = snakemake.params.obs
 obs, _ = measured_observations(snakemake.params.records, t_start=o["t_start"], t_end=o["t_end"], dt=o["dt"],

@@ -1,5 +1,5 @@
-"""One FDEM run of the diagnosis design (shpb.workflow_io.run_member with the design point's parameters)."""
-from shpb.workflow_io import member_params, run_member, simulator_command
+"""One FDEM run of the diagnosis design (calibration.workflow_io.run_member with the design point's parameters)."""
+from calibration.workflow_io import member_params, run_member, simulator_command
 
 sim = snakemake.params.sim
 run_member(command=simulator_command(sim["command"]), geometry=sim["geometry"], preset=sim["preset"],

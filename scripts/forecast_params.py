@@ -3,7 +3,7 @@ final ensemble (alive members)."""
 import numpy as np
 import pandas as pd
 
-from shpb.workflow_io import atomic_write_json, read_json
+from calibration.workflow_io import atomic_write_json, read_json
 
 final = read_json(snakemake.input.analyses[-1])
 P = pd.read_csv(snakemake.input.params)

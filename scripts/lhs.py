@@ -1,6 +1,6 @@
-"""iter_0/params.csv: Latin hypercube sample of the prior box (shpb.calibration.initial_ensemble)."""
-from shpb.calibration import ExperimentSpec, initial_ensemble
-from shpb.workflow_io import atomic_write_csv
+"""iter_0/params.csv: Latin hypercube sample of the prior box (calibration.experiment.initial_ensemble)."""
+from calibration.experiment import ExperimentSpec, initial_ensemble
+from calibration.workflow_io import atomic_write_csv
 
 exp = snakemake.wildcards.exp
 spec = ExperimentSpec.from_config(exp, snakemake.config["experiments"][exp],

@@ -1,5 +1,5 @@
-"""One ensemble member: `python -m shpb simulate` with the member's parameters (shpb.workflow_io.run_member)."""
-from shpb.workflow_io import member_params, run_member, simulator_command
+"""One ensemble member: `python -m shpb simulate` with the member's parameters (calibration.workflow_io.run_member)."""
+from calibration.workflow_io import member_params, run_member, simulator_command
 
 sim = snakemake.params.sim
 run_member(command=simulator_command(sim["command"]), geometry=sim["geometry"], preset=sim["preset"],

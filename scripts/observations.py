@@ -1,8 +1,8 @@
-"""observations/obs.csv + obs.json: twin (truth + noise) or measured records (shpb.observations)."""
+"""observations/obs.csv + obs.json: twin (truth + noise) or measured records (calibration.observations)."""
 import pandas as pd
 
-from shpb.calibration import rng_for
-from shpb.observations import measured_observations, observation_grid, twin_observations
+from calibration.experiment import rng_for
+from calibration.observations import measured_observations, observation_grid, twin_observations
 
 e = snakemake.params.exp
 o = e["observations"]

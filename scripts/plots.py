@@ -1,11 +1,11 @@
-"""plots/*.png of a finished experiment (shpb.plots)."""
+"""plots/*.png of a finished experiment (calibration.plots)."""
 import numpy as np
 import pandas as pd
 
-from shpb import plots
-from shpb.calibration import ExperimentSpec, final_iteration, final_verdict
-from shpb.observations import read_curve, read_observations
-from shpb.workflow_io import read_json, read_responses
+from calibration import plots
+from calibration.experiment import ExperimentSpec, final_iteration, final_verdict
+from calibration.observations import read_curve, read_observations
+from calibration.workflow_io import read_json, read_responses
 
 inp, out, exp = snakemake.input, snakemake.output, snakemake.wildcards.exp
 spec = ExperimentSpec.from_config(exp, snakemake.params.exp)

@@ -1,10 +1,10 @@
-"""posterior/samples.csv + sampler.json: the emulator MCMC posterior (shpb.posterior, posterior: emulator_mcmc)."""
+"""posterior/samples.csv + sampler.json: the emulator MCMC posterior (calibration.posterior, posterior: emulator_mcmc)."""
 import pandas as pd
 
-from shpb.calibration import ExperimentSpec
-from shpb.observations import read_observations
-from shpb.posterior import sample_posterior, samples_frame
-from shpb.workflow_io import atomic_write_csv, atomic_write_json, read_json, read_responses
+from calibration.experiment import ExperimentSpec
+from calibration.observations import read_observations
+from calibration.posterior import sample_posterior, samples_frame
+from calibration.workflow_io import atomic_write_csv, atomic_write_json, read_json, read_responses
 
 inp = snakemake.input
 spec = ExperimentSpec.from_config(snakemake.wildcards.exp, snakemake.params.exp)

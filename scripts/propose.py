@@ -1,6 +1,6 @@
 """iter_<k>/params.csv: the analysis ensemble stored by iteration k-1's analysis."""
-from shpb.calibration import params_frame
-from shpb.workflow_io import atomic_write_csv, read_json
+from calibration.experiment import params_frame
+from calibration.workflow_io import atomic_write_csv, read_json
 
 nxt = read_json(snakemake.input.analysis)["next_params"]
 if nxt is None:

@@ -1,11 +1,11 @@
 """sensitivity/report.json, indices_time.csv, indices_features.csv, plots/sensitivity_indices.png: the
-design's curves on the experiment's observation grid -> shpb.sensitivity.analyze."""
+design's curves on the experiment's observation grid -> calibration.sensitivity.analyze."""
 import numpy as np
 import pandas as pd
 
-from shpb import sensitivity as sa
-from shpb.observations import curve_on_grid, observation_grid, read_curve, reduce_measured_record
-from shpb.workflow_io import atomic_write_csv, atomic_write_json, read_json
+from calibration import sensitivity as sa
+from calibration.observations import curve_on_grid, observation_grid, read_curve, reduce_measured_record
+from calibration.workflow_io import atomic_write_csv, atomic_write_json, read_json
 
 exp, e = snakemake.wildcards.exp, snakemake.params.exp
 spec = sa.SensitivitySpec.from_config(exp, e)

@@ -1,6 +1,6 @@
-"""sensitivity/design.csv: SALib's design (shpb.sensitivity.design), one row per simulation."""
-from shpb.sensitivity import SensitivitySpec, design
-from shpb.workflow_io import atomic_write_csv
+"""sensitivity/design.csv: SALib's design (calibration.sensitivity.design), one row per simulation."""
+from calibration.sensitivity import SensitivitySpec, design
+from calibration.workflow_io import atomic_write_csv
 
 exp = snakemake.wildcards.exp
 spec = SensitivitySpec.from_config(exp, snakemake.params.exp)
@@ -10,5 +10,5 @@ frame = design(spec)
 if len(frame) != spec.n_simulations:
     raise RuntimeError(f"experiment {exp!r}: SALib's {spec.method} design has {len(frame)} rows, the workflow "
                        f"expected {spec.n_simulations}")
-frame.insert(0, "member", range(len(frame)))  # the column shpb.workflow_io.member_params reads
+frame.insert(0, "member", range(len(frame)))  # the column calibration.workflow_io.member_params reads
 atomic_write_csv(frame, snakemake.output.design)

@@ -1,6 +1,6 @@
-"""One simulation of the sensitivity design: shpb.workflow_io.run_member with the row's parameters, the
+"""One simulation of the sensitivity design: calibration.workflow_io.run_member with the row's parameters, the
 experiment's fixed parameters and its other estimated parameters held at their prior-box centres."""
-from shpb.workflow_io import member_params, run_member, simulator_command
+from calibration.workflow_io import member_params, run_member, simulator_command
 
 sim = snakemake.params.sim
 run_member(command=simulator_command(sim["command"]), geometry=sim["geometry"], preset=sim["preset"],

@@ -127,7 +127,7 @@ def run(workdir: Path, argv: list[str], logname: str, timeout: float) -> dict:
 
 
 def member_folder(member: int) -> str:
-    """The member's folder name in results/<exp>/iter_<k>/members/ (shpb.workflow_io.member_ids)."""
+    """The member's folder name in results/<exp>/iter_<k>/members/ (calibration.workflow_io.member_ids)."""
     return f"{member:03d}"
 
 

@@ -1,12 +1,12 @@
-"""summary.json and posterior.csv of a finished experiment (shpb.calibration.experiment_outcome)."""
+"""summary.json and posterior.csv of a finished experiment (calibration.experiment.experiment_outcome)."""
 import os
 import time
 
 import pandas as pd
 
-from shpb.calibration import experiment_outcome
-from shpb.observations import read_curve, read_observations
-from shpb.workflow_io import atomic_write_csv, atomic_write_json, read_json, read_responses
+from calibration.experiment import experiment_outcome
+from calibration.observations import read_curve, read_observations
+from calibration.workflow_io import atomic_write_csv, atomic_write_json, read_json, read_responses
 
 inp, recs = snakemake.input, list(snakemake.params.records)
 responses = [read_responses(p) for p in inp.responses]

@@ -1,5 +1,5 @@
 """Twin experiment: the reference simulation with the truth parameters (must succeed)."""
-from shpb.workflow_io import run_member, simulator_command
+from calibration.workflow_io import run_member, simulator_command
 
 sim = snakemake.params.sim
 run = run_member(command=simulator_command(sim["command"]), geometry=sim["geometry"], preset=sim["preset"],

@@ -2,5 +2,5 @@
 
 Geometries (shpb.geometry), loading (shpb.loading), parameters (shpb.parameters), one simulation
 (shpb.simulate.simulate, also `python -m shpb simulate`), measured-record readers and reduction
-(shpb.records, shpb.reduction).
+(shpb.lab.records, shpb.lab.reduction).
 """

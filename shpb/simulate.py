@@ -65,8 +65,8 @@ def write_outputs(out_dir, curve: pd.DataFrame, run_info: dict) -> None:
 
 def _measured_incident(record):
     """Reduce a measured record; returns (reduced, specimen length, diameter, rock dict)."""
-    from .records import freiburg_specimen, read_freiburg_raw, rock_properties
-    from .reduction import reduce_record
+    from .lab.records import freiburg_specimen, read_freiburg_raw, rock_properties
+    from .lab.reduction import reduce_record
     path = Path(record)
     if not path.is_file():
         raise FileNotFoundError(f"measured record {path} not found")

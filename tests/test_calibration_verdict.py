@@ -1,10 +1,10 @@
-"""The calibration's verdict (shpb.verdict): a fit made worse, a parameter pinned to its box, a stop rule
+"""The calibration's verdict (calibration.verdict): a fit made worse, a parameter pinned to its box, a stop rule
 not met, each named with its numbers and what to do next; a clean calibration says ok."""
 import math
 
 import pytest
 
-from shpb.verdict import PIN_FRACTION, calibration_verdict, pinned_parameters
+from calibration.verdict import PIN_FRACTION, calibration_verdict, pinned_parameters
 
 NAMES = ("sigma_t", "E_t")
 LOWER, UPPER = (4e6, 200.0), (60e6, 2400.0)
@@ -77,7 +77,7 @@ def test_summary_keeps_an_earlier_ensemble_that_fitted_better_beside_the_posteri
     import numpy as np
     import pandas as pd
 
-    from shpb.calibration import ExperimentSpec, summary
+    from calibration.experiment import ExperimentSpec, summary
 
     exp = {"kind": "measured", "geometry": "cylinder", "preset": "fast", "method": "esmda", "ensemble_size": 4,
            "seed": 1, "parameters": {"sigma_t": [4e6, 60e6], "E_t": [200.0, 2400.0]}, "esmda": {"steps": 2}}
@@ -102,7 +102,7 @@ def test_summary_keeps_an_earlier_ensemble_that_fitted_better_beside_the_posteri
     assert b["posterior"]["sigma_t"]["mean"] == pytest.approx(params[1]["sigma_t"].mean(), rel=1e-12)
     assert out["posterior"]["E_t"]["mean"] == pytest.approx(params[2]["E_t"].mean(), rel=1e-12)
     # the plots take the same verdict from the stored iterations alone
-    from shpb.calibration import final_verdict
+    from calibration.experiment import final_verdict
 
     v = final_verdict(spec, analyses, params)
     assert v["verdict"] == out["verdict"]["verdict"] and v["flags"] == out["verdict"]["flags"]

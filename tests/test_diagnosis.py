@@ -285,7 +285,7 @@ def test_curve_errors():
 
 
 def test_emulators_from_design_leave_failed_runs_out_and_refuse_too_few():
-    from shpb.diagnose import emulators_from_design
+    from calibration.diagnose import emulators_from_design
     t = np.linspace(0.0, 1e-4, 41)
     X = np.array([[a, b] for a in np.linspace(1.0, 3.0, 4) for b in np.linspace(0.5, 1.5, 4)])
     runs = [pd.DataFrame({"time_s": t, "stress_Pa": x[0] * 1e6 * np.sin(x[1] * t / 1e-4)}) for x in X]
@@ -304,8 +304,8 @@ def test_emulators_from_design_leave_failed_runs_out_and_refuse_too_few():
 def test_record_calibrations_fit_each_record_alone_and_expose_a_rate_trend():
     # three records whose amplitude a (the "strength") rises with the record's strain rate: fitted one
     # record at a time, the per-record estimates follow it; the trend test then sees the rise
-    from shpb.diagnose import EmulatedSHPB, emulators_from_design, record_calibrations
-    from shpb.observations import Observations
+    from calibration.diagnose import EmulatedSHPB, emulators_from_design, record_calibrations
+    from calibration.observations import Observations
     t = np.linspace(0.0, 2e-4, 81)
     X = np.array([[a, b] for a in np.linspace(1.0, 3.0, 6) for b in np.linspace(0.5, 1.5, 6)])
     recs = {"r135": 1.4, "r195": 1.9, "r257": 2.5}
@@ -328,7 +328,7 @@ def test_record_calibrations_fit_each_record_alone_and_expose_a_rate_trend():
 
 
 def test_fdem_check_passes_physical_parameters_to_the_simulator_and_applies_measurement_ones_in_the_chain(tmp_path):
-    from shpb.diagnose import measured_curve, simulator_params
+    from calibration.diagnose import measured_curve, simulator_params
     post = {"sigma_t": {"mean": 4e7}, "face_gap.gap_m": {"mean": 2e-4}, "gauge_gain.g": {"mean": 1.1},
             "baseline.offset_Pa": {"mean": -1e6}}
     assert simulator_params(post) == {"sigma_t": 4e7, "face_gap.gap_m": 2e-4}
@@ -342,8 +342,8 @@ def test_fdem_check_passes_physical_parameters_to_the_simulator_and_applies_meas
     np.testing.assert_allclose(y, 1.1 * 1e12 * obs_t - 1e6, rtol=0, atol=1e-3)
     assert measured_curve(pd.DataFrame({"time_s": [], "stress_Pa": []}), model_t, post, obs_t) is None
     # per record and data set: errors of each run, None for a failed one
-    from shpb.diagnose import check_errors
-    from shpb.observations import Observations
+    from calibration.diagnose import check_errors
+    from calibration.observations import Observations
     obs = Observations(pd.DataFrame({"record": "r1", "time_s": obs_t, "stress_Pa": 1.1e12 * obs_t - 1e6,
                                      "sigma_Pa": 1e5}))
     runs = {"after": {"r1": pd.DataFrame({"time_s": t_run, "stress_Pa": s})},
@@ -351,16 +351,16 @@ def test_fdem_check_passes_physical_parameters_to_the_simulator_and_applies_meas
     errors, curves = check_errors([("heldout", obs)], runs, model_t, {"before": {}, "after": post})
     assert errors["r1"]["data"] == "heldout" and errors["r1"]["before"] is None
     assert errors["r1"]["after"]["rmse"] < 1e-3 and curves["r1"]["before"] is None
-    from shpb.diagnose import model_grid
-    from shpb.plots import plot_diagnosis_check
+    from calibration.diagnose import model_grid
+    from calibration.plots import plot_diagnosis_check
     np.testing.assert_array_equal(model_grid({"t_end": 280e-6, "sample_dt": 0.5e-6}), model_t)
     png = plot_diagnosis_check(tmp_path / "check.png", curves, errors, ["face_gap"])
     assert png.stat().st_size > 1000
 
 
 def test_errors_per_record_split_calibration_and_heldout():
-    from shpb.diagnose import errors_per_record
-    from shpb.observations import Observations
+    from calibration.diagnose import errors_per_record
+    from calibration.observations import Observations
 
     def obs(recs):
         rows = [{"record": r, "time_s": t, "stress_Pa": 1e6 * k, "sigma_Pa": 2e5}

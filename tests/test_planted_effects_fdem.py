@@ -3,7 +3,7 @@
 Twin data come from real FDEM runs at the reference parameters (sigma_t = 45 MPa, E_t = 500 J/m^2)
 with one catalogue effect switched on and not declared to the pipeline, plus 1.5 % white noise. Two
 "tests" of the same disc: the calibration record at the default pulse (2.9 m/s) and a held-out
-record at a faster one (3.3 m/s), both 0-100 us. The pipeline (shpb.diagnose) calibrates the base
+record at a faster one (3.3 m/s), both 0-100 us. The pipeline (calibration.diagnose) calibrates the base
 model, tests the residual, screens the catalogue's effects (the four measurement effects and two
 physical ones, contact seating and element damping), re-calibrates with every screened candidate on
 emulators built from a 64-run FDEM design per record, and keeps the best one that earns its place;
@@ -21,7 +21,7 @@ import pytest
 from enkf import DiagonalError
 from enkf.emulator import CurveEmulator
 from shpb import effects as fx
-from shpb.diagnose import EmulatedSHPB, design_points, diagnose
+from calibration.diagnose import EmulatedSHPB, design_points, diagnose
 
 T_END, MODEL_DT, OBS_DT = 100e-6, 0.5e-6, 1e-6
 MODEL_T = np.arange(0.0, T_END + 1e-12, MODEL_DT)

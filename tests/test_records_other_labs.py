@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from shpb.paths import lanl_data_dir, yao_data_dir
-from shpb.records import read_lanl_minikolsky, read_lanl_raw, read_yao_record
-from shpb.reduction import reduce_record
+from shpb.lab.other_labs import read_lanl_minikolsky, read_lanl_raw, read_yao_record
+from shpb.lab.reduction import reduce_record
 
 
 @pytest.fixture(scope="module")

@@ -14,14 +14,14 @@ import numpy as np
 import pytest
 
 from shpb.paths import ENV_DATA_DIR, data_dir, freiburg_data_dir, freiburg_raw_files
-from shpb.records import (
+from shpb.lab.records import (
     freiburg_specimen,
     read_freiburg_metadata,
     read_freiburg_raw,
     read_petrophysical_properties,
     rock_properties,
 )
-from shpb.reduction import FREIBURG_BAR, bridge_strain_per_volt
+from shpb.lab.reduction import FREIBURG_BAR, bridge_strain_per_volt
 
 
 # ------------------------------------------------------------------------------------------------

@@ -2,7 +2,7 @@
 
 Acceptance of issue 4: the peak specimen stress matches the spreadsheet ``Strength`` / ``Max. Stress``
 within 5 % for at least 90 % of the CaMa and SeeSst records. All records (SaLi included) are reduced
-and the table is printed (``pytest -s`` shows it; ``python -m shpb.reduction_table`` prints it too).
+and the table is printed (``pytest -s`` shows it; ``python -m shpb.lab.reduction_table`` prints it too).
 Reads the full Freiburg set shipped in ``data/freiburg-rae-rock-shpb``.
 """
 
@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 
 from shpb.paths import freiburg_raw_files
-from shpb.reduction_table import (
+from shpb.lab.reduction_table import (
     markdown_table,
     readme_section,
     reduce_freiburg_record,

@@ -14,8 +14,8 @@ import math
 import numpy as np
 import pytest
 
-from shpb.records import RawRecord
-from shpb.reduction import (
+from shpb.lab.records import RawRecord
+from shpb.lab.reduction import (
     CSV_COLUMNS,
     FREIBURG_BAR,
     BarSetup,

@@ -1,4 +1,4 @@
-"""The global sensitivity-analysis stage (issue 19): shpb.sensitivity and rules/sensitivity.smk.
+"""The global sensitivity-analysis stage (issue 19): calibration.sensitivity and rules/sensitivity.smk.
 
 * The indices against the Ishigami function's analytic values (Ishigami & Homma 1990, a = 7, b = 0.1:
   S1 = [0.3139, 0.4424, 0], ST = [0.5576, 0.4424, 0.2437]), used as a stand-in model whose "curve"
@@ -19,9 +19,9 @@ import pytest
 import yaml
 from SALib.test_functions import Ishigami
 
-from shpb.sensitivity import (FEATURES, SensitivitySpec, analyze, design, features, recommend,
+from calibration.sensitivity import (FEATURES, SensitivitySpec, analyze, design, features, recommend,
                               report, tables)
-from shpb.workflow_io import ConfigError, load_yaml, validate_config
+from calibration.workflow_io import ConfigError, load_yaml, validate_config
 from test_workflow import REPO, SCHEMA, snakemake, twin_config, write_config, write_stand_in
 
 S1_ISHIGAMI = np.array([0.3139, 0.4424, 0.0])
@@ -271,7 +271,7 @@ def _auto_experiment(**sens) -> dict:
 
 
 def test_auto_takes_the_recommended_parameters_with_their_boxes_and_refuses_a_stale_or_empty_report(tmp_path):
-    from shpb.calibration import ExperimentSpec
+    from calibration.experiment import ExperimentSpec
 
     exp = _auto_experiment()
     boxes = exp["sensitivity"]["parameters"]

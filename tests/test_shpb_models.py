@@ -20,7 +20,7 @@ def _marble_record():
 
 
 def _measured_reduced():
-    from shpb.observations import reduce_measured_record
+    from calibration.observations import reduce_measured_record
     red = reduce_measured_record(_marble_record())
     return red[0] if isinstance(red, tuple) else red
 

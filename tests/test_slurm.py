@@ -231,7 +231,7 @@ def test_fault_wrapper_crashes_one_member_and_hangs_another(tmp_path):
 def test_fault_config_sets_the_wrapper_and_a_member_time_limit_below_the_slurm_runtime(tmp_path):
     cfg = tmp_path / "cfg.yaml"
     cfg.write_text(json.dumps(slurm_compare.FAST_TWIN))
-    from shpb.workflow_io import coerce_yaml_floats
+    from calibration.workflow_io import coerce_yaml_floats
 
     # (YAML 1.1 reads JSON's 1e-06 as a string; the workflow converts such strings back)
     conf = coerce_yaml_floats(yaml.safe_load(slurm_compare.fault_config(cfg, tmp_path, 1, 2).read_text()))

@@ -1,8 +1,8 @@
 """The Snakemake calibration workflow: config validation, observations, the analysis step, member
 failures, and end-to-end runs of `snakemake --cores 2`.
 
-* Unit tests of the workflow modules (``shpb.workflow_io``, ``shpb.observations``,
-  ``shpb.calibration``) against exact expectations (the reduced record, the seed, a linear model).
+* Unit tests of the workflow modules (``calibration.workflow_io``, ``calibration.observations``,
+  ``calibration.experiment``) against exact expectations (the reduced record, the seed, a linear model).
 * ``test_workflow_runs_end_to_end_and_a_second_run_has_nothing_to_do``: the real simulator
   (``python -m shpb simulate``, fast preset), a twin experiment with N = 8 and two ES-MDA analyses;
   checks the DESIGN section 6 files, ``summary.json``, the misfit falling, and that a second
@@ -31,10 +31,10 @@ import pytest
 import yaml
 
 from enkf import EnsembleFailure
-from shpb.calibration import ExperimentSpec, analysis_step, final_iteration, initial_ensemble, rng_for
-from shpb.observations import (ObservationFileError, Observations, check_record, curve_on_grid,
+from calibration.experiment import ExperimentSpec, analysis_step, final_iteration, initial_ensemble, rng_for
+from calibration.observations import (ObservationFileError, Observations, check_record, curve_on_grid,
                                measured_observations, observation_grid, read_observations, twin_observations)
-from shpb.workflow_io import (ConfigError, SimulatorRejected, load_yaml, member_ids, read_responses, run_member,
+from calibration.workflow_io import (ConfigError, SimulatorRejected, load_yaml, member_ids, read_responses, run_member,
                               validate_config, write_responses)
 
 REPO = Path(__file__).resolve().parents[1]
@@ -197,7 +197,7 @@ def test_yaml_scientific_notation_strings_are_read_as_numbers_and_defaults_are_f
 # observations
 # --------------------------------------------------------------------------------------------------
 def test_measured_observations_are_the_reduced_stress_with_the_records_noise_level():
-    from shpb.observations import reduce_measured_record
+    from calibration.observations import reduce_measured_record
 
     red, _, noise = reduce_measured_record(CAMA005)
     obs, reduced = measured_observations({"CaMa_SHPB_005": CAMA005}, t_start=0.0, t_end=3.2e-4, dt=None)
@@ -401,7 +401,7 @@ def test_a_rugged_model_matching_within_noise_and_model_error_stops_converged():
     # The last ensemble misses the truth here (sigma_t 41.7 MPa [38.5, 44.2], E_t 784 [566, 1018]); the
     # MCMC posterior on the smoothed emulator of all 80 runs holds it (5 of 5 seeds, 3-7, measured)
     from enkf.ces import emulator_posterior
-    from shpb.calibration import all_runs
+    from calibration.experiment import all_runs
 
     runs = [p for p, _ in history] + [params]
     X, Yall, latest = all_runs(spec, runs, [y for _, y in history] + [Y], np.ones(20, bool))
@@ -619,7 +619,7 @@ def test_a_malformed_observation_file_fails_before_the_first_simulation(tmp_path
 
 def test_the_rank_cap_keeps_exactly_that_many_singular_values():
     from enkf import esmda_update
-    from shpb.calibration import capped_truncation
+    from calibration.experiment import capped_truncation
 
     spec, obs, model, _ = _linear_setup(20)
     p = initial_ensemble(spec)

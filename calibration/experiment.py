@@ -4,7 +4,7 @@ The cycle of the paper (section 4: initialization, simulation, assimilation, cyc
 steps the Snakemake checkpoint loop runs as separate jobs, each a pure function of files:
 
 1. :func:`initial_ensemble` -- Latin hypercube sample of the prior box (``iter_0/params.csv``).
-2. (the simulations, one job per member and record; :func:`shpb.workflow_io.run_member`)
+2. (the simulations, one job per member and record; :func:`calibration.workflow_io.run_member`)
 3. :func:`analysis_step` -- for iteration ``k``: misfit of the ensemble and of its mean, failed members
    and their reasons, spreads, the stop decision (:func:`decide`), and the analysis ensemble for
    iteration ``k + 1`` (ES-MDA step ``alpha_k`` or the paper's EnKF, :mod:`enkf.analysis`). Written
@@ -436,13 +436,13 @@ def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], 
     """``summary.json`` (DESIGN section 6): experiment, iterations, converged, stop_reason,
     n_simulations, posterior, truth (twins), misfit per iteration, wall_s, per-record before/after
     misfits (before = prior ensemble mean, after = forecast with the posterior mean), and the
-    ``verdict`` (shpb.verdict: ok, box_limited, worse_than_prior or not_converged, with the numbers and
+    ``verdict`` (calibration.verdict: ok, box_limited, worse_than_prior or not_converged, with the numbers and
     what to do next)."""
     names = list(spec.names)
     K = int(decision["iteration"])
     P = final_params[names].to_numpy(float)
     post_ensemble = posterior_dict(P, names, np.asarray(final_alive, bool))
-    # posterior: emulator_mcmc reports the MCMC sample of the emulator posterior (shpb.posterior)
+    # posterior: emulator_mcmc reports the MCMC sample of the emulator posterior (calibration.posterior)
     post = post_ensemble if posterior_samples is None else interval_summary(
         posterior_samples[names].to_numpy(float), names)
     out = {

@@ -19,7 +19,7 @@ import pandas as pd
 
 from enkf.ces import EmulatorPosterior, emulator_posterior
 
-from .calibration import ExperimentSpec, all_runs, rng_for
+from .experiment import ExperimentSpec, all_runs, rng_for
 from .observations import Observations
 
 __all__ = ["POSTERIORS", "sample_posterior", "samples_frame"]

@@ -29,7 +29,7 @@ from enkf.covariance import ObservationError
 from enkf.diagnosis import CalibrationResult, curve_errors, diagnose_loop, finite_difference_sensitivity
 from enkf.emulator import CurveEmulator, with_emulator_error
 
-from . import effects as fx
+from shpb import effects as fx
 from .observations import curve_on_grid
 
 __all__ = ["design_points", "interpolation_matrix", "EmulatedSHPB", "diagnose", "emulators_from_design",
@@ -198,7 +198,7 @@ def record_calibrations(model: EmulatedSHPB, base_names: Sequence[str], observat
     """The base model calibrated on each record alone (ES-MDA on the emulator, its leave-one-out error
     added, as in :func:`diagnose`): one row per record with ``<param>_mean`` and ``<param>_sd``, for the
     fitted-parameters-against-covariates check (a strength that rises with the strain rate across
-    records is a rate effect the model lacks). ``observation_sets``: :class:`shpb.observations.Observations`
+    records is a rate effect the model lacks). ``observation_sets``: :class:`calibration.observations.Observations`
     whose records the emulator covers."""
     import pandas as pd
 
@@ -262,7 +262,7 @@ def model_grid(simulation: Mapping) -> np.ndarray:
 
 def curve_on_model_grid(curve, model_times) -> np.ndarray | None:
     """A simulated curve (DataFrame with ``time_s``, ``stress_Pa``) on ``model_times``
-    (:func:`shpb.observations.curve_on_grid`, the workflow's rule); None when it failed or does not
+    (:func:`calibration.observations.curve_on_grid`, the workflow's rule); None when it failed or does not
     cover the grid."""
     if curve is None or len(curve) < 2:
         return None

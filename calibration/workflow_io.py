@@ -1,7 +1,7 @@
 """File contracts of the calibration workflow: config validation, atomic writes, member runs.
 
 The Snakemake workflow (``Snakefile``, ``rules/*.smk``) names files and calls ``scripts/*.py``; the
-scripts call this module, :mod:`shpb.observations`, :mod:`shpb.calibration` and :mod:`shpb.plots`.
+scripts call this module, :mod:`calibration.observations`, :mod:`calibration.experiment` and :mod:`calibration.plots`.
 Nothing here imports Snakemake.
 
 * :func:`validate_config` checks the workflow config against ``config/schema.yaml`` (JSON Schema),
@@ -21,7 +21,6 @@ Units are SI everywhere (DESIGN section 6).
 
 from __future__ import annotations
 
-from .atomic import atomic_write_text  # noqa: F401  (re-exported for the scripts)
 
 import copy
 import json
@@ -39,6 +38,10 @@ from pathlib import Path
 
 import numpy as np
 
+# the base contracts, re-exported: the scripts and tests import them from here
+from .contracts import (PARAM_NAMES, ConfigError, atomic_write_csv, atomic_write_json,  # noqa: F401
+                        atomic_write_text, experiment_records, known_parameters, read_json, record_name)
+
 __all__ = [
     "PARAM_NAMES", "CURVE_COLUMNS", "ConfigError", "SimulatorCrash", "load_yaml", "validate_config",
     "apply_defaults", "atomic_write_text", "atomic_write_json", "atomic_write_csv", "read_json",
@@ -46,9 +49,6 @@ __all__ = [
     "simulate_argv", "failed_curve_text", "member_params", "combine_member_runs", "write_responses",
     "read_responses", "known_parameters", "coerce_yaml_floats",
 ]
-
-#: Parameter names the simulator accepts (``--param NAME=VALUE``), SI units (DESIGN section 6).
-PARAM_NAMES = ("sigma_n", "sigma_t", "E_n", "E_t", "a", "b", "c", "E", "nu", "rho")
 
 #: Columns of a simulated curve (``python -m shpb simulate`` contract).
 CURVE_COLUMNS = ("time_s", "stress_Pa", "stress_front_Pa", "stress_back_Pa", "force_balance", "centre_sxx_Pa",
@@ -58,10 +58,6 @@ CURVE_COLUMNS = ("time_s", "stress_Pa", "stress_front_Pa", "stress_back_Pa", "fo
 DEFAULT_SIMULATOR = "python -m shpb simulate"
 
 _NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_-]*$")
-
-
-class ConfigError(ValueError):
-    """The workflow config is invalid; the message lists every problem with the key that causes it."""
 
 
 class SimulatorCrash(RuntimeError):
@@ -77,21 +73,6 @@ class SimulatorRejected(RuntimeError):
 # --------------------------------------------------------------------------------------------------
 # Atomic writes
 # --------------------------------------------------------------------------------------------------
-def atomic_write_json(path: str | Path, obj) -> Path:
-    """Strict JSON (NaN/inf must already be ``None``), indented, keys in insertion order."""
-    return atomic_write_text(path, json.dumps(obj, indent=2, allow_nan=False) + "\n")
-
-
-def atomic_write_csv(df, path: str | Path) -> Path:
-    """``df.to_csv`` without index, floats written with full precision (round-trip exact)."""
-    return atomic_write_text(path, df.to_csv(index=False, lineterminator="\n"))
-
-
-def read_json(path: str | Path) -> dict:
-    with open(path) as fh:
-        return json.load(fh)
-
-
 # --------------------------------------------------------------------------------------------------
 # Config
 # --------------------------------------------------------------------------------------------------
@@ -144,35 +125,6 @@ def _schema_errors(config, schema) -> list[str]:
     return messages
 
 
-def record_name(path: str | Path) -> str:
-    """Short name of a measured record: ``CaMa_SHPB_005`` for ``CaMa_SHPB_005_Ti25_60b_Al12b_0_001.txt``
-    (the Freiburg test name), else the file stem."""
-    stem = Path(path).stem
-    m = re.match(r"^([A-Za-z]+_SHPB_\d+)(_|$)", stem)
-    return m.group(1) if m else stem
-
-
-def experiment_records(exp: Mapping) -> dict[str, str]:
-    """``{record name: raw file}``: the measured records of a measured experiment; for a twin
-    ``{"synthetic": incident record or ""}`` (the record only supplies a cylinder's incident wave)."""
-    if exp["kind"] == "twin":
-        return {"synthetic": exp["observations"].get("incident_record") or ""}
-    return {record_name(p): str(p) for p in exp["observations"]["records"]}
-
-
-def known_parameters(geometry: str) -> tuple[str, ...]:
-    """Parameter names the simulator accepts for ``geometry``: the contract's :data:`PARAM_NAMES` plus
-    the model settings of :mod:`shpb.parameters` (``phi_deg``, ``damping.beta`` ...) when present."""
-    try:
-        from .parameters import defaults
-    except ImportError:  # pragma: no cover - the simulator's parameter table is optional here
-        return PARAM_NAMES
-    try:
-        return tuple(dict.fromkeys([*PARAM_NAMES, *defaults(geometry)]))
-    except ValueError:
-        return PARAM_NAMES
-
-
 def _semantic_errors(config: Mapping, base: Path) -> list[str]:
     errors: list[str] = []
     exps = config.get("experiments", {})
@@ -182,7 +134,7 @@ def _semantic_errors(config: Mapping, base: Path) -> list[str]:
             errors.append(f"{where}: experiment names must match {_NAME_RE.pattern} (they become folder names)")
         params = exp.get("parameters", {})
         known = known_parameters(exp.get("geometry", ""))
-        # shpb.sensitivity.AUTO: the candidates are the sensitivity boxes (checked with that block)
+        # calibration.sensitivity.AUTO: the candidates are the sensitivity boxes (checked with that block)
         auto = params == "auto"
         if auto:
             params = (exp.get("sensitivity") or {}).get("parameters") or {}

@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from enkf import jsonable
-from .workflow_io import ConfigError, experiment_records, known_parameters
+from .contracts import ConfigError, experiment_records, known_parameters
 
 __all__ = ["METHODS", "FEATURES", "AUTO", "SensitivitySpec", "config_errors", "design", "features",
            "analyze", "recommend", "report", "tables", "plot_sensitivity_indices", "report_path",
@@ -41,7 +41,7 @@ RESIDUAL_FRACTION = 0.1
 # (e.g. before the wave reaches the specimen) has no variance to share out: its indices would be ratios
 # of round-off, so it is reported as NaN.
 NO_SPREAD_REL = 1e-6
-# spawn_key purposes, disjoint from shpb.calibration.PURPOSES (1-3), so the design is not correlated
+# spawn_key purposes, disjoint from calibration.experiment.PURPOSES (1-3), so the design is not correlated
 # with the experiment's LHS or noise streams drawn from the same seed.
 _SEED_PURPOSE = {"design": 19, "bootstrap": 20}
 _MEASURES = {"efast": ("S1", "S1_conf", "ST", "ST_conf"), "sobol": ("S1", "S1_conf", "ST", "ST_conf"),
@@ -117,7 +117,7 @@ class SensitivitySpec:
 
 def _experiment_errors(name: str, exp: Mapping) -> list[str]:
     """What a JSON schema cannot check in a sensitivity block: names, boxes, N per method, record."""
-    from .parameters import resolve
+    from shpb.parameters import resolve
 
     s, where, errors = exp.get("sensitivity"), f"experiments.{name}.sensitivity", []
     if s is None:

@@ -6,7 +6,7 @@ Two sources (DESIGN section 1, steps 3 and 6):
   "truth" curve; it is sampled on the observation grid and noise drawn from the declared error model is
   added (:func:`twin_observations`). The noise level is a fraction of the truth's peak stress or an
   absolute value in Pa.
-* **Measured records**: a Freiburg raw record is reduced (:func:`shpb.reduction.reduce_record`) to the
+* **Measured records**: a Freiburg raw record is reduced (:func:`shpb.lab.reduction.reduce_record`) to the
   back-face specimen stress ``sigma = F_back / A_s`` on the face time axis (0 = incident wave at the
   front face, the simulator's axis too) and sampled on the grid (:func:`measured_observations`). The
   observation error is the record's own noise: ``sigma`` = the pre-trigger standard deviation of the
@@ -164,7 +164,7 @@ class Observations:
                 "n_obs": self.m, **self.meta}
 
     def write(self, csv_path: str | Path, json_path: str | Path) -> None:
-        from .workflow_io import atomic_write_csv, atomic_write_json
+        from .contracts import atomic_write_csv, atomic_write_json
 
         atomic_write_csv(self.frame, csv_path)
         atomic_write_json(json_path, _jsonable(self.to_meta()))
@@ -254,8 +254,8 @@ def reduce_measured_record(path: str | Path):
     taken from the pre-trigger part of the averaged transmitted-bar signal (the one the specimen stress
     is made of), converted to Pa with ``E_b A_b / A_s``.
     """
-    from .records import freiburg_specimen, read_freiburg_raw
-    from .reduction import FREIBURG_BAR, reduce_record
+    from shpb.lab.records import freiburg_specimen, read_freiburg_raw
+    from shpb.lab.reduction import FREIBURG_BAR, reduce_record
 
     path = Path(path)
     raw = read_freiburg_raw(path, bar=FREIBURG_BAR)

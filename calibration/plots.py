@@ -164,7 +164,7 @@ def plot_forecast(path, obs: Observations, prior_mean: np.ndarray, forecast: Map
 def plot_misfit(path, misfit: Sequence[Mapping], per_record: Sequence[Mapping[str, Mapping]] | None = None,
                 chi2_target: float | None = None, title: str = "", verdict: Mapping | None = None) -> Path:
     """RMSE [MPa] and chi^2 per observation of the ensemble-mean response per iteration; with a
-    ``verdict`` (shpb.verdict), the best iteration ringed and the verdict and next step written under
+    ``verdict`` (calibration.verdict), the best iteration ringed and the verdict and next step written under
     the panels."""
     its = [int(m["iteration"]) for m in misfit]
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.5))
@@ -251,7 +251,7 @@ def plot_sensitivity(path, obs: Observations, params: pd.DataFrame, responses: n
 
 def plot_diagnosis_check(path, curves: Mapping[str, Mapping], errors: Mapping[str, Mapping],
                          added: Sequence[str]) -> Path:
-    """The FDEM check of a discrepancy-loop answer (``shpb.diagnose.check_errors``): per record, the data
+    """The FDEM check of a discrepancy-loop answer (``calibration.diagnose.check_errors``): per record, the data
     and the real runs at the posterior means before and after the loop, with their RMSE."""
     fig, axes = plt.subplots(1, len(curves), figsize=(4.2 * len(curves), 3.6), squeeze=False)
     after_label = "with " + ", ".join(added) if added else "after (nothing added)"

@@ -1,0 +1,10 @@
+"""The calibration application: the only package that joins the SHPB model (:mod:`shpb`) and the
+inference (:mod:`enkf`).
+
+Observations from twins and measured records (:mod:`.observations`), the experiment's inference
+settings and its analysis steps, stop decision and summary (:mod:`.experiment`), the reported
+posterior (:mod:`.posterior`), the verdict (:mod:`.verdict`), the global sensitivity stage
+(:mod:`.sensitivity`), the discrepancy loop on SHPB experiments (:mod:`.diagnose`), the workflow's file
+contracts and config validation (:mod:`.workflow_io`) and the plots (:mod:`.plots`). The Snakemake
+rules call these through the adapters in ``scripts/``.
+"""
