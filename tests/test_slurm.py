@@ -23,12 +23,12 @@ import pytest
 import yaml
 
 REPO = Path(__file__).resolve().parents[1]
-CLUSTER = REPO / "scripts" / "slurm_local_cluster.sh"
+CLUSTER = REPO / "tools" / "slurm" / "slurm_local_cluster.sh"
 PROFILES = REPO / "profiles"
 #: Rules that run one FDEM simulation each: the only ones a cluster run submits as Slurm jobs.
 SIMULATION_RULES = {"member", "truth", "forecast", "diagnosis_member", "diagnosis_check_member", "sensitivity_member"}
 
-sys.path.insert(0, str(REPO / "scripts"))
+sys.path.insert(0, str(REPO / "tools" / "slurm"))
 import slurm_compare  # noqa: E402
 
 
@@ -179,7 +179,7 @@ def test_cluster_script_refuses_to_reuse_a_directory_with_a_running_cluster(tmp_
 
 
 # --------------------------------------------------------------------------------------------------
-# Comparison logic of scripts/slurm_compare.py
+# Comparison logic of tools/slurm/slurm_compare.py
 # --------------------------------------------------------------------------------------------------
 def test_summary_comparison_ignores_wall_times_only():
     a = {"experiment": "x", "wall_s": 10.0, "misfit": [{"rmse_Pa": 1.5, "wall_s": 3}], "posterior": {"E": {"mean": 2.0}}}

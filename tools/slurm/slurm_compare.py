@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """The workflow on a (test) Slurm cluster versus the same workflow run locally.
 
-Runs inside a cluster that ``scripts/slurm_local_cluster.sh`` started (``SLURM_CONF`` must point at its
-``slurm.conf``); ``scripts/slurm_local_cluster.sh run-compare`` does both in one command and tears the
+Runs inside a cluster that ``tools/slurm/slurm_local_cluster.sh`` started (``SLURM_CONF`` must point at its
+``slurm.conf``); ``tools/slurm/slurm_local_cluster.sh run-compare`` does both in one command and tears the
 cluster down afterwards. Scenarios (all by default):
 
 ``compare``
@@ -45,7 +45,7 @@ import numpy as np
 import pandas as pd
 import yaml
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 #: The comparison's experiment: the paper's twin (Brazilian disc, sigma_t and E_t) on the `fast` mesh,
 #: small enough for a test (6 members, 2 ES-MDA steps: 18 member simulations + truth + forecast).
 FAST_TWIN = {
@@ -135,7 +135,7 @@ def fault_wrapper(workdir: Path, crash: int | None = None, hang: int | None = No
     """A `simulator` command for fault injection: crash (exit 1) for member `crash` of `iteration` and
     hang (sleep 15 min) for member `hang` of `iteration`, both on every attempt; else simulate."""
     script = workdir / "faulty_simulator.sh"
-    lines = ["#!/bin/sh", "# Fault injection for the failed-member checks (scripts/slurm_compare.py)."]
+    lines = ["#!/bin/sh", "# Fault injection for the failed-member checks (tools/slurm/slurm_compare.py)."]
     if crash is not None:
         lines.append(f'case "$*" in *"/iter_{iteration}/members/{member_folder(crash)}/"*) '
                      'echo "injected crash" >&2; exit 1;; esac')
@@ -366,7 +366,7 @@ def main(argv=None) -> int:
     ap.add_argument("--timeout", type=float, default=1800, help="per snakemake run [s]")
     args = ap.parse_args(argv)
     if not os.environ.get("SLURM_CONF"):
-        ap.error("SLURM_CONF is not set: run inside `scripts/slurm_local_cluster.sh with-cluster -- ...`")
+        ap.error("SLURM_CONF is not set: run inside `tools/slurm/slurm_local_cluster.sh with-cluster -- ...`")
     out = (args.out or Path(tempfile.mkdtemp(prefix="slurm-compare-"))).resolve()
     out.mkdir(parents=True, exist_ok=True)
     if args.configfile:

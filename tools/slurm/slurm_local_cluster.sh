@@ -2,15 +2,15 @@
 # A real one-node Slurm cluster on localhost (Debian's slurm-wlm + munge), for testing the
 # workflow's Slurm profile (profiles/slurm) end to end.
 #
-#   scripts/slurm_local_cluster.sh install             apt-get install slurm-wlm/munge, pip install the plugin
-#   scripts/slurm_local_cluster.sh up DIR              start munged, slurmctld, slurmd with state under DIR
+#   tools/slurm/slurm_local_cluster.sh install             apt-get install slurm-wlm/munge, pip install the plugin
+#   tools/slurm/slurm_local_cluster.sh up DIR              start munged, slurmctld, slurmd with state under DIR
 #                                                      (SLURM_LOCAL_ACCOUNTING=1: also MariaDB + slurmdbd, so
 #                                                      that sacct works; SLURM_LOCAL_MINJOBAGE=N: MinJobAge, 600)
-#   scripts/slurm_local_cluster.sh down DIR            cancel the cluster's jobs, stop exactly the PIDs `up` started
-#   scripts/slurm_local_cluster.sh with-cluster -- CMD ...
+#   tools/slurm/slurm_local_cluster.sh down DIR            cancel the cluster's jobs, stop exactly the PIDs `up` started
+#   tools/slurm/slurm_local_cluster.sh with-cluster -- CMD ...
 #                                                      up in a fresh temp dir, run CMD with SLURM_CONF exported,
 #                                                      tear down on exit (also on failure or Ctrl-C)
-#   scripts/slurm_local_cluster.sh run-compare [ARGS]  with-cluster + scripts/slurm_compare.py ARGS: the `fast`
+#   tools/slurm/slurm_local_cluster.sh run-compare [ARGS]  with-cluster + tools/slurm/slurm_compare.py ARGS: the `fast`
 #                                                      workflow locally and through profiles/slurm with the same
 #                                                      config and seed, compared; a failing member; a killed and
 #                                                      resumed head process (see that file)
@@ -27,7 +27,7 @@
 set -euo pipefail
 
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
-REPO="$(cd "$HERE/.." && pwd)"
+REPO="$(cd "$HERE/../.." && pwd)"
 
 log() { printf '[slurm-local %s] %s\n' "$(date +%H:%M:%S)" "$*" >&2; }
 die() { log "ERROR: $*"; exit 1; }
@@ -184,7 +184,7 @@ cmd_up() {
     while [[ "$slurmd_port" == "$ctld_port" ]]; do slurmd_port="$(free_port)"; done
 
     cat >"$dir/slurm.conf" <<EOF
-# One-node test cluster written by scripts/slurm_local_cluster.sh; lives and dies with $dir.
+# One-node test cluster written by tools/slurm/slurm_local_cluster.sh; lives and dies with $dir.
 ClusterName=fdemlocal
 SlurmctldHost=localhost
 SlurmUser=root
