@@ -96,7 +96,7 @@ def test_the_workflow_reports_the_emulator_posterior_with_posterior_emulator_mcm
 
     from test_workflow import snakemake, twin_config, write_config, write_stand_in
 
-    cfg = twin_config(method="emulated_esmda", posterior="emulator_mcmc", ensemble_size=10)
+    cfg = twin_config(method="emulated_esmda", posterior="emulator_mcmc", ensemble_size=6, max_iterations=2)
     cfg["simulator"] = write_stand_in(tmp_path)
     write_config(tmp_path, cfg)
     out = snakemake(tmp_path, "--cores", "2")

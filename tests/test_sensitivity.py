@@ -308,7 +308,7 @@ def test_auto_without_candidates_or_with_a_truth_missing_one_is_a_config_error()
 def test_auto_calibrates_what_the_stage_recommends_end_to_end(tmp_path):
     """The stand-in's curve depends on sigma_t (peak) and E_t (decay) and ignores `a`: the default
     target runs the sensitivity stage first, then calibrates sigma_t and E_t only, `a` at its default."""
-    cfg = {"experiments": {"twin": _auto_experiment()}}
+    cfg = {"experiments": {"twin": {**_auto_experiment(), "ensemble_size": 4, "esmda": {"steps": 1}}}}
     cfg["simulator"] = write_stand_in(tmp_path)
     write_config(tmp_path, cfg)
     out = snakemake(tmp_path, "--cores", "2")
