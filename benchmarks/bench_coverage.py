@@ -9,8 +9,8 @@ last ensemble simulated too (the workflow's iterations 0..3). Two posteriors per
 * ``ensemble``: the last simulated ensemble (what ``summary.json`` reported before issue 18);
 * ``ces``: the emcee sample of the emulator posterior on all 100 runs (:mod:`enkf.ces`).
 
-and the stop test of the workflow (chi2 of the ensemble-mean curve against R + the emulator's measured
-error) at every iteration: in how many twins it passes, and from which iteration.
+and the stop tests (chi2 of the ensemble-mean curve against R, the workflow's, and against R + the
+emulator's measured error, the candidate) at every iteration: in how many twins each passes.
 
 Prints one JSON object: per twin the truth, the errors of the posterior means and whether the 50 % and
 90 % central intervals contain the truth; per posterior the coverage fractions, the share of twins
@@ -84,10 +84,10 @@ def _scores(summary: dict, truth: np.ndarray) -> dict:
 
 
 def stopping(run: dict) -> dict:
-    """The workflow's stop test at each iteration k (calibration.experiment.analysis_step, emulated_esmda): the
-    chi2 per observation of iteration k's ensemble-mean curve against R + the emulator's leave-one-out
-    AR(1) error at iteration k's runs (emulator of runs 0..k), next to the chi2 against R alone. The
-    workflow takes the test after the untempered last analysis (k = 3)."""
+    """The stop tests at each iteration k: the chi2 per observation of iteration k's ensemble-mean curve
+    against R (the workflow's test, taken after the untempered last analysis, k = 3) and against R + the
+    emulator's leave-one-out AR(1) error at iteration k's runs (emulator of runs 0..k; the candidate
+    rule, recorded in analysis.json as a diagnostic, docs/inference.md)."""
     from enkf import DenseError, DiagonalError
     from enkf.emulated import emulator_error_model
     from enkf.emulator import CurveEmulator

@@ -168,8 +168,6 @@ def decide(spec: ExperimentSpec, k: int, misfit: Mapping, n_obs: int, spread, pr
     d = check_stop(k, chi2_per_obs=_nan(misfit.get("chi2_per_obs")), nrmse=_nan(misfit.get("nrmse")),
                    n_obs=n_obs, spread=spread, prior_spread=prior_spread, criteria=spec.criteria,
                    allow_convergence=allow).to_dict()
-    if spec.method == "emulated_esmda":
-        d["message"] += " [chi2 against R + the emulator's measured leave-one-out error]"
     return d
 
 
@@ -240,9 +238,9 @@ def analysis_step(spec: ExperimentSpec, k: int, params: pd.DataFrame, responses:
         update = res.to_dict()
         next_params = res.params.tolist()
         if res.error is not None:
-            # The stop test's yardstick (issue 18): a run of the model differs from the emulator's
-            # prediction, and from a neighbouring run, by the measured leave-one-out error, so a curve
-            # "within the noise" is within R + C_emulator, not R alone.
+            # A diagnostic, not the stop test (see _misfit_for_decide): the fit measured against R plus
+            # the emulator's leave-one-out error, which holds the simulator's ruggedness once the design
+            # is dense where the posterior is.
             C = DenseError(err.dense() + res.error.dense(), _symmetric=True)
             misfit_out["chi2_per_obs_model_error"] = mean_misfit(Y, d, C, alive)["chi2_per_obs"]
     elif alpha is not None:
@@ -373,9 +371,11 @@ def final_iteration(spec: ExperimentSpec, analyses: Sequence[Mapping]) -> tuple[
 
 
 def _misfit_for_decide(m: Mapping) -> dict:
-    # emulated_esmda: the discrepancy test against R + the measured emulator/model error
-    chi2 = m.get("chi2_per_obs_model_error", m.get("chi2_per_obs"))
-    return {"rmse": m.get("rmse_Pa"), "nrmse": m.get("nrmse"), "chi2_per_obs": chi2}
+    # Against R alone, also for emulated_esmda: its chi2_per_obs_model_error (R + the emulator's
+    # leave-one-out error) is recorded but not a stop test, because on a sparse design that error is
+    # interpolation error and the test cannot fail (measured: a 6-member fast twin passed it at
+    # chi2 1.1 with E_t at twice the truth and outside its interval; docs/inference.md).
+    return {"rmse": m.get("rmse_Pa"), "nrmse": m.get("nrmse"), "chi2_per_obs": m.get("chi2_per_obs")}
 
 
 def linear_sensitivity(params: pd.DataFrame, names: Sequence[str], lower, upper, responses: np.ndarray,

@@ -359,14 +359,15 @@ def test_emulated_analyses_use_every_successful_run_so_far_and_recover_the_linea
     # the emulator of a linear model is exact: its error adds nothing and the fit is at the noise level
     m = analyses[-1]["misfit"]
     assert m["chi2_per_obs_model_error"] <= m["chi2_per_obs"] * (1 + 1e-9)
-    assert decision["reason"] == "discrepancy" and decision["converged"]
+    assert decision["reason"] == "discrepancy" and decision["converged"]  # against R alone
 
 
-def test_a_rugged_model_matching_within_noise_and_model_error_stops_converged():
+def test_a_rugged_model_fits_within_noise_and_model_error_and_the_mcmc_posterior_holds_the_truth():
     """The linear twin plus a roughness of 6 noise sd per run (smooth in time, a deterministic function
     of the parameters, as the disc's fragment pattern): the ensemble-mean curve cannot come within R
     alone (the mean of 20 rough curves keeps ~1.3 sd of roughness), but it does within R plus the
-    emulator's measured leave-one-out error, which holds the roughness: converged by discrepancy."""
+    emulator's measured leave-one-out error, which holds the roughness (recorded in analysis.json as a
+    diagnostic; the stop test stays against R, see calibration.experiment._misfit_for_decide)."""
     spec, obs, smooth, truth = _linear_setup()
     t = obs.time
     sigma = float(obs.error_model().std[0])
@@ -397,7 +398,7 @@ def test_a_rugged_model_matching_within_noise_and_model_error_stops_converged():
     m = analyses[-1]["misfit"]
     target = 1 + 2 * np.sqrt(2 / obs.m)
     assert K == 3 and m["chi2_per_obs"] > target >= m["chi2_per_obs_model_error"]
-    assert decision["reason"] == "discrepancy" and "emulator's measured" in decision["message"]
+    assert decision["reason"] == "max_iterations" and not decision["converged"]
     # The last ensemble misses the truth here (sigma_t 41.7 MPa [38.5, 44.2], E_t 784 [566, 1018]); the
     # MCMC posterior on the smoothed emulator of all 80 runs holds it (5 of 5 seeds, 3-7, measured)
     from enkf.ces import emulator_posterior
