@@ -36,7 +36,7 @@ from ._rng import RngLike, as_generator
 from .covariance import DenseError, ObservationError
 from .diagnostics import default_names, jsonable
 from .emulated import emulator_error_model
-from .emulator import CurveEmulator
+from .emulator import CurveEmulator, design_arrays
 
 __all__ = ["EmulatorPosterior", "emulator_posterior", "interval_summary", "QUANTILES"]
 
@@ -69,18 +69,6 @@ class EmulatorPosterior:
 
     def to_dict(self) -> dict:
         return jsonable({"posterior": self.summary, **self.diagnostics})
-
-
-def _dedupe(X, Y, latest):
-    # The simulator is deterministic: a repeated parameter set adds nothing and makes the interpolation
-    # system singular; keep its first run, flagged latest if any copy is.
-    _, first, inverse = np.unique(X, axis=0, return_index=True, return_inverse=True)
-    if first.size == X.shape[0]:
-        return X, Y, latest
-    flags = np.bincount(inverse.ravel(), weights=latest.astype(float), minlength=first.size) > 0
-    order = np.argsort(first)
-    keep = first[order]
-    return X[keep], Y[keep], flags[order]
 
 
 #: Smoothing values tried by ``smoothing="loo"`` (SciPy's RBF ``smoothing``, inputs in the unit box).
@@ -119,17 +107,10 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
     smoothing : the RBF smoothing, or ``"loo"``: the value of :data:`SMOOTHING_GRID` with the least
         leave-one-out error at the latest runs.
     """
-    X = np.array(design_params, float, ndmin=2)
-    Y = np.array(design_responses, float, ndmin=2)
-    latest = np.asarray(latest, bool)
-    d = np.asarray(obs, float)
+    X, Y, latest, d = design_arrays(design_params, design_responses, latest, obs)
     lo, hi = np.asarray(lower, float), np.asarray(upper, float)
     n = lo.size
     names = default_names(n, names)
-    if X.shape[0] != Y.shape[0] or latest.shape != (X.shape[0],):
-        raise ValueError(f"{X.shape[0]} design points, {Y.shape[0]} curves, {latest.size} latest flags")
-    if Y.shape[1] != d.size:
-        raise ValueError(f"curves have {Y.shape[1]} values, the observations {d.size}")
     if walkers < 2 * n or walkers % 2:
         raise ValueError(f"walkers must be even and at least 2 n = {2 * n}, got {walkers}")
     if emulator_error and latest.sum() < 2:
@@ -137,7 +118,6 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
     import emcee  # a heavy import, needed only here
 
     rng = as_generator(rng)
-    X, Y, latest = _dedupe(X, Y, latest)
     em, smoothing_info = _smoothest_emulator(X, Y, lo, hi, names, latest, smoothing)
     emu_info = {"n_residuals": 0}
     C = DenseError(obs_error.dense(), _symmetric=True)

@@ -41,7 +41,7 @@ from ._rng import RngLike, as_generator
 from .analysis import esmda_alphas
 from .covariance import AR1Error, DenseError, ObservationError
 from .diagnostics import default_names, jsonable, posterior_dict
-from .emulator import CurveEmulator
+from .emulator import CurveEmulator, design_arrays
 from .loop import assimilate
 from .sampling import latin_hypercube
 from .transforms import BoxTransform
@@ -111,17 +111,10 @@ def emulated_esmda_update(design_params, design_responses, latest, obs, obs_erro
     rng : the analysis' random stream (inner Latin hypercube and ES-MDA perturbations).
     times, groups : observation times and record labels, for the AR(1) emulator error.
     """
-    X = np.array(design_params, dtype=float, ndmin=2)
-    Y = np.array(design_responses, dtype=float, ndmin=2)
-    latest = np.asarray(latest, dtype=bool)
-    d = np.asarray(obs, dtype=float)
+    X, Y, latest, d = design_arrays(design_params, design_responses, latest, obs)
     lo, hi = np.asarray(lower, float), np.asarray(upper, float)
     n = lo.size
     names = default_names(n, names)
-    if X.shape[0] != Y.shape[0] or latest.shape != (X.shape[0],):
-        raise ValueError(f"{X.shape[0]} design points, {Y.shape[0]} curves, {latest.size} latest flags")
-    if Y.shape[1] != d.size:
-        raise ValueError(f"curves have {Y.shape[1]} values, the observations {d.size}")
     if not 2 <= n_members <= inner_members:
         raise ValueError(f"n_members must lie in [2, inner_members = {inner_members}], got {n_members}")
     if not (math.isfinite(temper) and temper >= 1.0):
@@ -131,13 +124,6 @@ def emulated_esmda_update(design_params, design_responses, latest, obs, obs_erro
                          f"got {X.shape[0]} and {int(latest.sum())}")
     rng = as_generator(rng)
 
-    # The simulator is deterministic: a repeated parameter set adds no information and would make the
-    # interpolation system singular, so keep its first run (flagged latest if any copy is).
-    _, first, inverse = np.unique(X, axis=0, return_index=True, return_inverse=True)
-    if first.size < X.shape[0]:
-        latest = np.bincount(inverse.ravel(), weights=latest.astype(float), minlength=first.size)[np.argsort(first)] > 0
-        keep = np.sort(first)
-        X, Y = X[keep], Y[keep]
     em = CurveEmulator(X, Y, lo, hi, names=names)
     emu_err, emu_info = emulator_error_model(em.loo_residuals()[latest], times, groups)
 

@@ -22,7 +22,7 @@ from scipy.interpolate import RBFInterpolator
 
 from .covariance import DenseError, ObservationError
 
-__all__ = ["CurveEmulator", "with_emulator_error"]
+__all__ = ["CurveEmulator", "with_emulator_error", "design_arrays"]
 
 
 class CurveEmulator:
@@ -106,3 +106,24 @@ def with_emulator_error(obs_error: ObservationError, emulator_std) -> DenseError
     if s.shape != (obs_error.m,):
         raise ValueError(f"emulator_std has shape {s.shape}, the observations {obs_error.m}")
     return DenseError(obs_error.dense() + np.diag(s ** 2), _symmetric=True)
+
+
+def design_arrays(design_params, design_responses, latest, obs):
+    """Checked ``(X, Y, latest, d)`` of an emulator design, each simulator parameter set once.
+
+    The simulator is deterministic: a repeated parameter set adds nothing and would make the
+    interpolation system singular, so its first run is kept, flagged latest if any copy is."""
+    X = np.array(design_params, dtype=float, ndmin=2)
+    Y = np.array(design_responses, dtype=float, ndmin=2)
+    latest = np.asarray(latest, dtype=bool)
+    d = np.asarray(obs, dtype=float)
+    if X.shape[0] != Y.shape[0] or latest.shape != (X.shape[0],):
+        raise ValueError(f"{X.shape[0]} design points, {Y.shape[0]} curves, {latest.size} latest flags")
+    if Y.shape[1] != d.size:
+        raise ValueError(f"curves have {Y.shape[1]} values, the observations {d.size}")
+    _, first, inverse = np.unique(X, axis=0, return_index=True, return_inverse=True)
+    if first.size < X.shape[0]:
+        flags = np.bincount(inverse.ravel(), weights=latest.astype(float), minlength=first.size) > 0
+        order = np.argsort(first)
+        X, Y, latest = X[first[order]], Y[first[order]], flags[order]
+    return X, Y, latest, d
