@@ -108,7 +108,9 @@ def stopping(run: dict) -> dict:
     return {"target": target, "per_iteration": out, "converged": bool(last["chi2_per_obs_model_error"] <= target),
             "converged_without_model_error": bool(last["chi2_per_obs"] <= target),
             "first_passing_iteration": next((o["iteration"] for o in out if o["chi2_per_obs_model_error"] <= target),
-                                            None)}
+                                            None),
+            "first_passing_iteration_without_model_error": next(
+                (o["iteration"] for o in out if o["chi2_per_obs"] <= target), None)}
 
 
 def posteriors(run: dict) -> dict:
@@ -148,7 +150,7 @@ def main():
     args = ap.parse_args()
     args.cache.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    rows, sim_s = [], 0.0
+    rows, sim_s, cached = [], 0.0, 0
     with get_context("fork").Pool(args.cores) as pool:
         for i, truth in enumerate(truths(args.twins, args.seed)):
             seed = args.seed + 1 + i
@@ -156,6 +158,7 @@ def main():
             run = dict(np.load(path)) if path.is_file() else None
             if run is None or not np.allclose(run["truth"], truth, rtol=1e-12):  # a cache of another design
                 run = None
+            cached += run is not None
             if run is None:
                 ts = time.perf_counter()
                 run = simulate_twin(pool, truth, seed)
@@ -173,9 +176,11 @@ def main():
         "stopping": {"converged_at_last_iteration": float(np.mean([r["stopping"]["converged"] for r in rows])),
                      "converged_without_model_error": float(np.mean([r["stopping"]["converged_without_model_error"]
                                                                      for r in rows])),
-                     "first_passing_iteration": [r["stopping"]["first_passing_iteration"] for r in rows]},
+                     "first_passing_iteration": [r["stopping"]["first_passing_iteration"] for r in rows],
+                     "first_passing_iteration_without_model_error": [
+                         r["stopping"]["first_passing_iteration_without_model_error"] for r in rows]},
         "runs": rows,
-        "simulation_wall_s": sim_s, "wall_s": time.perf_counter() - t0, "cores": args.cores,
+        "twins_from_cache": cached, "simulation_wall_s": sim_s, "wall_s": time.perf_counter() - t0, "cores": args.cores,
     }, indent=2))
 
 

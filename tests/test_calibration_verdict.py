@@ -107,3 +107,34 @@ def test_summary_keeps_an_earlier_ensemble_that_fitted_better_beside_the_posteri
     v = final_verdict(spec, analyses, params)
     assert v["verdict"] == out["verdict"]["verdict"] and v["flags"] == out["verdict"]["flags"]
     assert v["chi2_per_obs"]["best_iteration"] == 1 and v["chi2_per_obs"]["final"] == 900.0
+
+
+def test_a_box_cutting_the_posterior_ends_box_limited_end_to_end(tmp_path):
+    """The whole workflow with the stand-in simulator of tests/test_workflow.py (peak 0.8 sigma_t): a box
+    ending at 30 MPa, just above the truth's sigma_t (29.9 MPa), so that about half of the posterior
+    lies beyond it (a twin's truth outside its box is refused as a config error). The data pull the ensemble against the
+    bound, and summary.json says so: verdict box_limited, sigma_t pinned at the upper side, and the next
+    step names the parameter and says to widen the box. With the box widened the same twin is not
+    box-limited (the flag comes from the box, not from the data)."""
+    import json
+
+    from test_workflow import snakemake, twin_config, write_config, write_stand_in
+
+    def run(folder, box):
+        folder.mkdir()
+        cfg = twin_config(parameters={"sigma_t": box, "E_t": [200.0, 2400.0]}, method="emulated_esmda",
+                          max_iterations=2)
+        cfg["experiments"]["twin"]["observations"]["truth"] = {"sigma_t": 29.9e6, "E_t": 500.0}
+        cfg["simulator"] = write_stand_in(folder)
+        write_config(folder, cfg)
+        out = snakemake(folder, "--cores", "2")
+        assert out.returncode == 0, out.stderr[-4000:]
+        return json.loads((folder / "results/twin/summary.json").read_text())
+
+    wrong = run(tmp_path / "wrong", [4.0e6, 30.0e6])
+    v = wrong["verdict"]
+    assert v["verdict"] == "box_limited" and v["pinned_to_box"] == {"sigma_t": "upper"}
+    assert wrong["posterior"]["sigma_t"]["mean"] > 30.0e6 - PIN_FRACTION * 26.0e6
+    assert "widen the box" in v["next_step"] and "sigma_t" in v["next_step"]
+    right = run(tmp_path / "right", [4.0e6, 60.0e6])
+    assert "box_limited" not in right["verdict"]["flags"] and right["verdict"]["pinned_to_box"] == {}
