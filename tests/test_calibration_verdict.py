@@ -120,21 +120,21 @@ def test_a_box_cutting_the_posterior_ends_box_limited_end_to_end(tmp_path):
 
     from test_workflow import snakemake, twin_config, write_config, write_stand_in
 
-    def run(folder, box):
-        folder.mkdir()
-        cfg = twin_config(parameters={"sigma_t": box, "E_t": [200.0, 2400.0]}, method="emulated_esmda",
-                          max_iterations=2)
-        cfg["experiments"]["twin"]["observations"]["truth"] = {"sigma_t": 29.9e6, "E_t": 500.0}
-        cfg["simulator"] = write_stand_in(folder)
-        write_config(folder, cfg)
-        out = snakemake(folder, "--cores", "2")
-        assert out.returncode == 0, out.stderr[-4000:]
-        return json.loads((folder / "results/twin/summary.json").read_text())
+    def twin(box):
+        exp = twin_config(parameters={"sigma_t": box, "E_t": [200.0, 2400.0]}, method="emulated_esmda",
+                          max_iterations=2)["experiments"]["twin"]
+        exp["observations"]["truth"] = {"sigma_t": 29.9e6, "E_t": 500.0}
+        return exp
 
-    wrong = run(tmp_path / "wrong", [4.0e6, 30.0e6])
+    # one workflow, both twins (the same seed, data and members; only the box differs)
+    cfg = {"run": ["cut", "wide"], "experiments": {"cut": twin([4.0e6, 30.0e6]), "wide": twin([4.0e6, 60.0e6])},
+           "simulator": write_stand_in(tmp_path)}
+    write_config(tmp_path, cfg)
+    out = snakemake(tmp_path, "--cores", "2")
+    assert out.returncode == 0, out.stderr[-4000:]
+    wrong, right = (json.loads((tmp_path / f"results/{e}/summary.json").read_text()) for e in ("cut", "wide"))
     v = wrong["verdict"]
     assert v["verdict"] == "box_limited" and v["pinned_to_box"] == {"sigma_t": "upper"}
     assert wrong["posterior"]["sigma_t"]["mean"] > 30.0e6 - PIN_FRACTION * 26.0e6
     assert "widen the box" in v["next_step"] and "sigma_t" in v["next_step"]
-    right = run(tmp_path / "right", [4.0e6, 60.0e6])
     assert "box_limited" not in right["verdict"]["flags"] and right["verdict"]["pinned_to_box"] == {}
