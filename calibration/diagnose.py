@@ -13,6 +13,13 @@ structure; the report states it.
 Conventions: every record's curve is emulated on one model time grid (the simulation's sampling),
 the measurement chain is applied on that grid, and the result is interpolated linearly to the record's
 observation times; records are concatenated in the order given.
+
+Scopes (:data:`shpb.effects.SCOPES`): a ``per_record`` candidate is offered to the loop with one copy of
+each parameter per calibration record, ``<effect>.<param>@<record>`` (:func:`record_candidates`), and
+the forward model of record A reads only A's copies (:meth:`EmulatedSHPB.forward`); the score test
+therefore has ``k`` = parameters x records degrees of freedom. A held-out record has no copy: it takes
+its prior centre where its own waves measure the effect (``record_prior``, e.g. the face closure before
+load for ``face_gap``), else the null, and the report says which (``per_record`` in the report).
 """
 
 from __future__ import annotations
@@ -26,14 +33,15 @@ from scipy.stats import qmc
 
 from enkf import BoxTransform, assimilate, esmda_alphas, latin_hypercube
 from enkf.covariance import ObservationError
-from enkf.diagnosis import CalibrationResult, curve_errors, diagnose_loop, finite_difference_sensitivity
+from enkf.diagnosis import Candidate, CalibrationResult, curve_errors, diagnose_loop, finite_difference_sensitivity
 from enkf.emulator import CurveEmulator, with_emulator_error
 
 from shpb import effects as fx
 from .observations import curve_on_grid
 
 __all__ = ["design_points", "interpolation_matrix", "EmulatedSHPB", "diagnose", "emulators_from_design",
-           "errors_per_record", "model_grid", "simulator_params", "measured_curve", "check_errors", "record_calibrations"]
+           "errors_per_record", "model_grid", "simulator_params", "measured_curve", "check_errors", "record_calibrations",
+           "record_candidates", "record_params", "record_prior_centres", "heldout_fill"]
 
 
 def design_points(base_lower, base_upper, physical_lower, physical_upper, n: int, *, seed: int,
@@ -74,12 +82,19 @@ class EmulatedSHPB:
     emulators : per record, a :class:`CurveEmulator` over ``input_names`` (the base parameters followed
         by the physical candidates' parameters) whose outputs are the curve on ``model_times``.
     obs_times : per record, the observation times (inside ``model_times``).
+    record_centres : per record, ``{param: value}`` the record's own measurement of a per-record parameter
+        (:func:`record_prior_centres`): the centre of that record's prior box (:func:`shpb.effects.centred_box`)
+        and a held-out record's value.
+
+    Parameter names are base / effect parameters (one value for every record) or per-record copies
+    ``<param>@<record>`` (:func:`shpb.effects.record_param`), which only ``<record>``'s curve reads.
     """
 
     emulators: Mapping[str, CurveEmulator]
     input_names: Sequence[str]
     model_times: np.ndarray
     obs_times: Mapping[str, np.ndarray]
+    record_centres: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
     _W: dict = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self):
@@ -91,36 +106,79 @@ class EmulatedSHPB:
                                  f"{len(self.input_names)} x {self.model_times.size}")
         self._W = {rec: interpolation_matrix(self.model_times, t) for rec, t in self.obs_times.items()}
 
-    def box(self, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
-        """Bounds of ``names``: the emulator's box for its inputs, the catalogue's for measurement effects."""
-        emu = next(iter(self.emulators.values()))
+    def _plain_box(self, n: str) -> tuple[float, float]:
+        if n in self.input_names:
+            emu = next(iter(self.emulators.values()))
+            i = self.input_names.index(n)
+            return float(emu.lower[i]), float(emu.upper[i])
+        effect = fx.effect_of(n)
+        if effect is None or effect.kind != "measurement":
+            raise ValueError(f"{n} is neither an emulator input nor a measurement effect parameter")
+        a, b = fx.bounds([n])
+        return float(a[0]), float(b[0])
+
+    def prior_centre(self, param: str, record: str) -> float | None:
+        """The record's measured centre of ``param`` clipped to its box, None where it measures none."""
+        c = self.record_centres.get(record, {}).get(param)
+        return None if c is None else fx.centred_box(param, c, within=self._plain_box(param))[0]
+
+    def box(self, names: Sequence[str], *, centred: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds of ``names``: the emulator's box for its inputs, the catalogue's for measurement effects;
+        a per-record copy whose record measures its value (``record_centres``) gets the box centred on it
+        (:func:`shpb.effects.centred_box`, inside the former) unless ``centred`` is False."""
         lo, hi = [], []
         for n in names:
-            if n in self.input_names:
-                i = self.input_names.index(n)
-                lo.append(emu.lower[i]), hi.append(emu.upper[i])
-            else:
-                effect = fx.effect_of(n)
-                if effect is None or effect.kind != "measurement":
-                    raise ValueError(f"{n} is neither an emulator input nor a measurement effect parameter")
-                a, b = fx.bounds([n])
-                lo.append(a[0]), hi.append(b[0])
+            p, rec = fx.split_record(n)
+            a, b = self._plain_box(p)
+            c = self.record_centres.get(rec, {}).get(p) if rec is not None and centred else None
+            if c is not None:
+                _, a, b = fx.centred_box(p, c, within=(a, b))
+            lo.append(a), hi.append(b)
         return np.array(lo), np.array(hi)
+
+    def record_value(self, param: str, record: str) -> tuple[float, str]:
+        """``(value, source)`` of a per-record parameter for a record that has no copy of its own (a
+        held-out record): its prior centre where its waves measure it, else the null."""
+        c = self.prior_centre(param, record)
+        if c is not None:
+            keys = dict(fx.effect_of(param).record_prior)
+            return c, f"prior centre: the record's own {keys.get(param.split('.', 1)[1], 'measurement')}"
+        return fx.null_values([param])[param], "null (the record does not measure it)"
+
+    def _sources(self, names: list[str], rec: str) -> dict:
+        """Where record ``rec`` takes each effect parameter from: a column of ``names`` (shared, or its own
+        copy) or a value (a per-record effect in ``names`` of which ``rec`` has no copy)."""
+        src, copied = {}, set()
+        for j, n in enumerate(names):
+            p, r = fx.split_record(n)
+            if r is None or r == rec:
+                src[p] = ("col", j)
+            else:
+                copied.add(p)
+        for p in copied - set(src):
+            src[p] = ("val", self.record_value(p, rec)[0])
+        return src
 
     def forward(self, names: Sequence[str], records: Sequence[str]) -> Callable[[np.ndarray], np.ndarray]:
         names = list(names)
-        meas = [n for n in names if n not in self.input_names]
-        nulls = {n: fx.null_values([n])[n] for n in self.input_names if n not in names}
+        plans = {rec: self._sources(names, rec) for rec in records}
+        nulls = {n: fx.null_values([n])[n] for n in self.input_names if "." in n}
+
+        def value(src, p, P):
+            kind, v = src[p]
+            return P[:, v] if kind == "col" else np.full(P.shape[0], v)
 
         def f(P):
             P = np.array(P, dtype=float, ndmin=2)
-            cols = {n: P[:, j] for j, n in enumerate(names)}
-            X = np.column_stack([cols[n] if n in cols else np.full(P.shape[0], nulls[n]) for n in self.input_names])
             out = []
             for rec in records:
+                src = plans[rec]
+                X = np.column_stack([value(src, n, P) if n in src else np.full(P.shape[0], nulls[n])
+                                     for n in self.input_names])
                 Y = self.emulators[rec](X)
+                meas = {p: value(src, p, P) for p in src if p not in self.input_names}
                 if meas:
-                    Y = np.array([fx.apply_measurement(self.model_times, Y[i], {n: cols[n][i] for n in meas})
+                    Y = np.array([fx.apply_measurement(self.model_times, Y[i], {p: v[i] for p, v in meas.items()})
                                   for i in range(Y.shape[0])])
                 out.append(Y @ self._W[rec].T)
             return np.hstack(out)
@@ -149,18 +207,90 @@ def _emulated_esmda(model: EmulatedSHPB, names: Sequence[str], records: Sequence
     return res, f, lo, hi
 
 
+def _scope(c, scopes: Mapping[str, str] | None) -> str:
+    s = (scopes or {}).get(c.name, getattr(c, "scope", "shared"))
+    if s not in fx.SCOPES:
+        raise ValueError(f"scope of {c.name}: {s!r} is not one of {fx.SCOPES}")
+    return s
+
+
+def record_candidates(candidates: Sequence, records: Sequence[str], scopes: Mapping[str, str] | None = None) -> list:
+    """The candidates as the loop sees them: a ``per_record`` effect (``scope``, or ``scopes[name]`` where
+    given) becomes a :class:`enkf.diagnosis.Candidate` of the same name with one copy of each parameter per
+    record, ``<effect>.<param>@<record>`` (record by record), the effect's nulls and box repeated; ``shared``
+    effects and candidates without a scope (generic :class:`enkf.diagnosis.Candidate`) are returned as they
+    are."""
+    out = []
+    for c in candidates:
+        if _scope(c, scopes) != "per_record":
+            out.append(c)
+            continue
+        k = len(records)
+        out.append(Candidate(c.name, tuple(fx.record_param(p, r) for r in records for p in c.param_names),
+                             tuple(c.nulls) * k, tuple(c.lower) * k, tuple(c.upper) * k))
+    return out
+
+
+def record_prior_centres(record_info: Mapping[str, Mapping], candidates: Sequence) -> dict[str, dict[str, float]]:
+    """Per record, the prior centres its own measurements give the candidates' per-record parameters:
+    ``{record: {<effect>.<param>: record_info[record][key]}}`` for the catalogue's ``record_prior`` pairs
+    (``face_gap.gap_m`` <- ``closure_before_load_m``); records without the value are left out."""
+    out: dict[str, dict[str, float]] = {}
+    for c in candidates:
+        eff = fx.get_effect(c if isinstance(c, str) else c.name)
+        for short, key in eff.record_prior:
+            for rec, info in record_info.items():
+                v = info.get(key)
+                if v is not None and np.isfinite(float(v)):
+                    out.setdefault(rec, {})[f"{eff.name}.{short}"] = float(v)
+    return out
+
+
+def _per_record_report(model: EmulatedSHPB, candidates: Sequence, calib_records: list, heldout_records: list,
+                       added: Sequence[str], scopes: Mapping[str, str] | None) -> dict:
+    per = [c for c in candidates if _scope(c, scopes) == "per_record"]
+    centres = {}
+    for rec in calib_records + heldout_records:
+        for c in per:
+            for p in c.param_names:
+                cen = model.prior_centre(p, rec)
+                if cen is not None:
+                    lo, hi = model.box([fx.record_param(p, rec)])
+                    centres.setdefault(rec, {})[p] = {"centre": cen, "measured": model.record_centres[rec][p],
+                                                      "box": [float(lo[0]), float(hi[0])]}
+    heldout = {rec: {p: dict(zip(("value", "source"), model.record_value(p, rec)), used=c.name in added)
+                     for c in per for p in c.param_names} for rec in heldout_records}
+    return {"scopes": {c.name: _scope(c, scopes) for c in candidates}, "records": calib_records,
+            "naming": "<effect>.<param>@<record>: the record's own copy of a per-record parameter",
+            "prior_centres": centres, "heldout": heldout,
+            "note": "a held-out record has no copy of a per-record parameter (the calibration cannot know it); "
+                    "it takes its prior centre where its own waves measure the effect, else the null ('source')"}
+
+
+def heldout_fill(report: Mapping, record: str) -> dict[str, float]:
+    """``{param: value}`` a record without copies of the per-record parameters takes (the report's
+    ``per_record.heldout``; empty for a calibration record or a report without per-record effects)."""
+    return {p: float(v["value"]) for p, v in (report.get("per_record") or {}).get("heldout", {}).get(record, {}).items()}
+
+
 def diagnose(model: EmulatedSHPB, *, base_names: Sequence[str], candidates: Sequence, calib_records: Sequence[str],
              obs, obs_error: ObservationError, times, heldout_records: Sequence[str] = (), heldout_obs=None,
              heldout_times=None, heldout_error: ObservationError | None = None, seed: int = 0,
-             n_members: int = 100, esmda_steps: int = 4, fd_fraction: float = 1e-3, **loop_kw) -> dict:
+             n_members: int = 100, esmda_steps: int = 4, fd_fraction: float = 1e-3,
+             scopes: Mapping[str, str] | None = None, **loop_kw) -> dict:
     """Run :func:`enkf.diagnosis.diagnose_loop` with ES-MDA re-calibrations on the emulated model.
 
     ``obs_error`` is the observation error of ``obs`` (calibration records, concatenated); the emulator's
     leave-one-out error is added to it. Physical candidates must be emulator inputs; measurement
-    candidates need nothing. Returns the loop's report with ``emulator`` (its error) added.
+    candidates need nothing. A ``per_record`` candidate is estimated per calibration record
+    (:func:`record_candidates`; module docstring); ``scopes`` overrides the catalogue's scope by effect name
+    (e.g. ``{"gauge_gain": "shared"}`` for records known to share their gauges' calibration). Returns the loop's report with ``emulator`` (its
+    error) and ``per_record`` (scopes, prior centres and boxes, held-out values and their source) added.
     """
     calib_records, heldout_records = list(calib_records), list(heldout_records)
     err = with_emulator_error(obs_error, model.emulator_std(calib_records))
+    offered = list(candidates)
+    candidates = record_candidates(offered, calib_records, scopes)
     for c in candidates:
         for n in c.param_names:
             model.box([n])  # raises for a physical candidate the emulator does not cover
@@ -178,7 +308,7 @@ def diagnose(model: EmulatedSHPB, *, base_names: Sequence[str], candidates: Sequ
     def sensitivities(result, names):
         mean = result.mean()
         x0 = np.array([mean[n] if n in mean else fx.null_values([n])[n] for n in names])
-        lo, hi = model.box(names)
+        lo, hi = model.box(names, centred=False)  # the nulls lie in it
         return finite_difference_sensitivity(model.forward(names, calib_records), x0, fd_fraction * (hi - lo),
                                              lower=lo, upper=hi)
 
@@ -190,6 +320,7 @@ def diagnose(model: EmulatedSHPB, *, base_names: Sequence[str], candidates: Sequ
     report["emulator"] = {"loo_rms_Pa": float(np.sqrt(np.mean(s ** 2))), "loo_max_Pa": float(s.max()),
                           "obs_sigma_rms_Pa": float(np.sqrt(np.mean(obs_error.std ** 2))),
                           "design_points": {r: int(model.emulators[r].X.shape[0]) for r in model.emulators}}
+    report["per_record"] = _per_record_report(model, offered, calib_records, heldout_records, report["added"], scopes)
     return report
 
 
@@ -290,34 +421,62 @@ def emulators_from_design(X, curves: Mapping[str, Sequence], model_times, lower,
     return emulators, n_failed
 
 
-def simulator_params(posterior: Mapping[str, Mapping[str, float]]) -> dict[str, float]:
-    """The parameters an FDEM run needs from a loop posterior (``params_before``/``params_after`` of the
-    report: ``{name: {"mean": ...}}``): base and physical effect parameters at their posterior mean;
-    measurement effects are left to :func:`measured_curve`."""
-    return {n: float(v["mean"]) for n, v in posterior.items()
-            if (fx.effect_of(n) is None or fx.effect_of(n).kind != "measurement")}
+def record_params(values: Mapping[str, float], record: str | None,
+                  fill: Mapping[str, float] | None = None) -> dict[str, float]:
+    """One record's parameters from a set with per-record copies: shared ones as they are, the record's own
+    copies ``<param>@<record>`` under their plain name, other records' copies dropped; a per-record
+    parameter of which ``record`` has no copy (a held-out record) takes ``fill[param]`` (:func:`heldout_fill`).
+    ValueError when a per-record parameter has no value for the record (or ``record`` is None)."""
+    out, own, others = {}, {}, set()
+    for n, v in values.items():
+        p, r = fx.split_record(n)
+        if r is None:
+            out[n] = v
+        elif r == record:
+            own[p] = v
+        else:
+            others.add(p)
+    out.update(own)
+    for p in sorted(others - set(own)):
+        if fill is None or p not in fill:
+            raise ValueError(f"{p} is estimated per record and has no value for record {record!r}")
+        out[p] = float(fill[p])
+    return out
 
 
-def measured_curve(curve, model_times, posterior: Mapping[str, Mapping[str, float]], obs_times) -> np.ndarray | None:
+def simulator_params(posterior: Mapping[str, Mapping[str, float]], record: str | None = None,
+                     fill: Mapping[str, float] | None = None) -> dict[str, float]:
+    """The parameters an FDEM run of ``record`` needs from a loop posterior (``params_before``/``params_after``
+    of the report: ``{name: {"mean": ...}}``): base and physical effect parameters at their posterior mean,
+    per-record ones the record's own (:func:`record_params`, ``fill`` for a held-out record); measurement
+    effects are left to :func:`measured_curve`."""
+    means = record_params({n: float(v["mean"]) for n, v in posterior.items()}, record, fill)
+    return {n: v for n, v in means.items() if (fx.effect_of(n) is None or fx.effect_of(n).kind != "measurement")}
+
+
+def measured_curve(curve, model_times, posterior: Mapping[str, Mapping[str, float]], obs_times,
+                   record: str | None = None, fill: Mapping[str, float] | None = None) -> np.ndarray | None:
     """An FDEM run's curve as the loop's model sees it: on ``model_times``, through the measurement chain
-    of the posterior's measurement parameters (at their means), at ``obs_times``; None for a failed run.
-    The FDEM check of a loop answer (rules/diagnosis.smk) compares it with the data."""
+    of the posterior's measurement parameters (at their means; per-record ones ``record``'s, as in
+    :func:`simulator_params`), at ``obs_times``; None for a failed run. The FDEM check of a loop answer
+    (rules/diagnosis.smk) compares it with the data."""
     y = curve_on_model_grid(curve, model_times)
     if y is None:
         return None
-    meas = {n: float(v["mean"]) for n, v in posterior.items()
-            if fx.effect_of(n) is not None and fx.effect_of(n).kind == "measurement"}
+    means = record_params({n: float(v["mean"]) for n, v in posterior.items()}, record, fill)
+    meas = {n: v for n, v in means.items() if fx.effect_of(n) is not None and fx.effect_of(n).kind == "measurement"}
     return interpolation_matrix(model_times, obs_times) @ fx.apply_measurement(model_times, y, meas)
 
 
-def check_errors(sets, runs: Mapping[str, Mapping], model_times,
-                 posteriors: Mapping[str, Mapping]) -> tuple[dict, dict]:
+def check_errors(sets, runs: Mapping[str, Mapping], model_times, posteriors: Mapping[str, Mapping],
+                 fills: Mapping[str, Mapping[str, float]] | None = None) -> tuple[dict, dict]:
     """The FDEM check of a loop answer: per record, the errors (:func:`enkf.diagnosis.curve_errors`) of
     real runs at the posterior means against the data.
 
     ``sets``: ``(data_label, Observations)`` pairs (calibration, held-out); ``runs[which][record]``: the
     run's curve (DataFrame) for each ``which`` of ``posteriors`` (e.g. ``"before"``, ``"after"``, the
-    report's ``params_before`` / ``params_after``). Returns ``(errors, curves)``:
+    report's ``params_before`` / ``params_after``); ``fills[record]``: a held-out record's values of the
+    per-record parameters (:func:`heldout_fill`). Returns ``(errors, curves)``:
     ``errors[rec] = {"data": label, which: curve_errors or None for a failed run}`` and
     ``curves[rec] = {"data", "time", "obs", which: the run seen through the chain (or None)}``."""
     errors, curves = {}, {}
@@ -327,7 +486,7 @@ def check_errors(sets, runs: Mapping[str, Mapping], model_times,
             t, y = o.time[s], o.values[s]
             errors[r], curves[r] = {"data": label}, {"data": label, "time": t, "obs": y}
             for which, post in posteriors.items():
-                sim = measured_curve(runs[which][r], model_times, post, t)
+                sim = measured_curve(runs[which][r], model_times, post, t, record=r, fill=(fills or {}).get(r))
                 curves[r][which] = sim
                 errors[r][which] = None if sim is None else curve_errors(t, sim, y)
     return errors, curves

@@ -310,7 +310,10 @@ def measured_observations(records: Mapping[str, str | Path], *, t_start: float, 
                       "peak_time_s": red.peak_time, "strain_rate_at_peak_per_s": red.strain_rate_at_peak,
                       "force_balance_at_peak": red.force_balance_at_peak, "notes": list(red.notes),
                       "specimen_length_m": red.specimen_length, "specimen_diameter_m": red.specimen_diameter,
-                      "spreadsheet_strength_Pa": _float_or_none(spec.get("reference_stress_Pa"))}
+                      "spreadsheet_strength_Pa": _float_or_none(spec.get("reference_stress_Pa")),
+                      # the incident bar face's travel before the specimen carries 2 % of its peak: the
+                      # record's own measure of the face gap (prior centre of its face_gap.gap_m)
+                      "closure_before_load_m": _closure_or_none(red)}
     obs = Observations(pd.concat(frames, ignore_index=True), error_kind, corr,
                        {"source": "measured", "sigma_scale": sigma_scale, "record_info": info})
     return obs, reduced
@@ -342,6 +345,14 @@ def _float_or_none(v):
     except (TypeError, ValueError):
         return None
     return f if math.isfinite(f) else None
+
+
+def _closure_or_none(red, level: float = 0.02):
+    """``red.closure_before_load(level)`` [m], None where the record does not give it."""
+    try:
+        return _float_or_none(red.closure_before_load(level))
+    except (IndexError, ValueError):
+        return None
 
 
 def _jsonable(obj):

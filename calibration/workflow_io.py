@@ -227,6 +227,9 @@ def _semantic_errors(config: Mapping, base: Path) -> list[str]:
             for key in diag.get("physical_upper") or {}:
                 if key.split(".")[0] not in (diag.get("candidates") or []):
                     errors.append(f"{where}.diagnosis.physical_upper.{key}: not a parameter of a listed candidate")
+            for key in diag.get("scopes") or {}:
+                if key not in (diag.get("candidates") or []):
+                    errors.append(f"{where}.diagnosis.scopes.{key}: not a listed candidate")
         method = exp.get("method")
         if method == "esmda" and exp.get("esmda", {}).get("alphas") is not None:
             alphas = np.asarray(exp["esmda"]["alphas"], float)

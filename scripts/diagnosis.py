@@ -6,7 +6,7 @@ import pandas as pd
 from enkf.diagnosis import covariate_trends, report_to_json, write_report
 from shpb import effects as fx
 from calibration.diagnose import (EmulatedSHPB, diagnose, emulators_from_design, errors_per_record, model_grid,
-                           record_calibrations, record_covariates)
+                                  record_calibrations, record_covariates, record_prior_centres)
 from calibration.observations import read_curve, read_observations
 from calibration.workflow_io import atomic_write_csv, atomic_write_json, read_json
 
@@ -27,7 +27,9 @@ emulators, n_failed = emulators_from_design(X, curves, model_t, meta["lower"], m
 obs_times = {r: obs.grid(r) for r in obs.records}
 if held is not None:
     obs_times.update({r: held.grid(r) for r in held.records})
-model = EmulatedSHPB(emulators, names, model_t, obs_times)
+info = {**obs.meta.get("record_info", {}), **(held.meta.get("record_info", {}) if held is not None else {})}
+# per-record effects measured by the records' own waves (the face closure before load) centre their priors
+model = EmulatedSHPB(emulators, names, model_t, obs_times, record_centres=record_prior_centres(info, d["candidates"]))
 
 report = diagnose(model, base_names=meta["base_names"], candidates=[fx.get_effect(c) for c in d["candidates"]],
                   calib_records=obs.records, obs=obs.values, obs_error=obs.error_model(), times=obs.time,
@@ -35,13 +37,12 @@ report = diagnose(model, base_names=meta["base_names"], candidates=[fx.get_effec
                   heldout_obs=held.values if held is not None else None,
                   heldout_times=held.time if held is not None else None,
                   seed=d["seed"], n_members=d["members"], esmda_steps=d["esmda_steps"],
-                  max_additions=d["max_additions"], bic_margin=d["bic_margin"])
+                  max_additions=d["max_additions"], bic_margin=d["bic_margin"], scopes=d["scopes"])
 
 # per record: errors before/after, and the residual against the strain rate (covariates)
 c = report["curves"]
 per_record, resid, sigma = errors_per_record([("calibration", obs, c["fitted_before"], c["fitted_after"]),
                                               ("heldout", held, c["heldout_before"], c["heldout_after"])])
-info = {**obs.meta.get("record_info", {}), **(held.meta.get("record_info", {}) if held is not None else {})}
 cov = record_covariates(info, resid, sigma)
 cov["data"] = [per_record[r]["data"] for r in cov["record"]]
 # the base parameters fitted to each record alone, against the same covariates

@@ -66,8 +66,18 @@ the model is the base model) and a one-line description with its equation. Two k
                                     reflected waves) travels 100-270 um while the specimen carries
                                     under 5 % of its peak (README, "Closing the loop"). Box [0, 400 um].
 
+**Scope.** Every entry says whether it is a property of one test (``per_record``: the seating of that
+specimen, the trigger and amplifier settings of that recording) or of the material and model
+(``shared``). The discrepancy loop (:func:`calibration.diagnose.diagnose`) estimates a per-record
+parameter once per calibration record, as ``<effect>.<param>@<record>`` (:func:`record_param`), each
+copy acting on its own record only; a held-out record cannot get its copy from the calibration. Where a
+record's own waves measure the effect (``record_prior``: the name of the measured quantity in the
+record's information, e.g. ``closure_before_load_m`` for the face gap, ``ReducedRecord.
+closure_before_load``), that value is the centre of the record's prior box (:func:`centred_box`).
+
 Public helpers: :func:`get_effect`, :func:`effects`, :func:`effect_of`, :func:`split_params`,
-:func:`apply_measurement`, :func:`bounds`, :func:`null_values`, :func:`candidates`.
+:func:`apply_measurement`, :func:`bounds`, :func:`null_values`, :func:`candidates`, :func:`record_param`,
+:func:`split_record`, :func:`centred_box`.
 """
 
 from __future__ import annotations
@@ -83,6 +93,12 @@ from scipy import signal
 RATE0_PER_S = 1.0
 
 KINDS = ("physical", "measurement")
+#: ``per_record``: a property of one test, estimated once per record; ``shared``: of the material / model.
+SCOPES = ("per_record", "shared")
+#: Separator of a per-record parameter copy's name: ``face_gap.gap_m@CaMa_SHPB_004``.
+RECORD_SEP = "@"
+#: Half-width of a record's prior box around its measured centre, as a fraction of the effect's box width.
+PRIOR_HALF_WIDTH_FRACTION = 0.5
 
 
 @dataclass(frozen=True)
@@ -108,6 +124,8 @@ class Effect:
 
     ``apply`` (measurement effects only) maps ``(time_s, stress_Pa, **short_params) -> stress_Pa``.
     ``fdem`` says, for physical effects, what the engine does with the parameters.
+    ``scope`` is ``per_record`` or ``shared`` (:data:`SCOPES`, module docstring); ``record_prior`` pairs a
+    short parameter name with the key of a record's information that measures it (its prior centre).
     The attributes ``name``, ``param_names``, ``nulls``, ``lower``, ``upper`` are what
     :func:`enkf.diagnosis.diagnose_loop` reads from a candidate.
     """
@@ -118,10 +136,19 @@ class Effect:
     description: str
     fdem: str = ""
     apply: Callable[..., np.ndarray] | None = field(default=None, repr=False, compare=False)
+    scope: str = ""
+    record_prior: tuple[tuple[str, str], ...] = ()
 
     def __post_init__(self):
         if self.kind not in KINDS:
             raise ValueError(f"effect {self.name!r}: kind must be one of {KINDS}")
+        if self.scope not in SCOPES:
+            raise ValueError(f"effect {self.name!r}: scope must be one of {SCOPES}, got {self.scope!r}")
+        if self.record_prior and self.scope != "per_record":
+            raise ValueError(f"effect {self.name!r}: only a per-record effect has a record prior")
+        for short, _ in self.record_prior:
+            if short not in {p.name for p in self.params}:
+                raise ValueError(f"effect {self.name!r}: record_prior names no parameter {short!r}")
         if (self.kind == "measurement") != (self.apply is not None):
             raise ValueError(f"effect {self.name!r}: measurement effects (only) need an apply function")
 
@@ -148,7 +175,8 @@ class Effect:
 
     def to_dict(self) -> dict:
         """JSON-ready description."""
-        return {"name": self.name, "kind": self.kind, "description": self.description, "fdem": self.fdem,
+        return {"name": self.name, "kind": self.kind, "scope": self.scope, "description": self.description,
+                "fdem": self.fdem, "record_prior": dict(self.record_prior),
                 "params": {f"{self.name}.{p.name}": {"lower": p.lower, "upper": p.upper, "null": p.null,
                                                       "unit": p.unit} for p in self.params}}
 
@@ -232,43 +260,54 @@ _P = EffectParam
 
 CATALOGUE: dict[str, Effect] = {e.name: e for e in (
     # measurement chain (order of application: MEASUREMENT_ORDER)
+    # per record: each recording is triggered, and its waves aligned, on its own
     Effect("trigger_shift", "measurement", (_P("dt_s", -10e-6, 10e-6, 0.0, "s"),),
            "trigger time shift: y(t) = s(t - dt) (linear interpolation; dt > 0 delays)",
-           apply=lambda t, s, dt_s=0.0: time_shift(t, s, dt_s)),
+           apply=lambda t, s, dt_s=0.0: time_shift(t, s, dt_s), scope="per_record"),
     Effect("lowpass", "measurement", (_P("tau_s", 0.0, 5e-6, 0.0, "s"),),
            "one-pole amplifier low-pass: tau y' + y = s, tau = 1/(2 pi f_c) (null 0 = no filter; "
            "tau <= 5 us is f_c >= 32 kHz)",
-           apply=lambda t, s, tau_s=0.0: lowpass(t, s, tau_s)),
+           apply=lambda t, s, tau_s=0.0: lowpass(t, s, tau_s),
+           scope="per_record"),  # per record: the amplifier's filter is set for each test
     Effect("gauge_gain", "measurement", (_P("g", 0.8, 1.2, 1.0, "-"),),
            "gauge gain: y(t) = g s(t)",
-           apply=lambda t, s, g=1.0: gain(t, s, g)),
+           apply=lambda t, s, g=1.0: gain(t, s, g),
+           scope="per_record"),  # per record: bridge excitation and amplifier gain are set for each test
     Effect("baseline", "measurement",
            (_P("offset_Pa", -5e6, 5e6, 0.0, "Pa"), _P("drift_Pa_per_s", -1e10, 1e10, 0.0, "Pa/s")),
            "baseline offset and drift: y(t) = s(t) + offset + drift (t - t_0)",
-           apply=lambda t, s, offset_Pa=0.0, drift_Pa_per_s=0.0: baseline(t, s, offset_Pa, drift_Pa_per_s)),
+           apply=lambda t, s, offset_Pa=0.0, drift_Pa_per_s=0.0: baseline(t, s, offset_Pa, drift_Pa_per_s),
+           scope="per_record"),  # per record: zero level and drift of that recording
     # physical (FDEM engine)
     Effect("rate_strength", "physical", (_P("k", 0.0, 0.6, 0.0, "-"),),
            "strain-rate-dependent joint strength: sigma_n,t * DIF, DIF = max(1, 1 + k log10(rate/rate0)), "
            "rate0 = 1 /s",
            fdem="multiplies the tensile (sigma_n) and shear (sigma_t) strength of each joint by the DIF of "
                 "the joint's local strain rate (opening or sliding rate / element size h), rate0 = "
-                "RATE0_PER_S"),
+                "RATE0_PER_S",
+           scope="shared"),  # shared: a law of the rock, the same in every test
     Effect("damping", "physical", (_P("beta", 0.0, 1.0, 0.0, "-"),),
            "element viscous damping: eta = 2 h beta sqrt(E rho), beta a fraction of critical",
            fdem="fdem.model.build_model(damping_beta=beta); the stable time step shrinks by "
-                "sqrt(1 + beta^2) - beta"),
+                "sqrt(1 + beta^2) - beta",
+           scope="shared"),  # shared: a property of the material / the model's discretisation
     Effect("interface_friction", "physical", (_P("mu", 0.0, 0.6, 0.0, "-"),),
            "bar-specimen Coulomb friction: |tau| <= mu sigma_n at the loaded faces",
-           fdem="fdem.model.ContactParams(friction=mu) on the bar-specimen contact pairs"),
+           fdem="fdem.model.ContactParams(friction=mu) on the bar-specimen contact pairs",
+           scope="shared"),  # shared: the same bar faces, rock and lubrication in every test of a series
     Effect("face_gap", "physical", (_P("gap_m", 0.0, 4e-4, 0.0, "m"),),
            "face gap: the incident bar's face travels gap_m before the specimen takes load (ends not flat "
            "or not parallel, seating never closed by a preload, a squeezed interlayer)",
            fdem="initial gap between the incident bar's face and the specimen's front face "
-                "(shpb.geometry face_gap_m); contact closes it"),
+                "(shpb.geometry face_gap_m); contact closes it",
+           # per record: every specimen has its own ends and seating; the record's own incident and
+           # reflected waves measure the face's travel before load (its prior centre)
+           scope="per_record", record_prior=(("gap_m", "closure_before_load_m"),)),
     Effect("seating", "physical", (_P("compliance_m_per_Pa", 0.0, 2e-12, 0.0, "m/Pa"),),
            "contact seating: extra face closure delta = C sigma_n at the loaded faces",
            fdem="normal stiffness per unit area of the bar-specimen contact 1/(1/k_contact + C), "
-                "C = compliance_m_per_Pa, in series with the contact penalty"),
+                "C = compliance_m_per_Pa, in series with the contact penalty",
+           scope="per_record"),  # per record: the contact of that specimen's faces in that test
 )}
 
 #: Order in which :func:`apply_measurement` applies the measurement effects.
@@ -294,9 +333,24 @@ def effects(kind: str | None = None) -> list[Effect]:
     return [e for e in CATALOGUE.values() if kind is None or e.kind == kind]
 
 
+def record_param(param_name: str, record: str) -> str:
+    """The name of ``record``'s copy of a per-record parameter: ``face_gap.gap_m@CaMa_SHPB_004``."""
+    if RECORD_SEP in param_name or not record or RECORD_SEP in record:
+        raise ValueError(f"cannot name a per-record copy of {param_name!r} for record {record!r}")
+    return f"{param_name}{RECORD_SEP}{record}"
+
+
+def split_record(name: str) -> tuple[str, str | None]:
+    """``(parameter, record)`` of a per-record copy's name, ``(name, None)`` for any other name."""
+    param, sep, record = name.partition(RECORD_SEP)
+    return (param, record) if sep else (name, None)
+
+
 def effect_of(param_name: str) -> Effect | None:
-    """The effect a parameter belongs to; ``None`` for a base parameter (no dot). A dotted name that
-    is not in the catalogue raises KeyError (typos should not pass silently as base parameters)."""
+    """The effect a parameter (or a per-record copy of one, :func:`record_param`) belongs to; ``None``
+    for a base parameter (no dot). A dotted name that is not in the catalogue raises KeyError (typos
+    should not pass silently as base parameters)."""
+    param_name = split_record(param_name)[0]
     if "." not in param_name:
         return None
     try:
@@ -326,6 +380,10 @@ def apply_measurement(curve_time, curve_stress, params: Mapping[str, float]) -> 
     """
     t, s = _as_curve(curve_time, curve_stress)
     _, _, meas = split_params(params)
+    copies = [n for n in meas if split_record(n)[1] is not None]
+    if copies:
+        raise ValueError(f"per-record parameters {copies}: give the chain one record's values under their plain "
+                         "names (calibration.diagnose.record_params)")
     by_effect: dict[str, dict[str, float]] = {}
     for name, value in meas.items():
         effect, p = _PARAM_INDEX[name]
@@ -340,21 +398,40 @@ def apply_measurement(curve_time, curve_stress, params: Mapping[str, float]) -> 
     return y
 
 
+def _param(name: str) -> EffectParam:
+    effect_of(name) or _raise_base(name)
+    return _PARAM_INDEX[split_record(name)[0]][1]
+
+
 def bounds(param_names: Iterable[str]) -> tuple[np.ndarray, np.ndarray]:
-    """Prior box ``(lower, upper)`` of the named effect parameters."""
-    names = list(param_names)
-    for n in names:
-        effect_of(n) or _raise_base(n)
-    return (np.array([_PARAM_INDEX[n][1].lower for n in names]),
-            np.array([_PARAM_INDEX[n][1].upper for n in names]))
+    """Prior box ``(lower, upper)`` of the named effect parameters (a per-record copy: its effect's box)."""
+    ps = [_param(n) for n in param_names]
+    return np.array([p.lower for p in ps]), np.array([p.upper for p in ps])
 
 
 def null_values(param_names: Iterable[str] | None = None) -> dict[str, float]:
-    """``{param: null}`` for the named effect parameters (all of the catalogue by default)."""
+    """``{param: null}`` for the named effect parameters or per-record copies (all of the catalogue by
+    default)."""
     names = list(_PARAM_INDEX) if param_names is None else list(param_names)
-    for n in names:
-        effect_of(n) or _raise_base(n)
-    return {n: _PARAM_INDEX[n][1].null for n in names}
+    return {n: _param(n).null for n in names}
+
+
+def centred_box(param_name: str, centre: float, *, within: tuple[float, float] | None = None,
+                half_width_fraction: float = PRIOR_HALF_WIDTH_FRACTION) -> tuple[float, float, float]:
+    """A record's prior box for a per-record parameter whose value the record measures (``record_prior``):
+    ``(c, lo, hi)`` with the centre ``c`` = ``centre`` clipped to the effect's box (intersected with
+    ``within``, e.g. an emulator's design range) and ``[lo, hi] = [c - h, c + h]`` clipped to the same
+    box, ``h = half_width_fraction`` x the effect's box width (the default keeps the prior as wide as
+    half the effect's box on either side: a measured closure is a centre, not a value)."""
+    p = _param(param_name)
+    lo, hi = p.lower, p.upper
+    if within is not None:
+        lo, hi = max(lo, float(within[0])), min(hi, float(within[1]))
+    if not (math.isfinite(centre) and lo < hi and half_width_fraction > 0):
+        raise ValueError(f"{param_name}: no prior box around {centre!r} inside [{lo}, {hi}]")
+    c = min(max(float(centre), lo), hi)
+    h = half_width_fraction * (p.upper - p.lower)
+    return c, max(lo, c - h), min(hi, c + h)
 
 
 def candidates(names: Iterable[str] | None = None, kind: str | None = None) -> list[Effect]:

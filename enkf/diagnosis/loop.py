@@ -108,7 +108,9 @@ def diagnose_loop(calibrate: Callable[[list[str]], CalibrationResult],
         (the loop whitens with ``obs_error``); finite differences or :func:`ensemble_sensitivity`.
     base_names : the base model's calibrated parameters.
     candidates : effects offered, each with ``name``, ``param_names``, ``nulls`` and optionally ``lower``,
-        ``upper`` (:class:`Candidate`, ``shpb.effects.Effect``).
+        ``upper`` (:class:`Candidate`, ``shpb.effects.Effect``). An effect estimated separately for each
+        group of observations (e.g. per record) is offered with one parameter per group; its score test
+        then has that many degrees of freedom and its BIC counts every copy.
     obs, obs_error, times : calibration observations, their error model and times.
     heldout_obs, heldout_times : observations not used to calibrate (another record, or the post-peak
         part), predicted by ``CalibrationResult.heldout``; None to skip the held-out criterion.

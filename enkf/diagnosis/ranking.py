@@ -207,7 +207,9 @@ def rank_candidates(white_resid, S_base_white, candidates: Mapping[str, np.ndarr
                     rtol: float = 1e-10) -> pd.DataFrame:
     """Score-test every candidate and rank them, most significant first.
 
-    ``candidates`` maps an effect name to its whitened sensitivity column(s) ``(m,)`` or ``(m, k)``.
+    ``candidates`` maps an effect name to its whitened sensitivity column(s) ``(m,)`` or ``(m, k)``; an
+    effect with one parameter per record has one column per record (zero outside its record's block), so
+    ``k`` and the chi-square degrees of freedom count the records.
     A candidate ``passes`` when its score test rejects the null at level ``alpha`` (default 1e-3, per
     candidate: the 99.9% quantile of ``chi2(k)``), its collinearity with the base span is at most
     ``max_collinearity`` (otherwise the base already absorbs it and its parameter is not identifiable),
