@@ -22,6 +22,7 @@ ENERGY_NAMES = ("kinetic", "strain", "joint_elastic", "contact", "joint_dissipat
 STATUS_OK = 0
 STATUS_NONFINITE = 1
 STATUS_ENERGY = 2
+STATUS_RUNAWAY = 3
 
 
 @njit(cache=True)
@@ -178,10 +179,20 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
             if nh > 0:
                 _hist_eval(hist_ptr, hist_t, hist_v, cursor, t + 0.5 * dt, hv)
                 E[7] += _apply_velocity_bc(v, mass, vel_nodes, vel_dir, vel_hist, hv)
+            vmax2 = 0.0
             for i in range(n):
                 x[i, 0] += dt * v[i, 0]
                 x[i, 1] += dt * v[i, 1]
+                vv = v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1]
+                if vv > vmax2:
+                    vmax2 = vv
             t += dt
+            # A node that crosses the contact buffer in one step moves faster than any wave the stable
+            # step resolves: the state is already garbage, and each contact rebuild over an exploding
+            # mesh would cost more than the whole run (the energy test only looks every sample).
+            if buffer > 0.0 and vmax2 * dt * dt > buffer * buffer:
+                status = STATUS_RUNAWAY
+                break
             # contact neighbour list
             if use_contact:
                 steps_since += 1

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .integrator import ENERGY_NAMES, STATUS_ENERGY, STATUS_NONFINITE, STATUS_OK, run_loop
+from .integrator import ENERGY_NAMES, STATUS_ENERGY, STATUS_NONFINITE, STATUS_OK, STATUS_RUNAWAY, run_loop
 from .model import DEFAULT_SAFETY, Model, stable_time_step
 
 
@@ -255,7 +255,9 @@ def run(model: Model, t_end: float, *, dt: float | None = None, safety: float = 
     wall = time.perf_counter() - t0
     msg = {STATUS_OK: "completed",
            STATUS_NONFINITE: f"non-finite state at t = {out_t[max(ns - 1, 0)]:.3e} s (numerical instability)",
-           STATUS_ENERGY: f"energy balance diverged at t = {out_t[max(ns - 1, 0)]:.3e} s (numerical instability)"}[status]
+           STATUS_ENERGY: f"energy balance diverged at t = {out_t[max(ns - 1, 0)]:.3e} s (numerical instability)",
+           STATUS_RUNAWAY: f"a node crossed the contact buffer in one step after t = {out_t[max(ns - 1, 0)]:.3e} s "
+                           "(numerical instability)"}[status]
     updates = (model.n_triangles + model.n_joints) * steps
     return Result(
         time=out_t[:ns], energy={k: out_energy[:ns, i] for i, k in enumerate(ENERGY_NAMES)},
