@@ -40,7 +40,7 @@ from enkf.ces import interval_summary
 
 from .observations import Observations
 from .sensitivity import AUTO, selected_parameters
-from .verdict import calibration_verdict
+from .verdict import calibration_verdict, reported_iteration
 
 __all__ = ["PURPOSES", "rng_for", "ExperimentSpec", "initial_ensemble", "analysis_step", "decide", "capped_truncation",
            "all_runs",
@@ -440,8 +440,12 @@ def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], 
     what to do next)."""
     names = list(spec.names)
     K = int(decision["iteration"])
-    P = final_params[names].to_numpy(float)
-    post_ensemble = posterior_dict(P, names, np.asarray(final_alive, bool))
+    misfits = [{"iteration": int(a["iteration"]), "n_alive": int(a["n_alive"]), **a["misfit"]} for a in analyses[:K + 1]]
+    # The ensemble reported as the posterior: the last, or the best when the last made the fit markedly
+    # worse (calibration.verdict.reported_iteration).
+    R = K if iteration_params is None else reported_iteration([m["chi2_per_obs"] for m in misfits])
+    P, alive_R = (final_params, final_alive) if R == K else (iteration_params[R], analyses[R]["alive"])
+    post_ensemble = posterior_dict(P[names].to_numpy(float), names, np.asarray(alive_R, bool))
     # posterior: emulator_mcmc reports the MCMC sample of the emulator posterior (calibration.posterior)
     post = post_ensemble if posterior_samples is None else interval_summary(
         posterior_samples[names].to_numpy(float), names)
@@ -462,16 +466,16 @@ def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], 
         "posterior_method": "ensemble" if posterior_samples is None else "emulator_mcmc",
         "posterior": post,
         "prior": {p: {"lower": float(spec.lower[j]), "upper": float(spec.upper[j])} for j, p in enumerate(names)},
-        "misfit": [{"iteration": int(a["iteration"]), "n_alive": int(a["n_alive"]), **a["misfit"]}
-                   for a in analyses[:K + 1]],
+        "posterior_iteration": int(R),
+        "misfit": misfits,
         "failed_members": {str(a["iteration"]): a["failed_members"] for a in analyses[:K + 1] if a["failed_members"]},
         "misfit_per_record": {
             rec: {"before": analyses[0]["misfit_per_record"][rec],
-                  "posterior_ensemble_mean": analyses[K]["misfit_per_record"][rec],
+                  "posterior_ensemble_mean": analyses[R]["misfit_per_record"][rec],
                   "after": forecast_misfit.get(rec)}
             for rec in analyses[0]["misfit_per_record"]
         },
-        "spread_ratio": {p: _ratio(analyses[K], p) for p in names},
+        "spread_ratio": {p: _ratio(analyses[R], p) for p in names},
         "wall_s": wall_s,
         "simulation_wall_s": simulation_wall_s,
     }
@@ -479,8 +483,8 @@ def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], 
                                          lower=spec.lower, upper=spec.upper, names=names)
     best = out["verdict"]["chi2_per_obs"]["best_iteration"]
     if iteration_params is not None and best != K:
-        # The last ensemble is the ES-MDA posterior and stays `posterior`; when an earlier one fitted
-        # better, it is kept beside it so a worse last step loses nothing (issue 17).
+        # When an earlier ensemble fitted better it is kept beside the reported one (which is the best
+        # itself when the last step made the fit markedly worse).
         Pb = iteration_params[best][names].to_numpy(float)
         out["best_ensemble"] = {"iteration": int(best), "chi2_per_obs": out["misfit"][best]["chi2_per_obs"],
                                 "rmse_Pa": out["misfit"][best]["rmse_Pa"],
@@ -509,8 +513,9 @@ def final_verdict(spec: ExperimentSpec, analyses: Sequence[Mapping], params: Seq
     if decision is None:
         return None
     misfits = [{"iteration": int(a["iteration"]), **a["misfit"]} for a in analyses[:K + 1]]
-    post = posterior_dict(params[K][list(spec.names)].to_numpy(float), list(spec.names),
-                          np.asarray(analyses[K]["alive"], bool))
+    R = reported_iteration([m["chi2_per_obs"] for m in misfits])
+    post = posterior_dict(params[R][list(spec.names)].to_numpy(float), list(spec.names),
+                          np.asarray(analyses[R]["alive"], bool))
     return calibration_verdict(misfits=misfits, decision=decision, posterior=post, lower=spec.lower,
                                upper=spec.upper, names=spec.names)
 
@@ -565,6 +570,7 @@ def experiment_outcome(*, name: str, exp: Mapping, params: Sequence[pd.DataFrame
                   posterior_samples=posterior_samples, posterior_sampler=posterior_sampler)
     if posterior_samples is not None:
         return out, posterior_samples
-    table = member_table(params[K][list(spec.names)].to_numpy(float), list(spec.names), responses=responses[K],
-                         obs=obs.values, obs_error=obs.error_model(), alive=alive)
+    R = int(out["posterior_iteration"])
+    table = member_table(params[R][list(spec.names)].to_numpy(float), list(spec.names), responses=responses[R],
+                         obs=obs.values, obs_error=obs.error_model(), alive=np.asarray(analyses[R]["alive"], bool))
     return out, table

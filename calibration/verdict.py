@@ -6,8 +6,8 @@ its budget far from the noise level, must say so in words and numbers, not only 
 
 Verdicts, the first that applies:
 
-- ``worse_than_prior``: the ensemble mean of the last iteration fits worse (chi^2 per observation)
-  than the prior ensemble's mean. The linear-Gaussian update pushed the ensemble where the model
+- ``worse_than_prior``: the last iteration's ensemble fits worse (chi^2 per observation) than the
+  prior ensemble. The reported posterior is then the best iteration's (:func:`reported_iteration`). The linear-Gaussian update pushed the ensemble where the model
   cannot follow the data: the model lacks an effect the data carry (run the diagnosis).
 - ``box_limited``: a posterior mean lies within ``PIN_FRACTION`` of its box width from a bound; the
   data want a value the prior box excludes (widen the box, or the parameter stands in for a missing
@@ -23,6 +23,13 @@ from collections.abc import Mapping, Sequence
 #: A posterior mean this close to a bound, as a fraction of the box width, is pinned to the box.
 PIN_FRACTION = 0.02
 
+#: The last ensemble is reported unless its chi^2 per observation exceeds the best iteration's by more
+#: than this fraction. ES-MDA's intermediate ensembles are posteriors under inflated noise (wider than
+#: the last), so a last step that is only a few per cent worse (sampling noise near convergence: twin
+#: chi^2 0.94 -> 1.01) keeps the last; a step that made the fit markedly worse (marble: 610 -> 2,019)
+#: does not get reported as the posterior (issue 17).
+REPORT_TOLERANCE = 0.10
+
 NEXT_STEP = {
     "worse_than_prior": ("the calibration made the fit worse than the prior: the model lacks something the "
                          "data carry; run the diagnosis (config/diagnosis.yaml) on this experiment"),
@@ -33,6 +40,21 @@ NEXT_STEP = {
                       "iteration is not the last; check the noise model or run the diagnosis"),
     "ok": "none: the fit reached the noise level inside the prior box",
 }
+
+
+def reported_iteration(chi2: Sequence[float], tolerance: float = REPORT_TOLERANCE) -> int:
+    """The iteration whose ensemble is reported as the posterior (posterior.csv, summary ``posterior``,
+    the forecast): the last, unless an earlier one fitted better by more than ``tolerance`` (relative
+    chi^2 per observation), then the best. Non-finite entries are never best."""
+    chi2 = [float(c) if c is not None else math.nan for c in chi2]
+    last = len(chi2) - 1
+    finite = [(c, k) for k, c in enumerate(chi2) if math.isfinite(c)]
+    if not finite:
+        return last
+    best_chi2, best = min(finite)
+    if math.isfinite(chi2[last]) and chi2[last] <= best_chi2 * (1.0 + tolerance):
+        return last
+    return int(best)
 
 
 def pinned_parameters(posterior: Mapping[str, Mapping], lower: Sequence[float], upper: Sequence[float],
@@ -53,8 +75,8 @@ def pinned_parameters(posterior: Mapping[str, Mapping], lower: Sequence[float], 
 def calibration_verdict(*, misfits: Sequence[Mapping], decision: Mapping, posterior: Mapping[str, Mapping],
                         lower: Sequence[float], upper: Sequence[float], names: Sequence[str]) -> dict:
     """The ``verdict`` block: misfits is the per-iteration list of ``summary.json`` (``iteration``,
-    ``chi2_per_obs``, ``rmse_Pa``), 0 = prior ensemble, the last = the reported posterior ensemble;
-    decision the stop decision taken on the last."""
+    ``chi2_per_obs``, ``rmse_Pa``), 0 = prior ensemble; posterior the reported one (of the ensemble
+    :func:`reported_iteration` picks, or the MCMC sample); decision the stop decision taken on the last."""
     chi2 = [float(m["chi2_per_obs"]) if m.get("chi2_per_obs") is not None else math.nan for m in misfits]
     finite = [(c, k) for k, c in enumerate(chi2) if math.isfinite(c)]
     best_chi2, best = min(finite) if finite else (math.nan, len(chi2) - 1)
@@ -74,6 +96,10 @@ def calibration_verdict(*, misfits: Sequence[Mapping], decision: Mapping, poster
         text = text.format(params=", ".join(pinned),
                            bounds=", ".join(f"its {side} bound" if len(pinned) == 1 else f"{p}'s {side} bound"
                                             for p, side in pinned.items()))
+    elif verdict == "worse_than_prior" and reported_iteration(chi2) != len(chi2) - 1:
+        k = reported_iteration(chi2)
+        text += (f"; the posterior reported (and forecast) is iteration {k}'s ensemble (chi^2 per observation "
+                 f"{chi2[k]:.4g}), not the last ({final:.4g})")
     elif verdict == "not_converged":
         text = text.format(reason=decision.get("reason"), chi2=final,
                            target=math.nan if target is None else float(target))
@@ -84,6 +110,7 @@ def calibration_verdict(*, misfits: Sequence[Mapping], decision: Mapping, poster
                          "final_over_prior": final / prior if prior and math.isfinite(prior) else None,
                          "target": target},
         "best_is_last": int(best) == len(chi2) - 1,
+        "reported_iteration": reported_iteration(chi2),
         "pinned_to_box": pinned,
         "pin_fraction": PIN_FRACTION,
         "next_step": text,

@@ -1,5 +1,5 @@
-# The forecast (best-estimate) simulation with the posterior-mean parameters: of the final iteration's
-# ensemble, or of the emulator MCMC sample (`posterior: emulator_mcmc`, rule posterior_sample).
+# The forecast (best-estimate) simulation with the posterior-mean parameters: of the reported ensemble (the
+# last, or the best when the last made the fit markedly worse: calibration.verdict), or of the emulator MCMC sample (`posterior: emulator_mcmc`, rule posterior_sample).
 
 
 def posterior_sample_files(exp):
@@ -29,7 +29,7 @@ rule forecast_params:
     input:
         unpack(lambda wc: posterior_sample_files(wc.exp)),
         analyses=lambda wc: iteration_files(wc.exp, "analysis.json"),
-        params=lambda wc: iteration_files(wc.exp, "params.csv")[-1],
+        params=lambda wc: iteration_files(wc.exp, "params.csv"),
     output:
         params="results/{exp}/forecast/params.json",
     script:

@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from calibration.verdict import PIN_FRACTION, calibration_verdict, pinned_parameters
+from calibration.verdict import PIN_FRACTION, REPORT_TOLERANCE, calibration_verdict, pinned_parameters, reported_iteration
 
 NAMES = ("sigma_t", "E_t")
 LOWER, UPPER = (4e6, 200.0), (60e6, 2400.0)
@@ -71,9 +71,21 @@ def test_failed_iterations_do_not_count_as_best():
     assert v["chi2_per_obs"]["best_iteration"] == 2 and v["best_is_last"]
 
 
-def test_summary_keeps_an_earlier_ensemble_that_fitted_better_beside_the_posterior():
-    """Three iterations where the middle one fitted best: summary.json keeps its ensemble (mean and
-    interval of that iteration's members) as best_ensemble; the posterior stays the last ensemble."""
+def test_the_last_ensemble_is_reported_unless_it_fits_markedly_worse_than_the_best():
+    """Near convergence the last step may be a few per cent worse by sampling noise (the standard twin:
+    0.94 -> 1.01): the last, the ES-MDA posterior, is kept. A last step that made the fit markedly worse
+    (marble 610 -> 2,019) is not reported: the best iteration is."""
+    assert reported_iteration([3.52, 1.74, 0.944, 1.01]) == 3
+    assert reported_iteration([610.0, 1025.0, 1500.0, 2019.0]) == 0
+    assert reported_iteration([500.0, 120.0, 120.0 * (1 + REPORT_TOLERANCE) * 1.001]) == 1
+    assert reported_iteration([500.0, 120.0, 120.0 * (1 + REPORT_TOLERANCE) * 0.999]) == 2
+    assert reported_iteration([50.0, 20.0, float("nan")]) == 1      # a failed last iteration is never reported
+    assert reported_iteration([float("nan")] * 2) == 1
+
+
+def test_summary_reports_the_best_ensemble_when_the_last_step_made_the_fit_worse():
+    """Three iterations where the middle one fitted best by far: summary.json keeps its ensemble as
+    best_ensemble and reports it as the posterior (posterior_iteration 1, the verdict says so)."""
     import numpy as np
     import pandas as pd
 
@@ -100,7 +112,9 @@ def test_summary_keeps_an_earlier_ensemble_that_fitted_better_beside_the_posteri
     b = out["best_ensemble"]
     assert b["iteration"] == 1 and b["chi2_per_obs"] == 120.0
     assert b["posterior"]["sigma_t"]["mean"] == pytest.approx(params[1]["sigma_t"].mean(), rel=1e-12)
-    assert out["posterior"]["E_t"]["mean"] == pytest.approx(params[2]["E_t"].mean(), rel=1e-12)
+    assert out["posterior_iteration"] == 1 and out["verdict"]["reported_iteration"] == 1
+    assert out["posterior"]["E_t"]["mean"] == pytest.approx(params[1]["E_t"].mean(), rel=1e-12)
+    assert "iteration 1's ensemble" in out["verdict"]["next_step"]
     # the plots take the same verdict from the stored iterations alone
     from calibration.experiment import final_verdict
 

@@ -138,6 +138,12 @@ def test_shipped_configs_are_valid():
     assert set(cfg["run"]) <= set(cfg["experiments"])
     assert cfg["experiments"]["twin_ref"]["observations"]["truth"] == {"sigma_t": 45.0e6, "E_t": 500.0}
     assert cfg["experiments"]["twin_ref"]["ensemble_size"] == 25
+    # the default run closes the loop on measured data: a calibration on two records, one held out, the
+    # catalogue's measurement and physical candidates (issue 17)
+    loops = [cfg["experiments"][e] for e in cfg["run"] if cfg["experiments"][e].get("diagnosis")]
+    assert loops and all(len(x["observations"]["records"]) == 2 and len(x["diagnosis"]["heldout_records"]) == 1
+                         and {"face_gap", "seating", "rate_strength", "gauge_gain"} <= set(x["diagnosis"]["candidates"])
+                         for x in loops)
     twins = load_yaml(REPO / "config" / "paper_twins.yaml")
     merged = {**base, **twins, "experiments": {**base["experiments"], **twins["experiments"]}}
     cfg = validate_config(merged, SCHEMA, base_dir=REPO)
