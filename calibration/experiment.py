@@ -480,7 +480,8 @@ def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], 
         "simulation_wall_s": simulation_wall_s,
     }
     out["verdict"] = calibration_verdict(misfits=out["misfit"], decision=decision, posterior=post,
-                                         lower=spec.lower, upper=spec.upper, names=names)
+                                         lower=spec.lower, upper=spec.upper, names=names,
+                                         diagnosed=_diagnosed(exp))
     best = out["verdict"]["chi2_per_obs"]["best_iteration"]
     if iteration_params is not None and best != K:
         # When an earlier ensemble fitted better it is kept beside the reported one (which is the best
@@ -506,7 +507,8 @@ def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], 
     return jsonable(out)
 
 
-def final_verdict(spec: ExperimentSpec, analyses: Sequence[Mapping], params: Sequence[pd.DataFrame]) -> dict | None:
+def final_verdict(spec: ExperimentSpec, analyses: Sequence[Mapping], params: Sequence[pd.DataFrame],
+                  exp: Mapping | None = None) -> dict | None:
     """The ``verdict`` block of ``summary.json`` from the stored iterations alone (for the plots, which
     run beside the summary): None while the stored iterations never stop."""
     K, decision = final_iteration(spec, analyses)
@@ -517,7 +519,12 @@ def final_verdict(spec: ExperimentSpec, analyses: Sequence[Mapping], params: Seq
     post = posterior_dict(params[R][list(spec.names)].to_numpy(float), list(spec.names),
                           np.asarray(analyses[R]["alive"], bool))
     return calibration_verdict(misfits=misfits, decision=decision, posterior=post, lower=spec.lower,
-                               upper=spec.upper, names=spec.names)
+                               upper=spec.upper, names=spec.names, diagnosed=_diagnosed(exp))
+
+
+def _diagnosed(exp: Mapping | None) -> bool:
+    d = (exp or {}).get("diagnosis")
+    return bool(d) and d.get("enabled", True) and (exp or {}).get("kind") == "measured"
 
 
 def _ratio(a: Mapping, p: str):

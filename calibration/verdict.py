@@ -73,8 +73,10 @@ def pinned_parameters(posterior: Mapping[str, Mapping], lower: Sequence[float], 
 
 
 def calibration_verdict(*, misfits: Sequence[Mapping], decision: Mapping, posterior: Mapping[str, Mapping],
-                        lower: Sequence[float], upper: Sequence[float], names: Sequence[str]) -> dict:
-    """The ``verdict`` block: misfits is the per-iteration list of ``summary.json`` (``iteration``,
+                        lower: Sequence[float], upper: Sequence[float], names: Sequence[str],
+                        diagnosed: bool = False) -> dict:
+    """The ``verdict`` block (``diagnosed``: the experiment runs the diagnosis itself, so the next step
+    points at its report rather than at config/diagnosis.yaml): misfits is the per-iteration list of ``summary.json`` (``iteration``,
     ``chi2_per_obs``, ``rmse_Pa``), 0 = prior ensemble; posterior the reported one (of the ensemble
     :func:`reported_iteration` picks, or the MCMC sample); decision the stop decision taken on the last."""
     chi2 = [float(m["chi2_per_obs"]) if m.get("chi2_per_obs") is not None else math.nan for m in misfits]
@@ -92,6 +94,9 @@ def calibration_verdict(*, misfits: Sequence[Mapping], decision: Mapping, poster
     verdict = flags[0] if flags else "ok"
     target = (decision.get("values") or {}).get("chi2_target")
     text = NEXT_STEP[verdict]
+    if diagnosed:
+        text = text.replace("run the diagnosis (config/diagnosis.yaml) on this experiment",
+                            "this experiment's diagnosis (diagnosis/report.json, check.json) traces it")
     if verdict == "box_limited":
         text = text.format(params=", ".join(pinned),
                            bounds=", ".join(f"its {side} bound" if len(pinned) == 1 else f"{p}'s {side} bound"

@@ -4,6 +4,7 @@ import pandas as pd
 
 from calibration import plots
 from calibration.experiment import ExperimentSpec, final_iteration, final_verdict
+from calibration.verdict import reported_iteration
 from calibration.observations import read_curve, read_observations
 from calibration.workflow_io import read_json, read_responses
 
@@ -17,12 +18,13 @@ alive = [np.asarray(a["alive"], bool) for a in analyses]
 title = f"{exp} ({snakemake.params.exp['kind']}, {spec.method}, N = {spec.ensemble_size})"
 plots.plot_parameters(out.parameters, params, alive, spec.names, spec.lower, spec.upper, spec.truth, title)
 plots.plot_ensemble_curves(out.ensemble_curves, obs, Ys, title)
-forecast = {r: read_curve(p) for r, p in zip(obs.records, inp.forecast_curves)}
-plots.plot_forecast(out.forecast, obs, np.nanmean(Ys[0][alive[0]], axis=0), forecast, title,
-                    posterior_mean=np.nanmean(Ys[-1][alive[-1]], axis=0))
 K = min(final_iteration(spec, analyses)[0], len(analyses) - 1)
 misfits = [{"iteration": a["iteration"], **a["misfit"]} for a in analyses[:K + 1]]
-verdict = final_verdict(spec, analyses, params)
+verdict = final_verdict(spec, analyses, params, snakemake.params.exp)
+R = reported_iteration([m["chi2_per_obs"] for m in misfits])  # the ensemble reported as the posterior
+forecast = {r: read_curve(p) for r, p in zip(obs.records, inp.forecast_curves)}
+plots.plot_forecast(out.forecast, obs, np.nanmean(Ys[0][alive[0]], axis=0), forecast, title,
+                    posterior_mean=np.nanmean(Ys[R][alive[R]], axis=0))
 plots.plot_misfit(out.misfit, misfits, [a["misfit_per_record"] for a in analyses[:K + 1]],
                   spec.criteria.target(obs.m), title, verdict=verdict)
 chi2 = np.array([m["chi2_per_obs"] if m["chi2_per_obs"] is not None else np.nan for m in analyses[0]["members"]])

@@ -40,7 +40,12 @@ def test_a_fit_worse_than_the_prior_is_named_first_with_the_best_iteration():
     assert v["chi2_per_obs"]["best"] == 610.0 and v["chi2_per_obs"]["best_iteration"] == 1
     assert not v["best_is_last"]
     assert v["chi2_per_obs"]["final_over_prior"] == pytest.approx(3200.0 / 833.0)
-    assert "diagnosis" in v["next_step"]
+    assert "config/diagnosis.yaml" in v["next_step"]
+    # an experiment that runs its own diagnosis is pointed at its report
+    v = calibration_verdict(misfits=_misfits(833.0, 610.0, 1900.0, 3200.0),
+                            decision=_decision(False, "max_iterations"),
+                            posterior=_post(79.5e6 * 0.5, 998.0), lower=LOWER, upper=UPPER, names=NAMES, diagnosed=True)
+    assert "diagnosis/report.json" in v["next_step"] and "config/diagnosis.yaml" not in v["next_step"]
 
 
 def test_a_mean_within_two_percent_of_a_bound_is_pinned_and_one_just_outside_is_not():
