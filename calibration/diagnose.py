@@ -40,7 +40,7 @@ from shpb import effects as fx
 from .observations import curve_on_grid
 
 __all__ = ["design_points", "interpolation_matrix", "EmulatedSHPB", "diagnose", "emulators_from_design",
-           "errors_per_record", "model_grid", "simulator_params", "measured_curve", "check_errors", "record_calibrations",
+           "errors_per_record", "fdem_confirmation", "model_grid", "simulator_params", "measured_curve", "check_errors", "record_calibrations",
            "record_candidates", "record_params", "record_prior_centres", "heldout_fill"]
 
 
@@ -490,6 +490,38 @@ def check_errors(sets, runs: Mapping[str, Mapping], model_times, posteriors: Map
                 curves[r][which] = sim
                 errors[r][which] = None if sim is None else curve_errors(t, sim, y)
     return errors, curves
+
+
+def fdem_confirmation(errors: Mapping[str, Mapping], added: Sequence[str]) -> dict:
+    """Does the FDEM check confirm the loop's answer on the records it was not calibrated on?
+
+    ``errors``: :func:`check_errors`' first result. The emulator the loop ran on can be wrong where the
+    design is thin, so the answer stands only if real runs agree: ``confirmed`` when every held-out
+    record's FDEM RMSE falls from before to after, ``refuted`` when any rises (or its after run failed),
+    ``nothing_added`` / ``no_heldout`` otherwise; with the RMSE of each record before and after."""
+    rmse = {r: {w: (None if e.get(w) is None else float(e[w]["rmse"])) for w in ("before", "after")}
+            for r, e in errors.items()}
+    held = [r for r, e in errors.items() if e["data"] == "heldout"]
+    if not added:
+        status = "nothing_added"
+    elif not held:
+        status = "no_heldout"
+    elif all(rmse[r]["after"] is not None and rmse[r]["before"] is not None and rmse[r]["after"] < rmse[r]["before"]
+             for r in held):
+        status = "confirmed"
+    else:
+        status = "refuted"
+    words = {"confirmed": "real FDEM runs confirm it: the held-out error falls",
+             "refuted": "real FDEM runs refute it: the held-out error does not fall (the emulator the loop "
+                        "ran on is wrong there; a denser design around the answer is needed)",
+             "nothing_added": "nothing was added", "no_heldout": "no held-out record to confirm it on"}[status]
+    detail = "; ".join(f"{r} {_mpa(rmse[r]['before'])} -> {_mpa(rmse[r]['after'])} MPa" for r in held)
+    return {"status": status, "added": list(added), "rmse_Pa": rmse,
+            "text": f"{', '.join(added) or 'no effect'}: {words}" + (f" ({detail})" if detail else "")}
+
+
+def _mpa(v):
+    return "failed" if v is None else f"{v / 1e6:.1f}"
 
 
 def errors_per_record(sets) -> tuple[dict, dict, dict]:

@@ -2,7 +2,7 @@
 from pathlib import Path
 
 
-from calibration.diagnose import check_errors, heldout_fill, model_grid
+from calibration.diagnose import check_errors, fdem_confirmation, heldout_fill, model_grid
 from calibration.observations import read_curve, read_observations
 from calibration.plots import plot_diagnosis_check
 from calibration.workflow_io import atomic_write_json, read_json
@@ -19,8 +19,10 @@ runs = {w: {r: read_curve(root / w / r / "curve.csv") for _, o in sets for r in 
         for w in ("before", "after")}
 result, curves = check_errors(sets, runs, model_t, {w: rep[f"params_{w}"] for w in ("before", "after")},
                               fills={r: heldout_fill(rep, r) for _, o in sets for r in o.records})
-atomic_write_json(out.check, {"added": rep["added"], "verdict": rep["verdict"], "errors_per_record": result,
+confirmation = fdem_confirmation(result, rep["added"])
+atomic_write_json(out.check, {"added": rep["added"], "verdict": rep["verdict"],
+                              "fdem_confirmation": confirmation, "errors_per_record": result,
                               "note": "real FDEM runs at the posterior means of diagnosis/report.json "
                                       "(params_before, params_after); None = the run failed"})
 
-plot_diagnosis_check(out.png, curves, result, rep["added"])
+plot_diagnosis_check(out.png, curves, result, rep["added"], confirmation["text"])

@@ -339,3 +339,23 @@ def test_errors_per_record_split_calibration_and_heldout():
     assert err["c"]["before"]["rmse"] == pytest.approx(3e5) and err["c"]["after"]["rmse"] == pytest.approx(1e5)
     np.testing.assert_allclose(resid["c"], [3e5] * 3)
     assert sigma == {"a": pytest.approx(2e5), "b": pytest.approx(2e5), "c": pytest.approx(2e5)}
+
+
+def test_fdem_confirmation_holds_an_effect_only_where_real_runs_lower_every_heldout_error():
+    """The marble diagnosis of 2026-11-25: the loop kept face_gap on its emulator, the real held-out run
+    rose from 38.4 to 42.9 MPa: refuted. The default run's: 25.2 -> 18.4 MPa: confirmed."""
+    from calibration.diagnose import fdem_confirmation
+
+    def errs(held_before, held_after, cal=(24.9e6, 16.7e6)):
+        e = lambda v: None if v is None else {"rmse": v}
+        return {"CaMa_SHPB_004": {"data": "calibration", "before": e(cal[0]), "after": e(cal[1])},
+                "CaMa_SHPB_005": {"data": "heldout", "before": e(held_before), "after": e(held_after)}}
+
+    c = fdem_confirmation(errs(38.4e6, 42.9e6), ["face_gap"])
+    assert c["status"] == "refuted" and "38.4 -> 42.9 MPa" in c["text"] and "refute" in c["text"]
+    c = fdem_confirmation(errs(25.2e6, 18.4e6), ["face_gap"])
+    assert c["status"] == "confirmed" and c["rmse_Pa"]["CaMa_SHPB_005"] == {"before": 25.2e6, "after": 18.4e6}
+    assert fdem_confirmation(errs(25.2e6, None), ["face_gap"])["status"] == "refuted"   # a failed run confirms nothing
+    assert fdem_confirmation(errs(25.2e6, 18.4e6), [])["status"] == "nothing_added"
+    only_cal = {k: v for k, v in errs(1.0, 0.5).items() if v["data"] == "calibration"}
+    assert fdem_confirmation(only_cal, ["face_gap"])["status"] == "no_heldout"
