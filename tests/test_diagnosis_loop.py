@@ -79,6 +79,17 @@ def box(names):
     return np.concatenate([BASE_LO, lo]), np.concatenate([BASE_HI, hi])
 
 
+def esmda_calibration(names, f, f_held, obs, err, rng):
+    """ES-MDA of the surrogate in the box of ``names``; the result at the posterior mean on the
+    calibration (f) and held-out (f_held) records."""
+    lo, hi = box(names)
+    res = assimilate(f, latin_hypercube(lo, hi, N_MEMBERS, rng), obs, err, rng=rng, method="esmda",
+                     alphas=esmda_alphas(N_STEPS), transform=BoxTransform(lo, hi), names=names)
+    mean = res.params.mean(axis=0)
+    return CalibrationResult(names, res.params, f(mean)[0], heldout=f_held(mean)[0], responses=res.responses,
+                             info={"stop_reason": res.decision.reason}, lower=lo, upper=hi)
+
+
 def run_loop(planted, seed, extra=None, candidates=None, **kw):
     """Twin data with ``planted`` effect parameters (undeclared), then the loop with the measurement catalogue."""
     rng = np.random.default_rng(seed)
@@ -92,14 +103,7 @@ def run_loop(planted, seed, extra=None, candidates=None, **kw):
     obs_held = clean_held + err.sample(rng, 1)[0]
 
     def calibrate(names):
-        lo, hi = box(names)
-        f = forward(names, K_CAL)
-        res = assimilate(f, latin_hypercube(lo, hi, N_MEMBERS, rng), obs, err, rng=rng, method="esmda",
-                         alphas=esmda_alphas(N_STEPS), transform=BoxTransform(lo, hi), names=names)
-        mean = res.params.mean(axis=0)
-        return CalibrationResult(names, res.params, f(mean)[0], heldout=forward(names, K_HELD)(mean)[0],
-                                 responses=res.responses, info={"stop_reason": res.decision.reason},
-                                 lower=lo, upper=hi)
+        return esmda_calibration(names, forward(names, K_CAL), forward(names, K_HELD), obs, err, rng)
 
     def sensitivities(result, names):
         # calibrated parameters: regression over the posterior ensemble (no extra run); candidates:
@@ -321,13 +325,8 @@ def test_loop_finds_a_rate_dependent_strength_from_two_records_at_two_rates():
     candidates = [fx.get_effect("rate_strength"), fx.get_effect("gauge_gain"), fx.get_effect("trigger_shift")]
 
     def calibrate(names):
-        lo, hi = box(names)
-        f = multi_record_forward(names, K_RECORDS)
-        res = assimilate(f, latin_hypercube(lo, hi, N_MEMBERS, rng), obs, err, rng=rng, method="esmda",
-                         alphas=esmda_alphas(N_STEPS), transform=BoxTransform(lo, hi), names=names)
-        mean = res.params.mean(axis=0)
-        return CalibrationResult(names, res.params, f(mean)[0],
-                                 heldout=multi_record_forward(names, (K_HELD_RATE,))(mean)[0])
+        return esmda_calibration(names, multi_record_forward(names, K_RECORDS),
+                                 multi_record_forward(names, (K_HELD_RATE,)), obs, err, rng)
 
     def sensitivities(result, names):  # finite differences of the whole model (for FDEM: new runs)
         mean = result.mean()
