@@ -44,7 +44,7 @@ from .verdict import calibration_verdict, reported_iteration
 
 __all__ = ["PURPOSES", "rng_for", "ExperimentSpec", "initial_ensemble", "analysis_step", "decide", "capped_truncation",
            "all_runs",
-           "final_iteration", "final_verdict", "linear_sensitivity", "record_misfits", "summary"]
+           "diagnosis_settings", "final_iteration", "final_verdict", "reported_ensemble", "linear_sensitivity", "record_misfits", "summary"]
 
 #: Independent random streams of an experiment (the ``spawn_key`` of :func:`rng_for`).
 PURPOSES = {"lhs": 1, "noise": 2, "analysis": 3, "posterior": 4}
@@ -507,6 +507,16 @@ def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], 
     return jsonable(out)
 
 
+def reported_ensemble(spec: ExperimentSpec, analyses: Sequence[Mapping],
+                      params: Sequence[pd.DataFrame]) -> tuple[int, pd.DataFrame, np.ndarray]:
+    """``(R, params[R], alive[R])``: the ensemble reported as the posterior (posterior.csv, summary.json,
+    the forecast, the plots) among iterations 0..K of the final loop (:func:`final_iteration`): the
+    last, unless it fits markedly worse than the best (:func:`calibration.verdict.reported_iteration`)."""
+    K = min(final_iteration(spec, analyses)[0], len(analyses) - 1)
+    R = reported_iteration([a["misfit"]["chi2_per_obs"] for a in analyses[:K + 1]])
+    return R, params[R], np.asarray(analyses[R]["alive"], bool)
+
+
 def final_verdict(spec: ExperimentSpec, analyses: Sequence[Mapping], params: Sequence[pd.DataFrame],
                   exp: Mapping | None = None) -> dict | None:
     """The ``verdict`` block of ``summary.json`` from the stored iterations alone (for the plots, which
@@ -515,16 +525,21 @@ def final_verdict(spec: ExperimentSpec, analyses: Sequence[Mapping], params: Seq
     if decision is None:
         return None
     misfits = [{"iteration": int(a["iteration"]), **a["misfit"]} for a in analyses[:K + 1]]
-    R = reported_iteration([m["chi2_per_obs"] for m in misfits])
-    post = posterior_dict(params[R][list(spec.names)].to_numpy(float), list(spec.names),
-                          np.asarray(analyses[R]["alive"], bool))
+    _, P, alive = reported_ensemble(spec, analyses, params)
+    post = posterior_dict(P[list(spec.names)].to_numpy(float), list(spec.names), alive)
     return calibration_verdict(misfits=misfits, decision=decision, posterior=post, lower=spec.lower,
                                upper=spec.upper, names=spec.names, diagnosed=_diagnosed(exp))
 
 
-def _diagnosed(exp: Mapping | None) -> bool:
+def diagnosis_settings(exp: Mapping | None) -> Mapping | None:
+    """The experiment's ``diagnosis`` block if it runs the diagnosis (a measured experiment with the
+    block enabled), else None."""
     d = (exp or {}).get("diagnosis")
-    return bool(d) and d.get("enabled", True) and (exp or {}).get("kind") == "measured"
+    return d if (d and d.get("enabled", True) and (exp or {}).get("kind") == "measured") else None
+
+
+def _diagnosed(exp: Mapping | None) -> bool:
+    return diagnosis_settings(exp) is not None
 
 
 def _ratio(a: Mapping, p: str):

@@ -7,8 +7,8 @@ walkers starting from the last ensemble. ``posterior.csv`` then holds the sample
 ``posterior`` its summary; the ensembles stay what was simulated (``iter_<k>/params.csv``), and the
 last one's summary is kept as ``posterior_ensemble``.
 
-With ``posterior: ensemble`` (the default) the reported posterior is the last simulated ensemble, as
-before.
+With ``posterior: ensemble`` (the default) the reported posterior is a simulated ensemble: the last, or
+the best when the last made the fit markedly worse (:func:`calibration.experiment.reported_ensemble`).
 """
 from __future__ import annotations
 
@@ -19,10 +19,10 @@ import pandas as pd
 
 from enkf.ces import EmulatorPosterior, emulator_posterior
 
-from .experiment import ExperimentSpec, all_runs, rng_for
+from .experiment import ExperimentSpec, all_runs, final_iteration, reported_ensemble, rng_for
 from .observations import Observations
 
-__all__ = ["POSTERIORS", "sample_posterior", "samples_frame"]
+__all__ = ["POSTERIORS", "forecast_parameters", "sample_posterior", "samples_frame"]
 
 POSTERIORS = ("ensemble", "emulator_mcmc")
 
@@ -45,3 +45,17 @@ def samples_frame(post: EmulatorPosterior) -> pd.DataFrame:
     df = pd.DataFrame(post.samples, columns=post.names)
     df.insert(0, "sample", np.arange(len(df)))
     return df
+
+
+def forecast_parameters(spec: ExperimentSpec, analyses: Sequence[Mapping], params: Sequence[pd.DataFrame],
+                        samples: pd.DataFrame | None = None) -> dict:
+    """forecast/params.json: the posterior mean the forecast runs at: of the emulator MCMC sample
+    (``posterior: emulator_mcmc``) or of the reported ensemble's alive members (:func:`reported_ensemble`)."""
+    names = list(spec.names)
+    if samples is not None:
+        K = min(final_iteration(spec, analyses)[0], len(analyses) - 1)
+        return {"iteration": int(analyses[K]["iteration"]), "posterior": "emulator_mcmc",
+                "params": {p: float(samples[p].mean()) for p in names}}
+    R, P, alive = reported_ensemble(spec, analyses, params)
+    return {"iteration": int(analyses[R]["iteration"]), "posterior": "ensemble",
+            "params": {p: float(P[p].to_numpy()[alive].mean()) for p in names}}

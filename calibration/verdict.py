@@ -32,7 +32,7 @@ REPORT_TOLERANCE = 0.10
 
 NEXT_STEP = {
     "worse_than_prior": ("the calibration made the fit worse than the prior: the model lacks something the "
-                         "data carry; run the diagnosis (config/diagnosis.yaml) on this experiment"),
+                         "data carry; {diagnosis}"),
     "box_limited": "the data push {params} against the prior box: widen the box beyond {bounds}, or run the "
                    "diagnosis if the value is not physical",
     "not_converged": ("the stop rule was not met ({reason}): chi^2 per observation {chi2:.4g} against the "
@@ -40,6 +40,9 @@ NEXT_STEP = {
                       "iteration is not the last; check the noise model or run the diagnosis"),
     "ok": "none: the fit reached the noise level inside the prior box",
 }
+#: Where the diagnosis is: a config to run, or the experiment's own report (``diagnosed``).
+DIAGNOSIS_STEP = {False: "run the diagnosis (config/diagnosis.yaml) on this experiment",
+                  True: "this experiment's diagnosis (diagnosis/report.json, check.json) traces it"}
 
 
 def reported_iteration(chi2: Sequence[float], tolerance: float = REPORT_TOLERANCE) -> int:
@@ -93,21 +96,14 @@ def calibration_verdict(*, misfits: Sequence[Mapping], decision: Mapping, poster
         flags.append("not_converged")
     verdict = flags[0] if flags else "ok"
     target = (decision.get("values") or {}).get("chi2_target")
-    text = NEXT_STEP[verdict]
-    if diagnosed:
-        text = text.replace("run the diagnosis (config/diagnosis.yaml) on this experiment",
-                            "this experiment's diagnosis (diagnosis/report.json, check.json) traces it")
-    if verdict == "box_limited":
-        text = text.format(params=", ".join(pinned),
-                           bounds=", ".join(f"its {side} bound" if len(pinned) == 1 else f"{p}'s {side} bound"
-                                            for p, side in pinned.items()))
-    elif verdict == "worse_than_prior" and reported_iteration(chi2) != len(chi2) - 1:
-        k = reported_iteration(chi2)
-        text += (f"; the posterior reported (and forecast) is iteration {k}'s ensemble (chi^2 per observation "
-                 f"{chi2[k]:.4g}), not the last ({final:.4g})")
-    elif verdict == "not_converged":
-        text = text.format(reason=decision.get("reason"), chi2=final,
-                           target=math.nan if target is None else float(target))
+    reported = reported_iteration(chi2)
+    text = NEXT_STEP[verdict].format(
+        diagnosis=DIAGNOSIS_STEP[bool(diagnosed)], params=", ".join(pinned),
+        bounds=", ".join(f"its {side} bound" if len(pinned) == 1 else f"{p}'s {side} bound" for p, side in pinned.items()),
+        reason=decision.get("reason"), chi2=final, target=math.nan if target is None else float(target))
+    if verdict == "worse_than_prior" and reported != len(chi2) - 1:
+        text += (f"; the posterior reported (and forecast) is iteration {reported}'s ensemble (chi^2 per "
+                 f"observation {chi2[reported]:.4g}), not the last ({final:.4g})")
     return {
         "verdict": verdict,
         "flags": flags,
@@ -115,7 +111,7 @@ def calibration_verdict(*, misfits: Sequence[Mapping], decision: Mapping, poster
                          "final_over_prior": final / prior if prior and math.isfinite(prior) else None,
                          "target": target},
         "best_is_last": int(best) == len(chi2) - 1,
-        "reported_iteration": reported_iteration(chi2),
+        "reported_iteration": reported,
         "pinned_to_box": pinned,
         "pin_fraction": PIN_FRACTION,
         "next_step": text,

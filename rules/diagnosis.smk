@@ -2,12 +2,12 @@
 # FDEM runs around its posterior (one job per design point and record, calibration and held-out
 # records), then the discrepancy loop (calibration.diagnose on enkf.diagnosis) on an emulator of those runs:
 # residual structure, candidate ranking, re-calibration, accept/reject, error before and after.
+from calibration.experiment import diagnosis_settings
 from calibration.workflow_io import record_name
 
 
 def diagnosis_cfg(exp):
-    d = EXPERIMENTS[exp].get("diagnosis")
-    return d if (d and d.get("enabled", True) and EXPERIMENTS[exp]["kind"] == "measured") else None
+    return diagnosis_settings(EXPERIMENTS[exp])
 
 
 def diagnosed_experiments():

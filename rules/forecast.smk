@@ -1,5 +1,6 @@
-# The forecast (best-estimate) simulation with the posterior-mean parameters: of the reported ensemble (the
-# last, or the best when the last made the fit markedly worse: calibration.verdict), or of the emulator MCMC sample (`posterior: emulator_mcmc`, rule posterior_sample).
+# The forecast (best-estimate) simulation with the posterior-mean parameters
+# (calibration.posterior.forecast_parameters): of the reported ensemble, or of the emulator MCMC sample
+# (`posterior: emulator_mcmc`, rule posterior_sample).
 
 
 def posterior_sample_files(exp):
@@ -32,6 +33,8 @@ rule forecast_params:
         params=lambda wc: iteration_files(wc.exp, "params.csv"),
     output:
         params="results/{exp}/forecast/params.json",
+    params:
+        exp=lambda wc: EXPERIMENTS[wc.exp],
     script:
         "../scripts/forecast_params.py"
 

@@ -1,22 +1,12 @@
-"""forecast/params.json: the posterior mean: of the emulator MCMC sample (posterior: emulator_mcmc) or of the
-reported ensemble's alive members (the last iteration's, or the best's when the last made the fit markedly
-worse: calibration.verdict.reported_iteration)."""
-import numpy as np
+"""forecast/params.json: the posterior mean the forecast runs at (calibration.posterior.forecast_parameters)."""
 import pandas as pd
 
-from calibration.verdict import reported_iteration
+from calibration.experiment import ExperimentSpec
+from calibration.posterior import forecast_parameters
 from calibration.workflow_io import atomic_write_json, read_json
 
-analyses = [read_json(f) for f in snakemake.input.analyses]
-params = list(snakemake.input.params)
-k = reported_iteration([a["misfit"]["chi2_per_obs"] for a in analyses])
-P = pd.read_csv(params[k])
-names = [c for c in P.columns if c != "member"]
-if "samples" in snakemake.input.keys():
-    S = pd.read_csv(snakemake.input.samples)
-    k = len(analyses) - 1
-    mean, source = {p: float(S[p].mean()) for p in names}, "emulator_mcmc"
-else:
-    alive = np.asarray(analyses[k]["alive"], bool)
-    mean, source = {p: float(P[p].to_numpy()[alive].mean()) for p in names}, "ensemble"
-atomic_write_json(snakemake.output.params, {"iteration": analyses[k]["iteration"], "posterior": source, "params": mean})
+inp = snakemake.input
+samples = pd.read_csv(inp.samples) if "samples" in inp.keys() else None
+atomic_write_json(snakemake.output.params, forecast_parameters(
+    ExperimentSpec.from_config(snakemake.wildcards.exp, snakemake.params.exp),
+    [read_json(f) for f in inp.analyses], [pd.read_csv(f) for f in inp.params], samples))

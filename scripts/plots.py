@@ -3,8 +3,7 @@ import numpy as np
 import pandas as pd
 
 from calibration import plots
-from calibration.experiment import ExperimentSpec, final_iteration, final_verdict
-from calibration.verdict import reported_iteration
+from calibration.experiment import ExperimentSpec, final_iteration, final_verdict, reported_ensemble
 from calibration.observations import read_curve, read_observations
 from calibration.workflow_io import read_json, read_responses
 
@@ -21,7 +20,7 @@ plots.plot_ensemble_curves(out.ensemble_curves, obs, Ys, title)
 K = min(final_iteration(spec, analyses)[0], len(analyses) - 1)
 misfits = [{"iteration": a["iteration"], **a["misfit"]} for a in analyses[:K + 1]]
 verdict = final_verdict(spec, analyses, params, snakemake.params.exp)
-R = reported_iteration([m["chi2_per_obs"] for m in misfits])  # the ensemble reported as the posterior
+R = reported_ensemble(spec, analyses, params)[0]  # the ensemble reported as the posterior
 forecast = {r: read_curve(p) for r, p in zip(obs.records, inp.forecast_curves)}
 plots.plot_forecast(out.forecast, obs, np.nanmean(Ys[0][alive[0]], axis=0), forecast, title,
                     posterior_mean=np.nanmean(Ys[R][alive[R]], axis=0))

@@ -120,6 +120,12 @@ def test_summary_reports_the_best_ensemble_when_the_last_step_made_the_fit_worse
     assert out["posterior_iteration"] == 1 and out["verdict"]["reported_iteration"] == 1
     assert out["posterior"]["E_t"]["mean"] == pytest.approx(params[1]["E_t"].mean(), rel=1e-12)
     assert "iteration 1's ensemble" in out["verdict"]["next_step"]
+    # the forecast runs at the mean of the same ensemble
+    from calibration.posterior import forecast_parameters
+
+    fc = forecast_parameters(spec, analyses, params)
+    assert fc["iteration"] == 1 and fc["posterior"] == "ensemble"
+    assert fc["params"]["sigma_t"] == pytest.approx(out["posterior"]["sigma_t"]["mean"], rel=1e-12)
     # the plots take the same verdict from the stored iterations alone
     from calibration.experiment import final_verdict
 
