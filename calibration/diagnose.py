@@ -17,14 +17,9 @@ observation times; records are concatenated in the order given.
 Scopes (:data:`shpb.effects.SCOPES`): a ``per_record`` candidate is offered to the loop with one copy of
 each parameter per calibration record, ``<effect>.<param>@<record>`` (:func:`record_candidates`), and
 the forward model of record A reads only A's copies (:meth:`EmulatedSHPB.forward`); the score test
-therefore has ``k`` = parameters x records degrees of freedom. A held-out record has no copy: where its
-own waves measure the effect (``record_prior``, e.g. the face closure before load for ``face_gap``) it
-takes that measurement plus the calibration records' mean excess of their estimate over their own
-measurement, else the null, and the report says which (``per_record`` in the report). Why the excess:
-a measurement is a proxy read with its own convention (the closure is the face's travel until the
-specimen carries 2 % of its peak; the model's gap is a hard gap), and its bias against the model's
-parameter is common to the records, so the calibration records measure it for the held-out ones (the
-Freiburg face gaps exceeded the records' closures by 38-136 um on all four calibration records).
+therefore has ``k`` = parameters x records degrees of freedom. A held-out record has no copy: it takes
+its prior centre where its own waves measure the effect (``record_prior``, e.g. the face closure before
+load for ``face_gap``), else the null, and the report says which (``per_record`` in the report).
 """
 
 from __future__ import annotations
@@ -141,45 +136,18 @@ class EmulatedSHPB:
             lo.append(a), hi.append(b)
         return np.array(lo), np.array(hi)
 
-    def _excess_terms(self, param: str, record: str, names: Sequence[str]) -> tuple[float, list] | None:
-        """``(centre, [(column, centre_r), ...])``: ``record``'s measured centre of ``param`` and, for each
-        copy ``param@r`` in ``names`` whose record ``r`` measures it too, the copy's column and ``r``'s
-        centre; None unless both exist (then the record has only its measurement, or the null)."""
+    def record_value(self, param: str, record: str) -> tuple[float, str]:
+        """``(value, source)`` of a per-record parameter for a record that has no copy of its own (a
+        held-out record): its prior centre where its waves measure it, else the null."""
         c = self.prior_centre(param, record)
-        if c is None:
-            return None
-        terms = []
-        for j, n in enumerate(names):
-            p, r = fx.split_record(n)
-            if p == param and r is not None and r != record:
-                cr = self.prior_centre(param, r)
-                if cr is not None:
-                    terms.append((j, cr))
-        return (c, terms) if terms else None
-
-    def record_value(self, param: str, record: str, names: Sequence[str] = (),
-                     values: Sequence[float] | None = None) -> tuple[float, str]:
-        """``(value, source)`` of a per-record parameter for a record without a copy (held out): its own
-        measurement plus the copies' (``values`` of ``names``) mean excess over their records'
-        measurements (module docstring), its measurement alone without copies, else the null."""
-        c = self.prior_centre(param, record)
-        if c is None:
-            return fx.null_values([param])[param], "null (the record does not measure it)"
-        key = dict(fx.effect_of(param).record_prior).get(param.split(".", 1)[1], "measurement")
-        ex = self._excess_terms(param, record, names) if values is not None else None
-        if ex is None:
-            return c, f"prior centre: the record's own {key}"
-        v = np.array(values, dtype=float)
-        excess = float(np.mean([v[j] - cr for j, cr in ex[1]]))
-        lo, hi = self._plain_box(param)
-        return (float(np.clip(c + excess, lo, hi)),
-                f"the record's own {key} {c:.6g} plus the calibration records' mean excess of their estimate "
-                f"over their own {key}, {excess:+.6g}")
+        if c is not None:
+            keys = dict(fx.effect_of(param).record_prior)
+            return c, f"prior centre: the record's own {keys.get(param.split('.', 1)[1], 'measurement')}"
+        return fx.null_values([param])[param], "null (the record does not measure it)"
 
     def _sources(self, names: list[str], rec: str) -> dict:
         """Where record ``rec`` takes each effect parameter from: a column of ``names`` (shared, or its own
-        copy), its measurement shifted by the copies' mean excess over their records' measurements
-        (:meth:`record_value`), or a value (a per-record effect it has no copy of and no measurement)."""
+        copy) or a value (a per-record effect in ``names`` of which ``rec`` has no copy)."""
         src, copied = {}, set()
         for j, n in enumerate(names):
             p, r = fx.split_record(n)
@@ -188,8 +156,7 @@ class EmulatedSHPB:
             else:
                 copied.add(p)
         for p in copied - set(src):
-            ex = self._excess_terms(p, rec, names)
-            src[p] = ("excess", ex, self._plain_box(p)) if ex is not None else ("val", self.record_value(p, rec)[0])
+            src[p] = ("val", self.record_value(p, rec)[0])
         return src
 
     def forward(self, names: Sequence[str], records: Sequence[str]) -> Callable[[np.ndarray], np.ndarray]:
@@ -198,10 +165,7 @@ class EmulatedSHPB:
         nulls = {n: fx.null_values([n])[n] for n in self.input_names if "." in n}
 
         def value(src, p, P):
-            kind, v = src[p][:2]
-            if kind == "excess":
-                (c, terms), (lo, hi) = v, src[p][2]
-                return np.clip(c + np.mean([P[:, j] - cr for j, cr in terms], axis=0), lo, hi)
+            kind, v = src[p]
             return P[:, v] if kind == "col" else np.full(P.shape[0], v)
 
         def f(P):
@@ -283,7 +247,7 @@ def record_prior_centres(record_info: Mapping[str, Mapping], candidates: Sequenc
 
 
 def _per_record_report(model: EmulatedSHPB, candidates: Sequence, calib_records: list, heldout_records: list,
-                       added: Sequence[str], scopes: Mapping[str, str] | None, posterior: Mapping) -> dict:
+                       added: Sequence[str], scopes: Mapping[str, str] | None) -> dict:
     per = [c for c in candidates if _scope(c, scopes) == "per_record"]
     centres = {}
     for rec in calib_records + heldout_records:
@@ -294,16 +258,13 @@ def _per_record_report(model: EmulatedSHPB, candidates: Sequence, calib_records:
                     lo, hi = model.box([fx.record_param(p, rec)])
                     centres.setdefault(rec, {})[p] = {"centre": cen, "measured": model.record_centres[rec][p],
                                                       "box": [float(lo[0]), float(hi[0])]}
-    names = list(posterior)
-    mean = [posterior[n]["mean"] for n in names]
-    heldout = {rec: {p: dict(zip(("value", "source"), model.record_value(p, rec, names, mean)), used=c.name in added)
+    heldout = {rec: {p: dict(zip(("value", "source"), model.record_value(p, rec)), used=c.name in added)
                      for c in per for p in c.param_names} for rec in heldout_records}
     return {"scopes": {c.name: _scope(c, scopes) for c in candidates}, "records": calib_records,
             "naming": "<effect>.<param>@<record>: the record's own copy of a per-record parameter",
             "prior_centres": centres, "heldout": heldout,
             "note": "a held-out record has no copy of a per-record parameter (the calibration cannot know it); "
-                    "where its own waves measure the effect it takes that measurement plus the calibration records' "
-                    "mean excess of their estimate over their own measurement, else the null ('source')"}
+                    "it takes its prior centre where its own waves measure the effect, else the null ('source')"}
 
 
 def heldout_fill(report: Mapping, record: str) -> dict[str, float]:
@@ -359,8 +320,7 @@ def diagnose(model: EmulatedSHPB, *, base_names: Sequence[str], candidates: Sequ
     report["emulator"] = {"loo_rms_Pa": float(np.sqrt(np.mean(s ** 2))), "loo_max_Pa": float(s.max()),
                           "obs_sigma_rms_Pa": float(np.sqrt(np.mean(obs_error.std ** 2))),
                           "design_points": {r: int(model.emulators[r].X.shape[0]) for r in model.emulators}}
-    report["per_record"] = _per_record_report(model, offered, calib_records, heldout_records, report["added"], scopes,
-                                              report["params_after"])
+    report["per_record"] = _per_record_report(model, offered, calib_records, heldout_records, report["added"], scopes)
     return report
 
 
