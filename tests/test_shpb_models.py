@@ -234,3 +234,40 @@ def test_reflected_wave_lines_up_with_the_measured_one_once_the_records_face_gap
     assert abs(lag_gap) <= 5e-6, lag_gap
     assert rms_gap < 0.5 * rms_base, (rms_gap, rms_base)
     assert rms_gap < 0.25 * np.max(np.abs(data))
+
+
+def _fall_to_half(t, s):
+    """Time from the peak to the first sample below half of it [s]."""
+    i = int(np.argmax(s))
+    below = np.nonzero(s[i:] < 0.5 * s[i])[0]
+    assert below.size, "the curve never falls to half its peak in the window"
+    return t[i + below[0]] - t[i]
+
+
+def test_marble_post_peak_fall_is_set_by_the_shear_band_dissipation_on_the_held_out_record():
+    """Issue 17 item 3, confirmed on CaMa_005 (held out in the default run), its own face closure as
+    the gap. The fast-preset specimen fails by a shear band that runs through in about one transit;
+    with E_t inside the old box (3.3 kJ/m^2, where the default run's diagnosis had put it) the load
+    halves within 20 us of the peak, the record's in 56 us. E_t = 26 kJ/m^2 (fitted by hand to
+    CaMa_014 only, sigma_t 32 MPa) lets each joint of the band soften over an eight times longer slip:
+    the fall takes 47 us and the whole curve follows the record (tolerances: the fall within 30 % of
+    the record's, the mesh alone moves it by 80 % from fast to paper; peak within 10 %)."""
+    red = _measured_reduced()
+    gap = red.closure_before_load(0.02)
+    grid = np.arange(0.0, 360e-6 + 1e-12, 2e-6)
+    data = np.interp(grid, red.time, red.stress)
+
+    def run(E_t):
+        out = simulate("cylinder", "fast", record=_marble_record(), t_end=360e-6, sample_dt=1e-6,
+                       params={"sigma_t": 32e6, "E_t": E_t, "face_gap.gap_m": gap})
+        assert out.run["status"] == "ok", out.run["reason"]
+        t, s = out.curve.time_s.to_numpy(), out.curve.stress_Pa.to_numpy()
+        return _fall_to_half(t, s), s.max(), np.sqrt(np.mean((np.interp(grid, t, s) - data) ** 2))
+
+    fall_rec = _fall_to_half(red.time[red.time <= 400e-6], red.stress[red.time <= 400e-6])
+    fall_lo, peak_lo, rmse_lo = run(3.3e3)
+    fall_hi, peak_hi, rmse_hi = run(26e3)
+    assert fall_hi > 2.0 * fall_lo, (fall_hi, fall_lo)
+    assert abs(fall_hi / fall_rec - 1.0) < 0.3, (fall_hi, fall_rec)
+    assert abs(peak_hi / red.peak_stress - 1.0) < 0.1, (peak_hi, red.peak_stress)
+    assert rmse_hi < 0.5 * rmse_lo, (rmse_hi, rmse_lo)
