@@ -38,16 +38,18 @@ from enkf import (BoxTransform, DenseError, EnsembleFailure, StopCriteria, check
 
 from enkf.ces import interval_summary
 
+from .model_error import analysis_error, discrepancy_kind, misfit_block, posterior_predictive, posterior_tempering
+from .identifiability import linear_sensitivity
 from .observations import Observations
 from .sensitivity import AUTO, selected_parameters
-from .verdict import calibration_verdict, reported_iteration
+from .verdict import calibration_verdict, member_chi2, reported_iteration
 
 __all__ = ["PURPOSES", "rng_for", "ExperimentSpec", "initial_ensemble", "analysis_step", "decide", "capped_truncation",
            "all_runs",
            "diagnosis_settings", "final_iteration", "final_verdict", "reported_ensemble", "linear_sensitivity", "record_misfits", "summary"]
 
 #: Independent random streams of an experiment (the ``spawn_key`` of :func:`rng_for`).
-PURPOSES = {"lhs": 1, "noise": 2, "analysis": 3, "posterior": 4}
+PURPOSES = {"lhs": 1, "noise": 2, "analysis": 3, "posterior": 4, "predictive": 5}
 
 
 def rng_for(seed: int, purpose: str, k: int = 0) -> np.random.Generator:
@@ -80,6 +82,7 @@ class ExperimentSpec:
     inner_steps: int = 8
     temper_base: float = 4.0
     posterior: str = "ensemble"
+    discrepancy: str = "none"
 
     @classmethod
     def from_config(cls, name: str, exp: Mapping, sensitivity_report: Mapping | str | None = None) -> "ExperimentSpec":
@@ -114,7 +117,7 @@ class ExperimentSpec:
                    inner_members=int(emulated.get("inner_members", cls.inner_members)),
                    inner_steps=int(emulated.get("inner_steps", cls.inner_steps)),
                    temper_base=float(emulated.get("temper_base", cls.temper_base)),
-                   posterior=str(exp.get("posterior", cls.posterior)))
+                   posterior=str(exp.get("posterior", cls.posterior)), discrepancy=discrepancy_kind(exp))
 
     @property
     def transform(self) -> BoxTransform:
@@ -220,8 +223,9 @@ def analysis_step(spec: ExperimentSpec, k: int, params: pd.DataFrame, responses:
         raise EnsembleFailure(f"{spec.name}, iteration {k}: only {int(alive.sum())} of {N} members succeeded "
                               f"(need {needed}, min_alive_fraction={spec.min_alive_fraction}). Failures:\n{lines}")
 
-    misfit = mean_misfit(Y, d, err, alive)
-    misfit_out = {"rmse_Pa": misfit["rmse"], "nrmse": misfit["nrmse"], "chi2_per_obs": misfit["chi2_per_obs"]}
+    # The likelihood's error model: R plus the model discrepancy estimated on these members.
+    total, model_error = analysis_error(spec.discrepancy, obs, Y, alive)
+    misfit_out = misfit_block(Y, obs, err, total, alive)
     spread = _spread(spec, P, alive)
     members = misfit_table(Y, d, err, alive).rename(columns={"rmse": "rmse_Pa"})
     members["member"] = params["member"].to_numpy(int)
@@ -234,27 +238,27 @@ def analysis_step(spec: ExperimentSpec, k: int, params: pd.DataFrame, responses:
     elif spec.method == "enkf":
         alpha = 1.0
     if spec.method == "emulated_esmda":
-        res = _emulated_analysis(spec, k, P, Y, alive, obs, history)
+        res = _emulated_analysis(spec, k, P, Y, alive, obs, history, total)
         update = res.to_dict()
         next_params = res.params.tolist()
         if res.error is not None:
             # A diagnostic, not the stop test (see _misfit_for_decide): the fit measured against R plus
             # the emulator's leave-one-out error, which holds the simulator's ruggedness once the design
             # is dense where the posterior is.
-            C = DenseError(err.dense() + res.error.dense(), _symmetric=True)
+            C = DenseError(total.dense() + res.error.dense(), _symmetric=True)
             misfit_out["chi2_per_obs_model_error"] = mean_misfit(Y, d, C, alive)["chi2_per_obs"]
     elif alpha is not None:
         base = spec.truncation if spec.truncation is not None else (0.99 if spec.method == "esmda" else 1.0)
-        truncation = capped_truncation(Y, alive, err, base, spec.max_rank)
+        truncation = capped_truncation(Y, alive, total, base, spec.max_rank)
         common = dict(rng=rng_for(spec.seed, "analysis", k), transform=transform,
                       localization=spec.localization(obs), prior_std=prior_spread, alive=alive,
                       min_alive_fraction=spec.min_alive_fraction, names=names)
         if spec.method == "esmda":
             infl = None if spec.inflation == "default" else spec.inflation
-            res = esmda_update(P, Y, d, err, alpha=alpha, inflation=infl, truncation=truncation, **common)
+            res = esmda_update(P, Y, d, total, alpha=alpha, inflation=infl, truncation=truncation, **common)
         else:
             infl = "paper" if spec.inflation == "default" else spec.inflation
-            res = enkf_update(P, Y, d, err, inflation=infl, truncation=truncation, **common)
+            res = enkf_update(P, Y, d, total, inflation=infl, truncation=truncation, **common)
         update = res.to_dict()
         update.pop("misfit_members", None)  # the same numbers are in "members" below
         update["max_rank"] = spec.max_rank
@@ -272,6 +276,7 @@ def analysis_step(spec: ExperimentSpec, k: int, params: pd.DataFrame, responses:
         "failed_members": failed,
         "n_obs": obs.m,
         "obs_error": err.describe(),
+        "model_error": model_error,
         "misfit": misfit_out,
         "misfit_per_record": record_misfits(Y, obs, alive),
         "members": members.to_dict(orient="records"),
@@ -286,7 +291,7 @@ def analysis_step(spec: ExperimentSpec, k: int, params: pd.DataFrame, responses:
 
 
 def _emulated_analysis(spec: ExperimentSpec, k: int, P: np.ndarray, Y: np.ndarray, alive: np.ndarray,
-                       obs: Observations, history: Sequence[tuple[pd.DataFrame, np.ndarray]]):
+                       obs: Observations, history: Sequence[tuple[pd.DataFrame, np.ndarray]], error):
     """:func:`enkf.emulated_esmda_update` on every successful run of iterations ``0..k``."""
     if len(history) != k:
         raise ValueError(f"{spec.name}, iteration {k}: emulated_esmda needs the runs of iterations 0..{k - 1}, "
@@ -294,7 +299,7 @@ def _emulated_analysis(spec: ExperimentSpec, k: int, P: np.ndarray, Y: np.ndarra
     names = list(spec.names)
     X, Ys, latest = all_runs(spec, [hp for hp, _ in history] + [pd.DataFrame(P, columns=names)],
                              [hy for _, hy in history] + [Y], alive)
-    return emulated_esmda_update(X, Ys, latest, obs.values, obs.error_model(),
+    return emulated_esmda_update(X, Ys, latest, obs.values, error,
                                  lower=spec.lower, upper=spec.upper, n_members=spec.ensemble_size,
                                  rng=rng_for(spec.seed, "analysis", k), times=obs.time,
                                  groups=obs.frame["record"].to_numpy(str), inner_members=spec.inner_members,
@@ -371,68 +376,20 @@ def final_iteration(spec: ExperimentSpec, analyses: Sequence[Mapping]) -> tuple[
 
 
 def _misfit_for_decide(m: Mapping) -> dict:
-    # Against R alone, also for emulated_esmda: its chi2_per_obs_model_error (R + the emulator's
-    # leave-one-out error) is recorded but not a stop test, because on a sparse design that error is
-    # interpolation error and the test cannot fail (measured: a 6-member fast twin passed it at
-    # chi2 1.1 with E_t at twice the truth and outside its interval; docs/inference.md).
-    return {"rmse": m.get("rmse_Pa"), "nrmse": m.get("nrmse"), "chi2_per_obs": m.get("chi2_per_obs")}
-
-
-def linear_sensitivity(params: pd.DataFrame, names: Sequence[str], lower, upper, responses: np.ndarray,
-                       obs: Observations, alive=None) -> dict:
-    """How strongly, and how separably, the curve constrains each parameter, from an ensemble.
-
-    Least-squares fit of the whitened responses on the parameters scaled to the box,
-    ``L^{-1} y_i ~ a + G u_i`` with ``u = (p - lower)/(upper - lower)``. Column ``j`` of ``G`` is the
-    change of the curve, in noise standard deviations, when parameter ``j`` crosses its whole box.
-    The linearised Fisher information is ``F = G^T G`` (white whitened noise), so
-    ``sqrt((F^-1)_jj) * (upper - lower)`` is the Cramer-Rao bound of the parameter's std [its units]
-    from this observation vector, *with the other parameters unknown*; ``1/sqrt(F_jj)`` is the bound
-    if they were known. A ratio ``crlb_joint / crlb_alone`` much larger than 1 means the parameters
-    trade off (identifiability, not sensitivity, is the problem). Valid where the response is close to
-    linear over the ensemble: use a narrow (late-iteration) ensemble for local numbers.
-    """
-    names = list(names)
-    P = params[names].to_numpy(float)
-    Y = np.asarray(responses, float)
-    alive = np.all(np.isfinite(Y), axis=1) if alive is None else np.asarray(alive, bool) & np.all(np.isfinite(Y), axis=1)
-    lo, hi = np.asarray(lower, float), np.asarray(upper, float)
-    U = (P[alive] - lo) / (hi - lo)
-    W = obs.error_model().whiten((Y[alive] - obs.values).T).T  # (Na, m)
-    n = len(names)
-    if U.shape[0] < n + 2:
-        return {"n_members": int(U.shape[0]), "note": "too few members for a regression"}
-    X = np.hstack([np.ones((U.shape[0], 1)), U - U.mean(axis=0)])
-    coef, *_ = np.linalg.lstsq(X, W, rcond=None)
-    G = coef[1:].T  # (m, n)
-    resid = W - X @ coef
-    F = G.T @ G
-    out = {"n_members": int(U.shape[0]), "fit_r2": float(1.0 - np.sum(resid ** 2) / max(np.sum((W - W.mean(0)) ** 2), 1e-300)),
-           "params": {}}
-    try:
-        Finv = np.linalg.inv(F)
-    except np.linalg.LinAlgError:
-        Finv = np.full_like(F, np.inf)
-    for j, p in enumerate(names):
-        width = hi[j] - lo[j]
-        joint = math.sqrt(max(Finv[j, j], 0.0)) * width if np.isfinite(Finv[j, j]) else math.inf
-        alone = width / math.sqrt(F[j, j]) if F[j, j] > 0 else math.inf
-        out["params"][p] = {"curve_change_over_box_noise_std": float(math.sqrt(F[j, j])),
-                            "crlb_std_joint": joint, "crlb_std_alone": alone,
-                            "tradeoff_ratio": joint / alone if alone > 0 and math.isfinite(alone) else None,
-                            "box_mean": float(P[alive, j].mean())}
-    if n >= 2:
-        d = np.sqrt(np.diag(F))
-        corr = F / np.outer(d, d) if np.all(d > 0) else np.full_like(F, np.nan)
-        out["information_correlation"] = corr.tolist()
-    return jsonable(out)
+    # The median member against the full error model (R + the estimated discrepancy): the members must
+    # fit, not their mean (a blurred mean of step-like members can fit where none does). Also for
+    # emulated_esmda: its chi2_per_obs_model_error (+ the emulator's leave-one-out error) is recorded but
+    # not a stop test, because on a sparse design that error is interpolation error and the test cannot
+    # fail (docs/inference.md). Files written before the members were scored carry only the mean's.
+    chi2 = m.get("stop_chi2_per_obs", m.get("chi2_per_obs"))
+    return {"rmse": m.get("rmse_Pa"), "nrmse": m.get("nrmse"), "chi2_per_obs": chi2}
 
 
 def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], decision: Mapping,
             final_params: pd.DataFrame, final_alive, forecast_misfit: Mapping, n_simulations: int,
             wall_s: float | None, simulation_wall_s: float, sensitivity: Mapping | None = None,
             iteration_params: Sequence[pd.DataFrame] | None = None, posterior_samples: pd.DataFrame | None = None,
-            posterior_sampler: Mapping | None = None) -> dict:
+            posterior_sampler: Mapping | None = None, predictive: Mapping | None = None) -> dict:
     """``summary.json`` (DESIGN section 6): experiment, iterations, converged, stop_reason,
     n_simulations, posterior, truth (twins), misfit per iteration, wall_s, per-record before/after
     misfits (before = prior ensemble mean, after = forecast with the posterior mean), and the
@@ -443,7 +400,7 @@ def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], 
     misfits = [{"iteration": int(a["iteration"]), "n_alive": int(a["n_alive"]), **a["misfit"]} for a in analyses[:K + 1]]
     # The ensemble reported as the posterior: the last, or the best when the last made the fit markedly
     # worse (calibration.verdict.reported_iteration).
-    R = K if iteration_params is None else reported_iteration([m["chi2_per_obs"] for m in misfits])
+    R = K if iteration_params is None else reported_iteration([member_chi2(m) for m in misfits])
     P, alive_R = (final_params, final_alive) if R == K else (iteration_params[R], analyses[R]["alive"])
     post_ensemble = posterior_dict(P[names].to_numpy(float), names, np.asarray(alive_R, bool))
     # posterior: emulator_mcmc reports the MCMC sample of the emulator posterior (calibration.posterior)
@@ -479,9 +436,15 @@ def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], 
         "wall_s": wall_s,
         "simulation_wall_s": simulation_wall_s,
     }
+    out["posterior_ensemble_info"] = posterior_tempering(spec, R, K)
+    out["discrepancy"] = (analyses[R].get("model_error") or {}).get("discrepancy")
+    out["inflated_noise_baseline"] = (analyses[R].get("model_error") or {}).get("inflated_noise_baseline")
+    if predictive is not None:
+        out["predictive_coverage_90"] = predictive
     out["verdict"] = calibration_verdict(misfits=out["misfit"], decision=decision, posterior=post,
                                          lower=spec.lower, upper=spec.upper, names=names,
-                                         diagnosed=_diagnosed(exp))
+                                         diagnosed=_diagnosed(exp), sampler=posterior_sampler,
+                                         n_obs=int(analyses[0]["n_obs"]), discrepancy=out["discrepancy"])
     best = out["verdict"]["chi2_per_obs"]["best_iteration"]
     if iteration_params is not None and best != K:
         # When an earlier ensemble fitted better it is kept beside the reported one (which is the best
@@ -513,7 +476,7 @@ def reported_ensemble(spec: ExperimentSpec, analyses: Sequence[Mapping],
     the forecast, the plots) among iterations 0..K of the final loop (:func:`final_iteration`): the
     last, unless it fits markedly worse than the best (:func:`calibration.verdict.reported_iteration`)."""
     K = min(final_iteration(spec, analyses)[0], len(analyses) - 1)
-    R = reported_iteration([a["misfit"]["chi2_per_obs"] for a in analyses[:K + 1]])
+    R = reported_iteration([member_chi2(a["misfit"]) for a in analyses[:K + 1]])
     return R, params[R], np.asarray(analyses[R]["alive"], bool)
 
 
@@ -527,8 +490,11 @@ def final_verdict(spec: ExperimentSpec, analyses: Sequence[Mapping], params: Seq
     misfits = [{"iteration": int(a["iteration"]), **a["misfit"]} for a in analyses[:K + 1]]
     _, P, alive = reported_ensemble(spec, analyses, params)
     post = posterior_dict(P[list(spec.names)].to_numpy(float), list(spec.names), alive)
+    R = reported_ensemble(spec, analyses, params)[0]
     return calibration_verdict(misfits=misfits, decision=decision, posterior=post, lower=spec.lower,
-                               upper=spec.upper, names=spec.names, diagnosed=_diagnosed(exp))
+                               upper=spec.upper, names=spec.names, diagnosed=_diagnosed(exp),
+                               n_obs=int(analyses[0]["n_obs"]),
+                               discrepancy=(analyses[R].get("model_error") or {}).get("discrepancy"))
 
 
 def diagnosis_settings(exp: Mapping | None) -> Mapping | None:
@@ -584,12 +550,17 @@ def experiment_outcome(*, name: str, exp: Mapping, params: Sequence[pd.DataFrame
     if K > 0:
         sens["final_ensemble"] = linear_sensitivity(params[K], spec.names, spec.lower, spec.upper, responses[K], obs,
                                                     alive)
+    R = reported_ensemble(spec, analyses, params)[0]
+    # The band of the reported ensemble's members (also under posterior: emulator_mcmc, whose samples
+    # have no simulated curves) with the full error model of its analysis.
+    predictive = posterior_predictive(obs, np.asarray(responses[R], float), np.asarray(analyses[R]["alive"], bool),
+                                      analyses[R], rng_for(spec.seed, "predictive"))
     out = summary(spec=spec, exp=exp, analyses=analyses, decision=decision, final_params=params[K],
                   final_alive=alive, forecast_misfit=fc_misfit,
                   n_simulations=(K + 1) * spec.ensemble_size * n_records + len(forecast_runs) + len(extra_runs),
                   wall_s=None if started is None or finished is None else finished - started,
                   simulation_wall_s=sim_wall, sensitivity=sens, iteration_params=params,
-                  posterior_samples=posterior_samples, posterior_sampler=posterior_sampler)
+                  posterior_samples=posterior_samples, posterior_sampler=posterior_sampler, predictive=predictive)
     if posterior_samples is not None:
         return out, posterior_samples
     R = int(out["posterior_iteration"])

@@ -163,19 +163,25 @@ def plot_forecast(path, obs: Observations, prior_mean: np.ndarray, forecast: Map
 
 def plot_misfit(path, misfit: Sequence[Mapping], per_record: Sequence[Mapping[str, Mapping]] | None = None,
                 chi2_target: float | None = None, title: str = "", verdict: Mapping | None = None) -> Path:
-    """RMSE [MPa] and chi^2 per observation of the ensemble-mean response per iteration; with a
+    """RMSE [MPa] of the ensemble-mean response and chi^2 per observation of the members (the median
+    member against R and, where a discrepancy was estimated, against R + D) per iteration; with a
     ``verdict`` (calibration.verdict), the best iteration ringed and the verdict and next step written under
     the panels."""
     its = [int(m["iteration"]) for m in misfit]
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.5))
     a1.plot(its, [m["rmse_Pa"] * 1e-6 for m in misfit], "o-", color="k", label="all records")
-    a2.semilogy(its, [m["chi2_per_obs"] for m in misfit], "o-", color="k", label="all records")
+    a2.semilogy(its, [m.get("median_chi2_per_obs", m["chi2_per_obs"]) for m in misfit], "o-", color="k",
+                label="median member, against R")
+    a2.semilogy(its, [m["chi2_per_obs"] for m in misfit], ":", color="0.5", label="ensemble-mean curve")
+    if any(m.get("stop_chi2_per_obs") not in (None, m.get("median_chi2_per_obs")) for m in misfit):
+        a2.semilogy(its, [m.get("stop_chi2_per_obs") for m in misfit], "s--", color="tab:blue",
+                    label="median member, against R + discrepancy")
     if per_record and len(per_record[0]) > 1:
         for rec in per_record[0]:
             a1.plot(its, [pr[rec]["rmse_Pa"] * 1e-6 for pr in per_record], ".--", label=rec)
             a2.semilogy(its, [pr[rec]["chi2_per_obs"] for pr in per_record], ".--", label=rec)
     if chi2_target is not None:
-        a2.axhline(chi2_target, color="tab:green", ls=":", label="discrepancy target")
+        a2.axhline(chi2_target, color="tab:green", ls=":", label="stop target")
     for ax in (a1, a2):
         ax.set_xticks(its)
         ax.set_xlabel("iteration")

@@ -1,19 +1,26 @@
 """Did the calibration do what it claims? The ``verdict`` block of ``summary.json``.
 
-A calibration that leaves the fit worse than the prior, or pins a parameter to its box, or stops on
-its budget far from the noise level, must say so in words and numbers, not only through a
-``stop_reason`` (issue 17). Computed from the stored iterations only; no simulation.
+A calibration that leaves the fit worse than the prior, pins a parameter to its box, stops on its
+budget, needs model error to explain its data or learns nothing must say so in words and numbers, not
+only through a ``stop_reason``. Computed from the stored iterations only; no simulation. Every misfit
+here is the members' (the median member's chi^2 per observation), never the ensemble-mean curve's: a
+blurred mean can fit where no member does.
 
-Verdicts, the first that applies:
+Flags, in this order; the verdict is the first that applies:
 
-- ``worse_than_prior``: the last iteration's ensemble fits worse (chi^2 per observation) than the
-  prior ensemble. The reported posterior is then the best iteration's (:func:`reported_iteration`). The linear-Gaussian update pushed the ensemble where the model
-  cannot follow the data: the model lacks an effect the data carry (run the diagnosis).
-- ``box_limited``: a posterior mean lies within ``PIN_FRACTION`` of its box width from a bound; the
-  data want a value the prior box excludes (widen the box, or the parameter stands in for a missing
-  effect).
+- ``worse_than_prior``: the reported ensemble's median member fits worse (against the instrument noise
+  ``R``) than the prior ensemble's. The model lacks an effect the data carry (run the diagnosis).
+- ``mcmc_not_converged``: the MCMC posterior's chain is shorter than its autocorrelation rule asks;
+  its intervals are not yet a posterior.
+- ``box_limited``: a posterior mean lies within ``PIN_FRACTION`` of its box width from a bound.
 - ``not_converged``: the stop rule was not met (iteration budget spent or ensemble collapse).
-- ``ok``: the tolerance was met and none of the above.
+- ``misfit_unexplained``: the median member's chi^2 per observation against the declared error model
+  (``R`` alone, before any estimated discrepancy) exceeds the noise level by more than its own
+  sampling uncertainty: the fit needs model error to be explained, and the intervals are only as good
+  as the discrepancy model (``summary.json``'s ``discrepancy`` gives its size).
+- ``uninformative``: a parameter's 90 % interval covers more than ``UNINFORMATIVE_FRACTION`` of its prior
+  box: the data did not constrain it (the posterior is the prior's).
+- ``ok``: none of the above.
 """
 from __future__ import annotations
 
@@ -22,6 +29,14 @@ from collections.abc import Mapping, Sequence
 
 #: A posterior mean this close to a bound, as a fraction of the box width, is pinned to the box.
 PIN_FRACTION = 0.02
+
+#: A 90 % interval wider than this fraction of the prior box is the prior's, not the data's (a uniform
+#: prior's own 90 % interval is 0.9 of the box).
+UNINFORMATIVE_FRACTION = 0.8
+
+#: Flags in the order they decide the verdict.
+FLAG_ORDER = ("worse_than_prior", "mcmc_not_converged", "box_limited", "not_converged", "misfit_unexplained",
+              "uninformative")
 
 #: The last ensemble is reported unless its chi^2 per observation exceeds the best iteration's by more
 #: than this fraction. ES-MDA's intermediate ensembles are posteriors under inflated noise (wider than
@@ -38,7 +53,15 @@ NEXT_STEP = {
     "not_converged": ("the stop rule was not met ({reason}): chi^2 per observation {chi2:.4g} against the "
                       "target {target:.4g}; more iterations will not close a gap this size if the best "
                       "iteration is not the last; check the noise model or run the diagnosis"),
-    "ok": "none: the fit reached the noise level inside the prior box",
+    "mcmc_not_converged": ("the MCMC chain did not reach its autocorrelation rule ({chain}): raise the "
+                           "sampler's steps before reading its intervals"),
+    "misfit_unexplained": ("the members miss the data by more than the instrument noise (chi^2 per "
+                           "observation {chi2_noise:.4g} against {target:.4g}); the intervals include an "
+                           "estimated model discrepancy{discrepancy} and are as good as that model; "
+                           "{diagnosis}"),
+    "uninformative": ("the data did not constrain {wide}: its 90 % interval covers more than "
+                      f"{int(UNINFORMATIVE_FRACTION * 100)} % of the prior box; fix it or observe where it acts"),
+    "ok": "none: the members fit within the error model inside the prior box and every parameter was learned",
 }
 #: Where the diagnosis is: a config to run, or the experiment's own report (``diagnosed``).
 DIAGNOSIS_STEP = {False: "run the diagnosis (config/diagnosis.yaml) on this experiment",
@@ -75,44 +98,92 @@ def pinned_parameters(posterior: Mapping[str, Mapping], lower: Sequence[float], 
     return out
 
 
+def uninformative_parameters(posterior: Mapping[str, Mapping], lower: Sequence[float], upper: Sequence[float],
+                             names: Sequence[str], fraction: float = UNINFORMATIVE_FRACTION) -> dict:
+    """``{name: width of the 90 % interval / box width}`` for the parameters above ``fraction``."""
+    out = {}
+    for j, p in enumerate(names):
+        width = (float(posterior[p]["q95"]) - float(posterior[p]["q05"])) / (float(upper[j]) - float(lower[j]))
+        if width > fraction:
+            out[p] = width
+    return out
+
+
+def member_chi2(m: Mapping) -> float:
+    """The median member's chi^2 per observation against R (the mean curve's for files written before
+    the members were scored)."""
+    v = m.get("median_chi2_per_obs", m.get("chi2_per_obs"))
+    return float(v) if v is not None else math.nan
+
+
 def calibration_verdict(*, misfits: Sequence[Mapping], decision: Mapping, posterior: Mapping[str, Mapping],
                         lower: Sequence[float], upper: Sequence[float], names: Sequence[str],
-                        diagnosed: bool = False) -> dict:
-    """The ``verdict`` block (``diagnosed``: the experiment runs the diagnosis itself, so the next step
-    points at its report rather than at config/diagnosis.yaml): misfits is the per-iteration list of ``summary.json`` (``iteration``,
-    ``chi2_per_obs``, ``rmse_Pa``), 0 = prior ensemble; posterior the reported one (of the ensemble
-    :func:`reported_iteration` picks, or the MCMC sample); decision the stop decision taken on the last."""
-    chi2 = [float(m["chi2_per_obs"]) if m.get("chi2_per_obs") is not None else math.nan for m in misfits]
+                        diagnosed: bool = False, sampler: Mapping | None = None, n_obs: int | None = None,
+                        discrepancy: Mapping | None = None) -> dict:
+    """The ``verdict`` block.
+
+    ``misfits``: the per-iteration list of ``summary.json`` (0 = prior ensemble), with the members'
+    ``median_chi2_per_obs`` against ``R``; ``posterior``: the reported one; ``decision``: the stop
+    decision; ``sampler``: the MCMC diagnostics (``posterior: emulator_mcmc``); ``n_obs``: the
+    observation count (the noise level's sampling uncertainty); ``discrepancy``: the estimated model
+    discrepancy per record (for the words); ``diagnosed``: the experiment runs its own diagnosis.
+    """
+    chi2 = [member_chi2(m) for m in misfits]
     finite = [(c, k) for k, c in enumerate(chi2) if math.isfinite(c)]
     best_chi2, best = min(finite) if finite else (math.nan, len(chi2) - 1)
-    prior, final = chi2[0], chi2[-1]
-    pinned = pinned_parameters(posterior, lower, upper, names)
-    flags = []
-    if math.isfinite(prior) and math.isfinite(final) and final > prior:
-        flags.append("worse_than_prior")
-    if pinned:
-        flags.append("box_limited")
-    if not decision.get("converged", False):
-        flags.append("not_converged")
-    verdict = flags[0] if flags else "ok"
-    target = (decision.get("values") or {}).get("chi2_target")
     reported = reported_iteration(chi2)
+    prior, last, final = chi2[0], chi2[-1], chi2[reported]
+    target = (decision.get("values") or {}).get("chi2_target")
+    noise_target = 1.0 + 2.0 * math.sqrt(2.0 / n_obs) if n_obs else (float(target) if target else math.nan)
+    pinned = pinned_parameters(posterior, lower, upper, names)
+    wide = uninformative_parameters(posterior, lower, upper, names)
+    checks = {
+        "worse_than_prior": math.isfinite(prior) and math.isfinite(last) and last > prior,
+        "mcmc_not_converged": sampler is not None and not bool(sampler.get("converged_chain", True)),
+        "box_limited": bool(pinned),
+        "not_converged": not decision.get("converged", False),
+        "misfit_unexplained": math.isfinite(final) and math.isfinite(noise_target) and final > noise_target,
+        "uninformative": bool(wide),
+    }
+    flags = [f for f in FLAG_ORDER if checks[f]]
+    verdict = flags[0] if flags else "ok"
     text = NEXT_STEP[verdict].format(
         diagnosis=DIAGNOSIS_STEP[bool(diagnosed)], params=", ".join(pinned),
         bounds=", ".join(f"its {side} bound" if len(pinned) == 1 else f"{p}'s {side} bound" for p, side in pinned.items()),
-        reason=decision.get("reason"), chi2=final, target=math.nan if target is None else float(target))
-    if verdict == "worse_than_prior" and reported != len(chi2) - 1:
-        text += (f"; the posterior reported (and forecast) is iteration {reported}'s ensemble (chi^2 per "
-                 f"observation {chi2[reported]:.4g}), not the last ({final:.4g})")
+        reason=decision.get("reason"), chi2=float((decision.get("values") or {}).get("chi2_per_obs") or last),
+        target=math.nan if target is None else float(target), chi2_noise=final,
+        chain=_chain_words(sampler), wide=", ".join(wide), discrepancy=_discrepancy_words(discrepancy))
+    if reported != len(chi2) - 1:
+        text += (f"; the posterior reported (and forecast) is iteration {reported}'s ensemble (median member chi^2 "
+                 f"per observation {final:.4g}), not the last ({last:.4g})")
     return {
         "verdict": verdict,
         "flags": flags,
-        "chi2_per_obs": {"prior": prior, "final": final, "best": best_chi2, "best_iteration": int(best),
-                         "final_over_prior": final / prior if prior and math.isfinite(prior) else None,
-                         "target": target},
+        "chi2_per_obs": {"statistic": "median member against R", "prior": prior, "final": last,
+                         "reported": final, "best": best_chi2, "best_iteration": int(best),
+                         "final_over_prior": last / prior if prior and math.isfinite(prior) else None,
+                         "noise_level": noise_target, "stop_target": target},
         "best_is_last": int(best) == len(chi2) - 1,
         "reported_iteration": reported,
         "pinned_to_box": pinned,
         "pin_fraction": PIN_FRACTION,
+        "interval_over_box": {p: (float(posterior[p]["q95"]) - float(posterior[p]["q05"])) /
+                              (float(upper[j]) - float(lower[j])) for j, p in enumerate(names)},
+        "uninformative_fraction": UNINFORMATIVE_FRACTION,
         "next_step": text,
     }
+
+
+def _chain_words(sampler: Mapping | None) -> str:
+    if not sampler:
+        return ""
+    tau = sampler.get("autocorr_time") or {}
+    return f"{sampler.get('steps')} steps, autocorrelation times {', '.join(f'{k} {v:.3g}' for k, v in tau.items())}"
+
+
+def _discrepancy_words(discrepancy: Mapping | None) -> str:
+    if not discrepancy:
+        return " (none was estimated: declare observations.model_error.discrepancy: ar1)"
+    parts = [f"{rec} {v['sigma'] / 1e6:.3g} MPa over {v['corr_time_s'] * 1e6:.3g} us"
+             for rec, v in (discrepancy.get("records") or {}).items()]
+    return " (" + "; ".join(parts) + ")"

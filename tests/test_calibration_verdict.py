@@ -4,7 +4,8 @@ import math
 
 import pytest
 
-from calibration.verdict import PIN_FRACTION, REPORT_TOLERANCE, calibration_verdict, pinned_parameters, reported_iteration
+from calibration.verdict import (PIN_FRACTION, REPORT_TOLERANCE, UNINFORMATIVE_FRACTION, calibration_verdict,
+                                 pinned_parameters, reported_iteration, uninformative_parameters)
 
 NAMES = ("sigma_t", "E_t")
 LOWER, UPPER = (4e6, 200.0), (60e6, 2400.0)
@@ -14,8 +15,10 @@ def _misfits(*chi2):
     return [{"iteration": k, "chi2_per_obs": c, "rmse_Pa": 1e6 * math.sqrt(c)} for k, c in enumerate(chi2)]
 
 
-def _post(st, et):
-    return {"sigma_t": {"mean": st}, "E_t": {"mean": et}}
+def _post(st, et, rel=0.02):
+    """A posterior with 90 % intervals of +-rel around the means (informative by default)."""
+    return {"sigma_t": {"mean": st, "q05": st * (1 - rel), "q95": st * (1 + rel)},
+            "E_t": {"mean": et, "q05": et * (1 - rel), "q95": et * (1 + rel)}}
 
 
 def _decision(converged, reason="discrepancy", target=1.02):
@@ -36,7 +39,7 @@ def test_a_fit_worse_than_the_prior_is_named_first_with_the_best_iteration():
                             decision=_decision(False, "max_iterations"),
                             posterior=_post(79.5e6 * 0.5, 998.0), lower=LOWER, upper=UPPER, names=NAMES)
     assert v["verdict"] == "worse_than_prior"
-    assert v["flags"] == ["worse_than_prior", "not_converged"]
+    assert v["flags"] == ["worse_than_prior", "not_converged", "misfit_unexplained"]
     assert v["chi2_per_obs"]["best"] == 610.0 and v["chi2_per_obs"]["best_iteration"] == 1
     assert not v["best_is_last"]
     assert v["chi2_per_obs"]["final_over_prior"] == pytest.approx(3200.0 / 833.0)
@@ -66,7 +69,7 @@ def test_a_mean_within_two_percent_of_a_bound_is_pinned_and_one_just_outside_is_
 def test_a_budget_spent_above_the_target_is_not_converged_with_its_numbers():
     v = calibration_verdict(misfits=_misfits(900.0, 40.0, 14.0), decision=_decision(False, "max_iterations"),
                             posterior=_post(30.7e6, 281.0), lower=LOWER, upper=UPPER, names=NAMES)
-    assert v["verdict"] == "not_converged" and v["flags"] == ["not_converged"]
+    assert v["verdict"] == "not_converged" and v["flags"] == ["not_converged", "misfit_unexplained"]
     assert "max_iterations" in v["next_step"] and "14" in v["next_step"] and "1.02" in v["next_step"]
 
 
@@ -163,3 +166,56 @@ def test_a_box_cutting_the_posterior_ends_box_limited_end_to_end(tmp_path):
     assert wrong["posterior"]["sigma_t"]["mean"] > 30.0e6 - PIN_FRACTION * 26.0e6
     assert "widen the box" in v["next_step"] and "sigma_t" in v["next_step"]
     assert "box_limited" not in right["verdict"]["flags"] and right["verdict"]["pinned_to_box"] == {}
+
+
+def test_a_posterior_equal_to_the_prior_is_flagged_uninformative():
+    """A uniform prior's own 90 % interval spans 0.9 of the box: reported as the posterior, it is
+    flagged, even when the fit is at the noise level and the stop rule was met."""
+    prior_like = {p: {"mean": 0.5 * (lo + hi), "q05": lo + 0.05 * (hi - lo), "q95": lo + 0.95 * (hi - lo)}
+                  for p, lo, hi in zip(NAMES, LOWER, UPPER)}
+    v = calibration_verdict(misfits=_misfits(1.1, 1.0), decision=_decision(True), posterior=prior_like,
+                            lower=LOWER, upper=UPPER, names=NAMES, n_obs=161)
+    assert v["verdict"] == "uninformative" and v["flags"] == ["uninformative"]
+    assert v["interval_over_box"]["E_t"] == pytest.approx(0.9)
+    assert "sigma_t, E_t" in v["next_step"]
+    # one parameter learned (interval 0.1 of the box), the other not
+    half = dict(prior_like, sigma_t={"mean": 45e6, "q05": 43e6, "q95": 48.6e6})
+    assert set(uninformative_parameters(half, LOWER, UPPER, NAMES)) == {"E_t"}
+    edge = {p: {"mean": 0.5 * (lo + hi), "q05": lo, "q95": lo + UNINFORMATIVE_FRACTION * (hi - lo)}
+            for p, lo, hi in zip(NAMES, LOWER, UPPER)}
+    assert uninformative_parameters(edge, LOWER, UPPER, NAMES) == {}
+
+
+def test_an_mcmc_chain_short_of_its_autocorrelation_rule_is_flagged():
+    sampler = {"converged_chain": False, "steps": 400, "autocorr_time": {"sigma_t": 80.0, "E_t": 95.0}}
+    v = calibration_verdict(misfits=_misfits(900.0, 1.0), decision=_decision(True), posterior=_post(45e6, 500.0),
+                            lower=LOWER, upper=UPPER, names=NAMES, sampler=sampler, n_obs=161)
+    assert v["verdict"] == "mcmc_not_converged" and v["flags"] == ["mcmc_not_converged"]
+    assert "400 steps" in v["next_step"]
+    v = calibration_verdict(misfits=_misfits(900.0, 1.0), decision=_decision(True), posterior=_post(45e6, 500.0),
+                            lower=LOWER, upper=UPPER, names=NAMES, sampler={**sampler, "converged_chain": True},
+                            n_obs=161)
+    assert v["verdict"] == "ok"
+
+
+def test_a_fit_explained_only_by_an_estimated_discrepancy_is_flagged_unexplained_with_its_size():
+    """The members' chi^2 against the instrument noise alone: 1.3 with 161 observations is above the
+    noise level (1 + 2 sqrt(2/161) = 1.22); 1.1 is not. The stop rule (against R + D) was met."""
+    disc = {"records": {"CaMa_004": {"sigma": 18.5e6, "corr_time_s": 21e-6}}}
+    v = calibration_verdict(misfits=_misfits(900.0, 1.3), decision=_decision(True), posterior=_post(45e6, 500.0),
+                            lower=LOWER, upper=UPPER, names=NAMES, n_obs=161, discrepancy=disc)
+    assert v["verdict"] == "misfit_unexplained" and v["flags"] == ["misfit_unexplained"]
+    assert v["chi2_per_obs"]["noise_level"] == pytest.approx(1.0 + 2.0 * math.sqrt(2.0 / 161))
+    assert "18.5 MPa over 21 us" in v["next_step"]
+    v = calibration_verdict(misfits=_misfits(900.0, 1.1), decision=_decision(True), posterior=_post(45e6, 500.0),
+                            lower=LOWER, upper=UPPER, names=NAMES, n_obs=161, discrepancy=disc)
+    assert v["verdict"] == "ok"
+
+
+def test_the_verdict_scores_the_median_member_not_the_mean_curve():
+    """Step-like members whose blurred mean fits (chi^2 1.19) while the median member misses (23.1)."""
+    misfits = [{"iteration": 0, "chi2_per_obs": 50.0, "median_chi2_per_obs": 80.0},
+               {"iteration": 1, "chi2_per_obs": 1.19, "median_chi2_per_obs": 23.1}]
+    v = calibration_verdict(misfits=misfits, decision=_decision(False, "max_iterations"),
+                            posterior=_post(45e6, 500.0), lower=LOWER, upper=UPPER, names=NAMES, n_obs=200)
+    assert "misfit_unexplained" in v["flags"] and v["chi2_per_obs"]["final"] == 23.1

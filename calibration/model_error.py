@@ -1,0 +1,110 @@
+"""The likelihood's error model of an experiment: instrument noise plus, where declared, model error.
+
+``C = R + D``: ``R`` is the records' instrument noise (:meth:`Observations.error_model`); ``D`` is the
+model discrepancy, an AR(1) term per record estimated at every analysis from that iteration's members
+(:mod:`enkf.discrepancy`; ``observations.model_error.discrepancy``: ``ar1`` by default for measured
+experiments, ``none`` for twins). ``C`` is what the analysis assimilates with, what the stop test and the
+verdict score the members against, and what the posterior-predictive band adds to the members' curves.
+
+Each ``analysis.json`` stores the estimate (``model_error``), so the summary rebuilds the same ``C``
+from files alone (:func:`stored_error`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from enkf import ObservationError
+from enkf.diagnostics import member_misfit, mean_misfit
+from enkf.discrepancy import combined_error, estimate_discrepancy, inflated_noise_factor
+from enkf.predictive import predictive_coverage
+
+from .observations import Observations
+
+__all__ = ["discrepancy_kind", "analysis_error", "stored_error", "misfit_block", "posterior_predictive"]
+
+
+def discrepancy_kind(exp: Mapping) -> str:
+    """``"ar1"`` or ``"none"``: the config's choice, else ``ar1`` for measured data and ``none`` for twins."""
+    kind = ((exp.get("observations") or {}).get("model_error") or {}).get("discrepancy")
+    if kind is None:
+        return "ar1" if exp.get("kind") == "measured" else "none"
+    return str(kind)
+
+
+def analysis_error(kind: str, obs: Observations, Y: np.ndarray, alive: np.ndarray) -> tuple[ObservationError, dict]:
+    """``(C, model_error block of analysis.json)`` for one analysis on the members ``Y`` (alive rows)."""
+    R = obs.error_model()
+    block = {"noise": R.describe(), "discrepancy": None}
+    if kind == "none":
+        return R, block
+    est = estimate_discrepancy(obs.values[None, :] - Y, R, obs.time, obs.groups, alive)
+    block["discrepancy"] = est.to_dict(obs.records)
+    best = obs.values - Y[est.member]
+    # The simplest honest alternative, for comparison: R inflated until the same member's chi^2/m is 1.
+    block["inflated_noise_baseline"] = {
+        rec: {"factor": inflated_noise_factor(best[obs.record_slice(rec)], obs.of_record(rec).error_model())}
+        for rec in obs.records}
+    return stored_error(obs, {"model_error": block}), block
+
+
+def stored_error(obs: Observations, analysis: Mapping) -> ObservationError:
+    """``R + D`` as stored in an ``analysis.json`` (``R`` alone where it has no discrepancy)."""
+    R = obs.error_model()
+    disc = (analysis.get("model_error") or {}).get("discrepancy")
+    if not disc:
+        return R
+    labels = {rec: i for i, rec in enumerate(obs.records)}
+    terms = {labels[rec]: (float(v["sigma"]), float(v["corr_time_s"])) for rec, v in disc["records"].items()}
+    return combined_error(R, obs.time, obs.groups, terms)
+
+
+def misfit_block(Y: np.ndarray, obs: Observations, noise: ObservationError, total: ObservationError,
+                 alive: np.ndarray) -> dict:
+    """The ``misfit`` block of ``analysis.json``.
+
+    ``chi2_per_obs`` / ``rmse_Pa`` / ``nrmse``: the ensemble-mean curve against ``R`` (kept for the
+    plots and for comparison); ``median_chi2_per_obs`` and ``best_chi2_per_obs``: the members against
+    ``R``; ``*_total``: the members against the full error model; ``stop_chi2_per_obs``: the median
+    member against the full error model, the stop test's statistic.
+    """
+    mean = mean_misfit(Y, obs.values, noise, alive)
+    mem = member_misfit(Y, obs.values, noise, alive)
+    out = {"rmse_Pa": mean["rmse"], "nrmse": mean["nrmse"], "chi2_per_obs": mean["chi2_per_obs"],
+           "median_chi2_per_obs": mem["median_chi2_per_obs"], "best_chi2_per_obs": mem["best_chi2_per_obs"],
+           "median_rmse_Pa": mem["median_rmse"], "median_nrmse": mem["median_nrmse"]}
+    tot = mem if total is noise else member_misfit(Y, obs.values, total, alive)
+    out.update({"median_chi2_per_obs_total": tot["median_chi2_per_obs"],
+                "best_chi2_per_obs_total": tot["best_chi2_per_obs"],
+                "stop_chi2_per_obs": tot["median_chi2_per_obs"]})
+    return out
+
+
+def posterior_predictive(obs: Observations, Y: np.ndarray, alive: np.ndarray, analysis: Mapping,
+                         rng: np.random.Generator, level: float = 0.9) -> dict:
+    """``{record: coverage}``: the fraction of each record's observations inside the ``level``
+    posterior-predictive band of the members ``Y`` with the full error model of ``analysis``."""
+    C = stored_error(obs, analysis)
+    cov = predictive_coverage(Y, obs.values, C, rng, level, groups=obs.groups, alive=alive)
+    return {rec: cov["groups"][i] for i, rec in enumerate(obs.records)}
+
+
+
+def posterior_tempering(spec, R: int, K: int) -> dict:
+    """Which ensemble is reported and under which tempering: iteration ``R`` of the final ``K`` is, for
+    a linear-Gaussian model, the posterior of the likelihood with its error covariance multiplied by
+    ``covariance_factor`` (1 = the full posterior; None = the prior, nothing assimilated)."""
+    if R == 0:
+        factor = None
+    elif spec.method == "esmda":
+        factor = 1.0 / sum(1.0 / a for a in spec.alphas[:R])
+    elif spec.method == "emulated_esmda":
+        factor = float(spec.temper_base ** max(0, spec.max_iterations - R))
+    else:  # the paper's EnKF re-uses the same data with alpha = 1 at every analysis
+        factor = 1.0 / R
+    what = ("the prior ensemble" if factor is None else "the full posterior" if abs(factor - 1.0) < 1e-9
+            else f"a tempered posterior (error covariance x {factor:.3g})")
+    return {"iteration": int(R), "final_iteration": int(K), "is_last": R == K, "covariance_factor": factor,
+            "reads_as": what}
