@@ -6,7 +6,7 @@ The Snakemake workflow runs the same cycle one step per checkpoint with :func:`e
 
     k = 0; p = p_0
     loop: y = forward(p)                      # one simulation per member, NaN rows = failed members
-          decision = check_stop(k, misfit of mean(y), spread(p))
+          decision = check_stop(k, misfit of the median member, spread(p))
           if decision.stop: break
           p = analysis(p, y, alpha_k); k += 1
 
@@ -27,7 +27,7 @@ import pandas as pd
 from ._rng import RngLike, as_generator
 from .analysis import enkf_update, esmda_alphas, esmda_update
 from .covariance import ObservationError
-from .diagnostics import default_names, jsonable, mean_misfit, posterior_dict
+from .diagnostics import default_names, jsonable, mean_misfit, member_misfit, posterior_dict
 from .stopping import StopCriteria, StopDecision, check_stop
 from .transforms import BoxTransform, IdentityTransform
 
@@ -113,11 +113,13 @@ def assimilate(forward: Callable[[np.ndarray], np.ndarray], params0, obs, obs_er
         n_sim += P.shape[0]
         alive = np.all(np.isfinite(Y), axis=1)
         misfit = mean_misfit(Y, d, obs_error, alive)
+        members = member_misfit(Y, d, obs_error, alive)
         spread = transform.to_unbounded(P[alive]).std(axis=0, ddof=1) if alive.sum() > 1 else None
-        decision = check_stop(k, chi2_per_obs=misfit["chi2_per_obs"], nrmse=misfit["nrmse"], n_obs=d.size,
+        # the members must fit, not their (possibly blurred) mean
+        decision = check_stop(k, chi2_per_obs=members["median_chi2_per_obs"], nrmse=members["median_nrmse"], n_obs=d.size,
                               spread=spread, prior_spread=prior_spread, criteria=criteria,
                               allow_convergence=(method == "enkf" or k == criteria.max_iterations))
-        history.append(jsonable({"iteration": k, "n_alive": int(alive.sum()), "misfit_mean": misfit,
+        history.append(jsonable({"iteration": k, "n_alive": int(alive.sum()), "misfit_mean": misfit, "misfit_members": members,
                                  "posterior": posterior_dict(P, names, alive), "decision": decision.to_dict()}))
         if decision.stop:
             return AssimilationResult(P, Y, alive, history, decision, n_sim, names, prior_spread)

@@ -3,12 +3,15 @@
 Checked after each ensemble of simulations (``iteration`` = number of analyses done so far, 0 for the
 prior ensemble), in this order:
 
-1. ``"discrepancy"`` (converged): the ensemble-mean response fits the data to the noise level,
-   ``chi2_per_obs <= chi2_target``. The discrepancy principle: iterating further fits the noise and
+1. ``"discrepancy"`` (converged): the members fit the data to the level of the error model,
+   ``chi2_per_obs <= chi2_target``, where the callers pass the median member's chi^2 per observation
+   against the full error model (noise plus any model error): a blurred mean of step-like members can
+   fit where no member does. The discrepancy principle: iterating further fits the noise and
    collapses the ensemble. Default target ``1 + 2 sqrt(2/m)``: the chi-square of pure noise has mean
    ``m`` and std ``sqrt(2m)``, so at the truth ``chi2/m`` exceeds this only ~2% of the time.
 2. ``"tolerance"`` (converged): the user's tolerance on the normalised RMSE of the ensemble-mean
-   response, ``nrmse <= nrmse_tol`` (the paper's ``|x_bar - y_o| < tol``); off by default.
+   response the caller passes (the median member's), ``nrmse <= nrmse_tol`` (the paper's
+   ``|x_bar - y_o| < tol``); off by default.
 3. ``"collapse"`` (not converged): the spread of some parameter, in the unbounded space, fell below
    ``collapse_fraction`` times its prior spread (default 1e-3); the ensemble can no longer move it.
    (A sharp but legitimate posterior from a dense record can be ~0.5% of a wide prior box in the
@@ -73,7 +76,7 @@ def check_stop(iteration: int, *, chi2_per_obs: float, nrmse: float, n_obs: int,
 
     Parameters
     ----------
-    chi2_per_obs, nrmse : misfit of the ensemble-mean response (see :mod:`enkf.diagnostics`).
+    chi2_per_obs, nrmse : misfit of the median member (:func:`enkf.diagnostics.member_misfit`).
     n_obs : number of observations (for the default chi-square target).
     spread, prior_spread : (n,) per-parameter std now and of the initial ensemble, unbounded space.
         The collapse guard is skipped if either is ``None``.
