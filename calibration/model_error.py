@@ -1,7 +1,8 @@
 """The likelihood's error model of an experiment: instrument noise plus, where declared, model error.
 
 ``C = R + D``: ``R`` is the records' instrument noise (:meth:`Observations.error_model`); ``D`` is the
-model discrepancy, an AR(1) term per record estimated at every analysis from that iteration's members
+model discrepancy, an AR(1) term per record (its amplitude free to differ before and after the
+record's observed peak) estimated at every analysis from that iteration's members
 (:mod:`enkf.discrepancy`; ``observations.model_error.discrepancy``: ``ar1`` by default for measured
 experiments, ``none`` for twins). ``C`` is what the analysis assimilates with, what the stop test and the
 verdict score the members against, and what the posterior-predictive band adds to the members' curves.
@@ -40,7 +41,8 @@ def analysis_error(kind: str, obs: Observations, Y: np.ndarray, alive: np.ndarra
     block = {"noise": R.describe(), "discrepancy": None}
     if kind == "none":
         return R, block
-    est = estimate_discrepancy(obs.values[None, :] - Y, R, obs.time, obs.groups, alive)
+    est = estimate_discrepancy(obs.values[None, :] - Y, R, obs.time, obs.groups, alive,
+                               split_times=peak_times(obs))
     block["discrepancy"] = est.to_dict(obs.records)
     best = obs.values - Y[est.member]
     # The simplest honest alternative, for comparison: R inflated until the same member's chi^2/m is 1.
@@ -50,6 +52,16 @@ def analysis_error(kind: str, obs: Observations, Y: np.ndarray, alive: np.ndarra
     return stored_error(obs, {"model_error": block}), block
 
 
+def peak_times(obs: Observations) -> dict:
+    """``{group: time of the record's largest observed |stress|}``: where the discrepancy's amplitude may
+    change (the elastic rise before, the fracture after)."""
+    out = {}
+    for g, rec in enumerate(obs.records):
+        sl = obs.record_slice(rec)
+        out[g] = float(obs.time[sl][int(np.argmax(np.abs(obs.values[sl])))])
+    return out
+
+
 def stored_error(obs: Observations, analysis: Mapping) -> ObservationError:
     """``R + D`` as stored in an ``analysis.json`` (``R`` alone where it has no discrepancy)."""
     R = obs.error_model()
@@ -57,7 +69,9 @@ def stored_error(obs: Observations, analysis: Mapping) -> ObservationError:
     if not disc:
         return R
     labels = {rec: i for i, rec in enumerate(obs.records)}
-    terms = {labels[rec]: (float(v["sigma"]), float(v["corr_time_s"])) for rec, v in disc["records"].items()}
+    terms = {labels[rec]: (float(v["sigma_pre"]), float(v["sigma_post"]), float(v["corr_time_s"]),
+                           None if v.get("split_time_s") is None else float(v["split_time_s"]))
+             for rec, v in disc["records"].items()}
     return combined_error(R, obs.time, obs.groups, terms)
 
 

@@ -1,10 +1,14 @@
 """Model discrepancy: a time-correlated error term for what the model lacks (Kennedy & O'Hagan 2001).
 
 The data model of one record is ``d = y(theta) + delta + e`` with the instrument noise ``e ~ N(0, R)``
-and the discrepancy ``delta ~ N(0, D)``, an AR(1) (Ornstein-Uhlenbeck) process of its own marginal std
-``sigma_d`` and correlation time ``tau_d``:
+and the discrepancy ``delta ~ N(0, D)``, an AR(1) (Ornstein-Uhlenbeck) process of correlation time
+``tau_d`` whose marginal std ``s(t)`` may differ before and after a split time ``t_s`` (the record's
+observed peak, where a fracture model's error changes character: the elastic rise is smooth, the
+post-peak carries which crack wins):
 
-    D_ij = sigma_d^2 exp(-|t_i - t_j| / tau_d),   records independent.
+    D_ij = s(t_i) s(t_j) exp(-|t_i - t_j| / tau_d),   s(t) = sigma_pre (t < t_s), sigma_post (t >= t_s),
+
+records independent. Without a split time ``sigma_pre = sigma_post`` (a stationary AR(1)).
 
 Why AR(1): a missing effect leaves a residual that is smooth on the scale of the observation step
 (a shifted onset, a peak too high, a fall too fast), so a white inflation would count each of the
@@ -30,7 +34,7 @@ chi^2 per observation to 1 (:func:`inflated_noise_factor`), is reported beside i
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,20 +48,29 @@ __all__ = ["RecordDiscrepancy", "DiscrepancyEstimate", "ar1_covariance", "record
 _LOG_2PI = math.log(2.0 * math.pi)
 
 
-def ar1_covariance(sigma: float, corr_time: float, times) -> np.ndarray:
-    """``sigma^2 exp(-|t_i - t_j| / tau)`` on ``times`` (one record); zeros for ``sigma = 0``."""
+def _amplitude(sigma_pre: float, sigma_post: float, split_time: float | None, t: np.ndarray) -> np.ndarray:
+    if split_time is None:
+        return np.full(t.size, float(sigma_pre))
+    return np.where(t < split_time, float(sigma_pre), float(sigma_post))
+
+
+def ar1_covariance(sigma: float, corr_time: float, times, sigma_post: float | None = None,
+                   split_time: float | None = None) -> np.ndarray:
+    """``s_i s_j exp(-|t_i - t_j| / tau)`` on ``times`` (one record), ``s = sigma`` before ``split_time``
+    and ``sigma_post`` from it on (``sigma`` everywhere without a split); zeros where ``s = 0``."""
     t = np.asarray(times, float)
-    if sigma <= 0.0:
+    s = _amplitude(sigma, sigma if sigma_post is None else sigma_post, split_time, t)
+    if not np.any(s > 0.0):
         return np.zeros((t.size, t.size))
-    if corr_time <= 0.0:
-        return sigma * sigma * np.eye(t.size)
-    return sigma * sigma * np.exp(-np.abs(t[:, None] - t[None, :]) / corr_time)
+    rho = np.eye(t.size) if corr_time <= 0.0 else np.exp(-np.abs(t[:, None] - t[None, :]) / corr_time)
+    return s[:, None] * rho * s[None, :]
 
 
-def record_loglik(residual, noise_cov: np.ndarray, times, sigma: float, corr_time: float) -> float:
-    """``log N(residual; 0, R + D(sigma, tau))`` of one record (``residual = d - y``)."""
+def record_loglik(residual, noise_cov: np.ndarray, times, sigma: float, corr_time: float,
+                  sigma_post: float | None = None, split_time: float | None = None) -> float:
+    """``log N(residual; 0, R + D)`` of one record (``residual = d - y``)."""
     r = np.asarray(residual, float)
-    C = noise_cov + ar1_covariance(sigma, corr_time, times)
+    C = noise_cov + ar1_covariance(sigma, corr_time, times, sigma_post, split_time)
     try:
         L = linalg.cholesky(C, lower=True, check_finite=False)
     except linalg.LinAlgError:
@@ -70,49 +83,76 @@ def record_loglik(residual, noise_cov: np.ndarray, times, sigma: float, corr_tim
 class RecordDiscrepancy:
     """The estimated discrepancy of one record and what it buys in likelihood."""
 
-    sigma: float
+    sigma_pre: float
+    sigma_post: float
     corr_time: float
+    split_time: float | None
     loglik: float
     loglik_noise_only: float
     n_obs: int
     noise_sigma: float
+    times: tuple = ()
+
+    @property
+    def sigma(self) -> float:
+        """The RMS of ``s(t)`` over the record's observations: the discrepancy's size in one number."""
+        t = np.asarray(self.times, float)
+        if t.size == 0:
+            return float(max(self.sigma_pre, self.sigma_post))
+        return float(np.sqrt(np.mean(_amplitude(self.sigma_pre, self.sigma_post, self.split_time, t) ** 2)))
+
+    def term(self) -> tuple:
+        return (self.sigma_pre, self.sigma_post, self.corr_time, self.split_time)
 
     def to_dict(self) -> dict:
-        return {"sigma": self.sigma, "corr_time_s": self.corr_time, "sigma_over_noise": self.sigma / self.noise_sigma
-                if self.noise_sigma > 0 else None, "noise_sigma": self.noise_sigma, "loglik": self.loglik,
-                "loglik_noise_only": self.loglik_noise_only, "n_obs": self.n_obs}
+        return {"sigma": self.sigma, "sigma_pre": self.sigma_pre, "sigma_post": self.sigma_post,
+                "corr_time_s": self.corr_time, "split_time_s": self.split_time,
+                "sigma_over_noise": self.sigma / self.noise_sigma if self.noise_sigma > 0 else None,
+                "noise_sigma": self.noise_sigma, "loglik": self.loglik, "loglik_noise_only": self.loglik_noise_only,
+                "n_obs": self.n_obs}
 
 
-def fit_record_discrepancy(residual, noise_cov: np.ndarray, times) -> RecordDiscrepancy:
-    """Maximum-likelihood ``(sigma_d, tau_d)`` of one record's residual (``sigma_d = 0`` allowed).
+def fit_record_discrepancy(residual, noise_cov: np.ndarray, times, split_time: float | None = None) -> RecordDiscrepancy:
+    """Maximum-likelihood ``(sigma_pre, sigma_post, tau_d)`` of one record's residual (zero allowed).
 
-    Searched in ``(log sigma, log tau)`` with ``sigma`` from 1e-3 to 10 times the residual's RMS and
-    ``tau`` from half the smallest time step to the record's span; the start is the best point of a
-    coarse grid, so the optimum found does not hinge on one start.
+    Searched in logs with each ``sigma`` from 1e-3 to 10 times the residual's RMS and ``tau`` from half
+    the smallest time step to the record's span; the start is the best point of a coarse grid, so the
+    optimum found does not hinge on one start. A split time outside the record's span (or None) fits
+    one amplitude.
     """
     r = np.asarray(residual, float)
     t = np.asarray(times, float)
     noise_sigma = float(np.sqrt(np.mean(np.diag(noise_cov))))
     l0 = record_loglik(r, noise_cov, t, 0.0, 0.0)
+    none = RecordDiscrepancy(0.0, 0.0, 0.0, None, l0, l0, int(r.size), noise_sigma, tuple(t))
     rms = float(np.sqrt(np.mean(r * r)))
-    span = float(t[-1] - t[0]) if t.size > 1 else 1.0
-    step = float(np.min(np.diff(t))) if t.size > 1 else 1.0
     if rms <= 0.0 or t.size < 4:
-        return RecordDiscrepancy(0.0, 0.0, l0, l0, int(r.size), noise_sigma)
-    lo = np.array([math.log(1e-3 * rms), math.log(0.5 * step)])
-    hi = np.array([math.log(10.0 * rms), math.log(span)])
+        return none
+    if split_time is not None and not (t[0] < split_time <= t[-1]):
+        split_time = None
+    span, step = float(t[-1] - t[0]), float(np.min(np.diff(t)))
+    n_amp = 1 if split_time is None else 2
+    lo = np.array([math.log(1e-3 * rms)] * n_amp + [math.log(0.5 * step)])
+    hi = np.array([math.log(10.0 * rms)] * n_amp + [math.log(span)])
+
+    def unpack(u):
+        a = np.exp(u[:n_amp])
+        return a[0], a[-1], math.exp(u[-1])
 
     def nll(u):
-        return -record_loglik(r, noise_cov, t, math.exp(u[0]), math.exp(u[1]))
+        s_pre, s_post, tau = unpack(u)
+        return -record_loglik(r, noise_cov, t, s_pre, tau, s_post, split_time)
 
-    grid = [(a, b) for a in np.linspace(lo[0] + 0.5 * (hi[0] - lo[0]), hi[0] - 1.0, 4)
-            for b in np.linspace(lo[1], hi[1], 5)]
+    amps = np.linspace(lo[0] + 0.5 * (hi[0] - lo[0]), hi[0] - 1.0, 3)
+    taus = np.linspace(lo[-1], hi[-1], 4)
+    grid = [np.array([*a, b]) for a in (np.array(np.meshgrid(*[amps] * n_amp)).reshape(n_amp, -1).T) for b in taus]
     start = min(grid, key=nll)
-    res = optimize.minimize(nll, np.array(start), method="L-BFGS-B", bounds=list(zip(lo, hi)))
-    sigma, tau, l1 = math.exp(res.x[0]), math.exp(res.x[1]), -float(res.fun)
+    res = optimize.minimize(nll, start, method="L-BFGS-B", bounds=list(zip(lo, hi)))
+    l1 = -float(res.fun)
     if not math.isfinite(l1) or l1 <= l0:
-        return RecordDiscrepancy(0.0, 0.0, l0, l0, int(r.size), noise_sigma)
-    return RecordDiscrepancy(sigma, tau, l1, l0, int(r.size), noise_sigma)
+        return none
+    s_pre, s_post, tau = unpack(res.x)
+    return RecordDiscrepancy(s_pre, s_post, tau, split_time, l1, l0, int(r.size), noise_sigma, tuple(t))
 
 
 @dataclass(frozen=True)
@@ -125,8 +165,7 @@ class DiscrepancyEstimate:
 
     def covariance(self, noise: ObservationError, times, groups) -> np.ndarray:
         """``R + D`` of the whole observation vector (block diagonal over records)."""
-        return combined_error(noise, times, groups, {g: (d.sigma, d.corr_time) for g, d in self.records.items()},
-                              as_matrix=True)
+        return combined_error(noise, times, groups, {g: d.term() for g, d in self.records.items()}, as_matrix=True)
 
     def error_model(self, noise: ObservationError, times, groups) -> DenseError:
         return DenseError(self.covariance(noise, times, groups), _symmetric=True)
@@ -138,18 +177,20 @@ class DiscrepancyEstimate:
                 "records": {names[k]: self.records[g].to_dict() for k, g in enumerate(self.labels)}}
 
 
-def combined_error(noise: ObservationError, times, groups, terms: dict, *, as_matrix: bool = False):
-    """``R`` plus one AR(1) term per group, ``terms = {group: (sigma, tau)}`` (missing groups: none).
+def combined_error(noise: ObservationError, times, groups, terms: Mapping, *, as_matrix: bool = False):
+    """``R`` plus one AR(1) term per group, ``terms = {group: (sigma_pre, sigma_post, tau, split_time)}``
+    (or ``(sigma, tau)`` for a stationary term; missing groups: none).
 
     Returns the dense matrix or (default) a :class:`DenseError`.
     """
     t = np.asarray(times, float)
     g = np.zeros(t.size, int) if groups is None else np.asarray(groups)
     C = noise.dense()
-    for label, (sigma, tau) in terms.items():
+    for label, term in terms.items():
+        s_pre, s_post, tau, split = term if len(term) == 4 else (term[0], term[0], term[1], None)
         idx = np.flatnonzero(g == label)
-        if idx.size and sigma > 0:
-            C[np.ix_(idx, idx)] += ar1_covariance(float(sigma), float(tau), t[idx])
+        if idx.size and (s_pre > 0 or s_post > 0):
+            C[np.ix_(idx, idx)] += ar1_covariance(float(s_pre), float(tau), t[idx], float(s_post), split)
     return C if as_matrix else DenseError(C, _symmetric=True)
 
 
@@ -161,11 +202,13 @@ def _group_blocks(noise: ObservationError, times, groups):
     return [(lab, np.flatnonzero(g == lab)) for lab in labels], R, t, labels
 
 
-def estimate_discrepancy(residuals, noise: ObservationError, times, groups=None, alive=None) -> DiscrepancyEstimate:
+def estimate_discrepancy(residuals, noise: ObservationError, times, groups=None, alive=None,
+                         split_times: Mapping | None = None) -> DiscrepancyEstimate:
     """Profile-likelihood discrepancy from member residuals ``d - y_i`` (rows = members, NaN = failed).
 
-    Every alive member is fitted record by record; the member with the largest summed maximised
-    log-likelihood gives the estimate (see the module docstring).
+    The member with the largest summed maximised log-likelihood gives the estimate (see the module
+    docstring), found by coordinate ascent (:func:`estimate_discrepancy`'s comment). ``split_times``: ``{group: t_s}``,
+    where the amplitude may change (none: one amplitude per record).
     """
     Rr = np.atleast_2d(np.asarray(residuals, float))
     ok = np.all(np.isfinite(Rr), axis=1)
@@ -174,13 +217,27 @@ def estimate_discrepancy(residuals, noise: ObservationError, times, groups=None,
     if not np.any(ok):
         raise ValueError("no alive member with a finite residual to estimate the discrepancy from")
     blocks, R, t, labels = _group_blocks(noise, times, groups)
-    best, best_ll = None, -math.inf
-    for i in np.flatnonzero(ok):
-        fits = {lab: fit_record_discrepancy(Rr[i, idx], R[np.ix_(idx, idx)], t[idx]) for lab, idx in blocks}
-        ll = sum(f.loglik for f in fits.values())
-        if ll > best_ll:
-            best, best_ll = (int(i), fits), ll
-    return DiscrepancyEstimate(records=best[1], member=best[0], labels=labels)
+    split_times = split_times or {}
+
+    def fit(i):
+        return {lab: fit_record_discrepancy(Rr[i, idx], R[np.ix_(idx, idx)], t[idx], split_times.get(lab))
+                for lab, idx in blocks}
+
+    def score(i, fits):
+        return sum(record_loglik(Rr[i, idx], R[np.ix_(idx, idx)], t[idx], fits[lab].sigma_pre, fits[lab].corr_time,
+                                 fits[lab].sigma_post, fits[lab].split_time) for lab, idx in blocks)
+
+    # Coordinate ascent on (member, hyperparameters), cheaper than a full fit per member: fit the member
+    # of smallest RMS residual, rank every member at those hyperparameters, refit the best if it differs.
+    alive_idx = np.flatnonzero(ok)
+    i0 = int(alive_idx[np.argmin(np.mean(Rr[alive_idx] ** 2, axis=1))])
+    best_i, best_fits = i0, fit(i0)
+    i1 = int(alive_idx[np.argmax([score(i, best_fits) for i in alive_idx])])
+    if i1 != i0:
+        fits1 = fit(i1)
+        if sum(f.loglik for f in fits1.values()) > sum(f.loglik for f in best_fits.values()):
+            best_i, best_fits = i1, fits1
+    return DiscrepancyEstimate(records=best_fits, member=best_i, labels=labels)
 
 
 def inflated_noise_factor(residual, noise: ObservationError) -> float:

@@ -347,9 +347,13 @@ def test_workflow_runs_end_to_end_and_a_second_run_has_nothing_to_do(tmp_path, m
     assert summary["misfit"][-1]["chi2_per_obs"] < summary["misfit"][0]["chi2_per_obs"]
     assert set(summary["posterior"]) == {"sigma_t", "E_t"}
     v = summary["verdict"]
-    assert v["verdict"] in ("ok", "box_limited", "not_converged") and "worse_than_prior" not in v["flags"]
-    assert v["chi2_per_obs"]["final"] == summary["misfit"][-1]["chi2_per_obs"]
-    assert (v["verdict"] == "ok") == summary["converged"] and v["next_step"]
+    assert "worse_than_prior" not in v["flags"] and v["next_step"]
+    assert v["chi2_per_obs"]["final"] == summary["misfit"][-1]["median_chi2_per_obs"]
+    assert ("not_converged" in v["flags"]) == (not summary["converged"])
+    assert v["verdict"] != "ok" or summary["converged"]
+    assert set(summary["predictive_coverage_90"]) == {"synthetic"}
+    assert 0.0 <= summary["predictive_coverage_90"]["synthetic"] <= 1.0
+    assert summary["posterior_ensemble_info"]["iteration"] == summary["posterior_iteration"]
     print(f"\nend-to-end fast workflow: {wall:.0f} s; misfit per iteration "
           f"{[round(m['rmse_Pa'] / 1e6, 2) for m in summary['misfit']]} MPa; posterior "
           f"{ {p: round(v['mean'], 1) for p, v in summary['posterior'].items()} }")
