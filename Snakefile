@@ -10,17 +10,32 @@ from pathlib import Path
 from snakemake.exceptions import WorkflowError
 from snakemake.utils import min_version
 
+from calibration.config_files import config_sources
 from calibration.observations import ObservationFileError, check_record
 from calibration.workflow_io import ConfigError, validate_config
 
 min_version("9.0")
 
 
+# The config files in merge order (config/config.yaml, each --configfile, --config), read again so that
+# messages name them: a YAML syntax error in config/config.yaml with its line (Snakemake's own message
+# names neither; a --configfile with one fails in Snakemake before this file runs: --verbose shows the
+# line), a schema error with the file that set the key.
+try:
+    _config_sources = config_sources(
+        (["config/config.yaml"] if Path("config/config.yaml").exists() else [])
+        + [str(p) for p in workflow.overwrite_configfiles],
+        overrides=getattr(workflow.config_settings, "config", None))
+except ConfigError as exc:
+    raise WorkflowError(str(exc)) from None
+
+
 configfile: "config/config.yaml"
 
 
 try:
-    _validated = validate_config(config, Path(workflow.basedir) / "config" / "schema.yaml", base_dir=".")
+    _validated = validate_config(config, Path(workflow.basedir) / "config" / "schema.yaml", base_dir=".",
+                                 sources=_config_sources)
 except ConfigError as exc:
     raise WorkflowError(str(exc)) from None
 config.clear()
@@ -59,3 +74,15 @@ rule all:
         expand("results/{exp}/diagnosis/check.json", exp=diagnosed_experiments()),
         expand("results/{exp}/sensitivity/report.json", exp=SENSITIVITY_RUN),
     default_target: True
+
+
+# At the end of a run (not a dry run): each experiment's verdict, stop reason, posterior mean with its
+# 90 % interval and the path of its summary.json (calibration.run_summary; never fails the run).
+onsuccess:
+    try:
+        from calibration.run_summary import experiments_of_run, run_summary
+
+        _targets = getattr(getattr(workflow, "dag_settings", None), "targets", None) or ()
+        print(run_summary(experiments_of_run(_targets, list(EXPERIMENTS), RUN), "results"), flush=True)
+    except Exception as exc:  # noqa: BLE001
+        print(f"(no run summary: {type(exc).__name__}: {exc})", flush=True)

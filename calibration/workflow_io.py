@@ -7,7 +7,9 @@ Nothing here imports Snakemake.
 * :func:`validate_config` checks the workflow config against ``config/schema.yaml`` (JSON Schema),
   fills in the schema's defaults and adds the checks a schema cannot express (prior box, truth inside
   the box, observation window inside the simulated window, records exist ...). Every problem is
-  reported in one :class:`ConfigError` whose message names the key (``experiments.<name>.<key>``).
+  reported in one :class:`ConfigError` whose message names the key (``experiments.<name>.<key>``)
+  and, given the merged files (:func:`calibration.config_files.config_sources`), the config file
+  that set it.
 * :func:`atomic_write_text`, :func:`atomic_write_json`, :func:`atomic_write_csv`: temporary file in the
   destination folder, then ``os.replace``, so that "the file exists" means "the file is complete"
   (Snakemake reuses existing outputs of later checkpoint iterations without checking them).
@@ -41,9 +43,11 @@ import numpy as np
 # the base contracts, re-exported: the scripts and tests import them from here
 from .contracts import (PARAM_NAMES, ConfigError, atomic_write_csv, atomic_write_json,  # noqa: F401
                         atomic_write_text, experiment_records, known_parameters, read_json, record_name)
+from .config_files import config_sources, error_origin, load_config_file  # noqa: F401
 
 __all__ = [
-    "PARAM_NAMES", "CURVE_COLUMNS", "ConfigError", "SimulatorCrash", "load_yaml", "validate_config",
+    "PARAM_NAMES", "CURVE_COLUMNS", "ConfigError", "SimulatorCrash", "load_yaml", "load_config_file",
+    "config_sources", "validate_config",
     "apply_defaults", "atomic_write_text", "atomic_write_json", "atomic_write_csv", "read_json",
     "member_ids", "record_name", "experiment_records", "run_member", "simulator_command",
     "simulate_argv", "failed_curve_text", "member_params", "combine_member_runs", "write_responses",
@@ -273,8 +277,11 @@ def coerce_yaml_floats(obj):
 
 
 def validate_config(config: Mapping, schema: Mapping | str | Path, *, base_dir: str | Path = ".",
-                    source: str = "config") -> dict:
+                    source: str = "config", sources: Sequence[tuple[str, Mapping]] | None = None) -> dict:
     """Validate the workflow config and return a copy with the schema's defaults filled in.
+
+    ``sources``: the config files merged into ``config`` (:func:`config_sources`); the message then
+    names them instead of ``source``, and after each problem the file that sets that key.
 
     Raises
     ------
@@ -282,6 +289,8 @@ def validate_config(config: Mapping, schema: Mapping | str | Path, *, base_dir: 
         Listing every schema violation and semantic problem, each prefixed with its key path
         (e.g. ``experiments.twin_ref.method: 'esmd' is not one of ['esmda', 'enkf']``).
     """
+    if sources:
+        source = " + ".join(name for name, _ in sources)
     if not isinstance(schema, Mapping):
         schema = load_yaml(schema)
     if not isinstance(config, Mapping):
@@ -298,6 +307,8 @@ def validate_config(config: Mapping, schema: Mapping | str | Path, *, base_dir: 
             from .sensitivity import config_errors as sensitivity_errors  # it imports this module
             errors = sensitivity_errors(cfg)
     if errors:
+        if sources:
+            errors = [e + error_origin(e, sources) for e in errors]
         raise ConfigError(f"invalid workflow config ({source}):\n  - " + "\n  - ".join(errors))
     return cfg
 

@@ -4,20 +4,22 @@ Written by ``python -m shpb simulate ... --snapshots`` and by the workflow's for
 (``.vtu``, written with meshio) holds every triangle of the model at the snapshot's coordinates, with
 cell data ``body`` (index into the model's bodies) and ``damage`` (a triangle's largest joint damage),
 and every joint as a line cell between its first pair of nodes with ``damage`` in [0, 1] and
-``broken`` (0/1); point data ``displacement`` [m]. Files are written to a temporary name and renamed.
+``broken`` (0/1); point data ``displacement`` [m]. Files are written to a temporary name and renamed
+(:func:`shpb.atomic.create_temp`: the mode of a normally created file, 0644 under umask 022).
 """
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from .atomic import create_temp
+
 
 def _replace_into(path: Path, write) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}-", suffix=path.suffix, dir=path.parent)
+    fd, tmp = create_temp(path.parent, prefix=f".{path.stem}-", suffix=path.suffix)  # mode 0666 & ~umask
     os.close(fd)
     try:
         write(tmp)
