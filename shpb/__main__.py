@@ -1,4 +1,5 @@
-"""Command line: `python -m shpb simulate ...` runs one SHPB simulation into a folder.
+"""Command line: `python -m shpb simulate ...` runs one SHPB simulation into a folder
+(`python -m shpb --version`: the package version).
 
 Writes DIR/curve.csv and DIR/run.json (DESIGN section 6). Exit codes: 0 ok, 3 the simulation
 failed numerically (run.json says why), 2 bad arguments or input files.
@@ -34,8 +35,28 @@ def _parse_snapshots(text):
         raise ValueError(f"--snapshots expects a count N or comma-separated times in s, got {text!r}") from None
 
 
+def package_version() -> str:
+    """The installed distribution's version (importlib.metadata), else pyproject.toml's beside the
+    package (a source tree on the path without an install), else ``"unknown"``."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("fdem-enkf-shpb")
+    except metadata.PackageNotFoundError:
+        pass
+    try:
+        import tomllib
+        from pathlib import Path
+
+        with open(Path(__file__).resolve().parents[1] / "pyproject.toml", "rb") as fh:
+            return str(tomllib.load(fh)["project"]["version"])
+    except (OSError, KeyError, ValueError):
+        return "unknown"
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m shpb", description=__doc__)
+    ap.add_argument("--version", action="version", version=f"fdem-enkf-shpb {package_version()}")
     sub = ap.add_subparsers(dest="command", required=True)
     sim = sub.add_parser("simulate", help="run one SHPB simulation")
     sim.add_argument("--geometry", required=True, choices=["brazilian_disc", "cylinder"])
@@ -51,6 +72,9 @@ def main(argv=None) -> int:
                      help="write the mesh with joint damage (VTK) at N times spread over the window or at "
                      "the given times [s] after the wave reaches the specimen, plus the failure peak and "
                      "the window's end with PNG damage maps, to OUT/snapshots/")
+    sim.add_argument("--mesh-seed", type=int, metavar="N",
+                     help="a realization of the specimen mesh: its interior nodes move at random (seed N >= 0; "
+                     "default: the unperturbed mesh)")
     args = ap.parse_args(argv)
 
     from .simulate import simulate
@@ -58,7 +82,7 @@ def main(argv=None) -> int:
         params = _parse_params(args.param)
         out = simulate(args.geometry, args.preset, params=params, record=args.record,
                        out_dir=args.out, t_end=args.t_end, sample_dt=args.sample_dt,
-                       snapshots=_parse_snapshots(args.snapshots))
+                       snapshots=_parse_snapshots(args.snapshots), mesh_seed=args.mesh_seed)
     except (ValueError, FileNotFoundError, KeyError) as exc:
         print(f"python -m shpb simulate: error: {exc}", file=sys.stderr)
         return 2

@@ -24,6 +24,10 @@ Conventions
   coarse size away from it. Boundary vertices are placed here and Triangle may not add any on the
   boundary (switch ``Y``), so the end faces are exactly straight and their node sets are exact.
   Triangle is deterministic: the same arguments give identical arrays.
+* Mesh realizations (``mesh_seed``): by default the specimen is Triangle's mesh as it is. With a seed
+  its interior nodes move at random (``shpb.meshing.perturb_interior_nodes``; boundary, contact faces
+  and the ``centre`` probe's nodes stay), so that replicate runs that differ only in the mesh show
+  how much one mesh's crack-path bias decides a result.
 
 Bar-length rule (``window_s``)
 ------------------------------
@@ -83,8 +87,8 @@ import numpy as np
 from fdem.body import Body, Material
 from shpb.presets import Preset, get_preset
 
-from .meshing import (_bars, _centre_set, _mesh_disc, _mesh_rectangle, _sizes,  # noqa: F401
-                      _triangle_areas, bar_thickness)
+from .meshing import (MESH_JITTER, _bars, _centre_set, _mesh_disc, _mesh_rectangle, _sizes,  # noqa: F401
+                      _triangle_areas, bar_thickness, perturb_interior_nodes)
 
 GRANITE = Material(E=35.0e9, nu=0.16, rho=2550.0)
 STEEL_BAR = Material(E=200.0e9, nu=0.29, rho=7850.0)
@@ -127,6 +131,8 @@ class Geometry:
         absorbing boundary).
     element_size_m: the preset's sizes (``specimen``, ``bar``, ``bar_near``) [m].
     centre_radius_m: radius of the specimen's ``centre`` set [m].
+    mesh_seed, mesh_jitter: the specimen mesh's realization (None: Triangle's mesh as it is; else its
+        interior nodes are perturbed, ``shpb.meshing.perturb_interior_nodes``).
     """
 
     kind: str
@@ -147,6 +153,8 @@ class Geometry:
     loading: str
     element_size_m: dict[str, float] = field(default_factory=dict)
     centre_radius_m: float = 0.0
+    mesh_seed: int | None = None
+    mesh_jitter: float = MESH_JITTER
 
     def body(self, name: str) -> Body:
         """The body called ``name`` (a body name or one of the roles' names)."""
@@ -211,6 +219,8 @@ class Geometry:
             "window_s": float(self.window_s), "arrival_time_s": float(self.arrival_time_s),
             "element_size_m": {k: float(v) for k, v in self.element_size_m.items()},
             "centre_radius_m": float(self.centre_radius_m),
+            "mesh_seed": None if self.mesh_seed is None else int(self.mesh_seed),
+            "mesh_jitter": float(self.mesh_jitter),
             "element_counts": self.element_counts,
             "n_triangles_total": int(sum(self.element_counts.values())),
             "bodies": bodies,
@@ -228,7 +238,8 @@ def brazilian_disc(preset: str | Preset = "standard", *,
                    incident_gauge_m: float | None = None, transmission_gauge_m: float | None = None,
                    incident_length_m: float | None = None, transmission_length_m: float | None = None,
                    enforce_window: bool = True, flat_half_angle_deg: float = 0.0,
-                   face_gap_m: float = 0.0, bar_face_h_m: float | None = None) -> Geometry:
+                   face_gap_m: float = 0.0, bar_face_h_m: float | None = None,
+                   mesh_seed: int | None = None, mesh_jitter: float = MESH_JITTER) -> Geometry:
     """Brazilian disc between an incident and a transmission bar (the paper's set-up), 2D along x.
 
     diameter_m, thickness_m: disc diameter and real thickness [m] (the plane-stress thickness).
@@ -247,6 +258,8 @@ def brazilian_disc(preset: str | Preset = "standard", *,
     bar_face_h_m: with flats, segment length of the bars' end faces where they meet them (|y| <=
         1.5 R sin(alpha)) [m] (default: half the specimen's element size, so that each specimen edge on a loaded flat is
         pressed by bar nodes, not by one bar node every few specimen elements).
+    mesh_seed, mesh_jitter: None (default) keeps Triangle's disc mesh; a seed perturbs its interior
+        nodes (``_realize``).
     """
     p = get_preset(preset)
     _check_positive(diameter_m=diameter_m, thickness_m=thickness_m, bar_diameter_m=bar_diameter_m,
@@ -271,6 +284,7 @@ def brazilian_disc(preset: str | Preset = "standard", *,
     on_axis = (nodes[:, 1] == 0.0) if alpha == 0.0 else np.ones(len(nodes), bool)
     front = np.flatnonzero((nodes[:, 0] == x_front) & on_axis)
     back = np.flatnonzero((nodes[:, 0] == x_back) & on_axis)
+    nodes = _realize(nodes, tris, [front, back], [centre], mesh_seed, mesh_jitter)
     specimen = Body("disc", nodes, tris, disc, thickness=thickness_m, fracturable=True,
                     node_sets={"front_face": front, "back_face": back},
                     element_sets={"centre": centre})
@@ -287,7 +301,7 @@ def brazilian_disc(preset: str | Preset = "standard", *,
         specimen_dims={"diameter_m": float(diameter_m), "thickness_m": float(thickness_m)},
         bar_material=bar, bar_diameter_m=float(bar_diameter_m), bar_thickness_m=bar_thickness(bar_diameter_m),
         bar_length_m=(float(L_i), float(L_t)), window_s=float(window_s), loading="free_end_velocity",
-        element_size_m=_sizes(p), centre_radius_m=r_c)
+        element_size_m=_sizes(p), centre_radius_m=r_c, mesh_seed=mesh_seed, mesh_jitter=float(mesh_jitter))
 
 
 def cylinder(preset: str | Preset, length_m: float, diameter_m: float, rock: Material, *, bar: Material = TITANIUM_BAR, bar_diameter_m: float = 0.050,
@@ -295,7 +309,8 @@ def cylinder(preset: str | Preset, length_m: float, diameter_m: float, rock: Mat
              incident_gauge_m: float = FREIBURG_GAUGE_DISTANCES_M[0],
              transmission_gauge_m: float = FREIBURG_GAUGE_DISTANCES_M[1],
              transmission_length_m: float | None = None, enforce_window: bool = True,
-             face_gap_m: float = 0.0) -> Geometry:
+             face_gap_m: float = 0.0, mesh_seed: int | None = None,
+             mesh_jitter: float = MESH_JITTER) -> Geometry:
     """Cylindrical compression specimen between titanium bars (the Freiburg set-up), 2D along x.
 
     length_m, diameter_m: specimen length (along x) and diameter [m]; it is a rectangle of height D with
@@ -309,6 +324,8 @@ def cylinder(preset: str | Preset, length_m: float, diameter_m: float, rock: Mat
     face_gap_m: initial gap between the incident bar's face and the specimen's front face [m] (the
         ``face_gap`` effect: closure the bar's face travels before the specimen takes load); the incident
         bar moves back by it, so the gauge stays ``incident_gauge_m`` from the bar's face.
+    mesh_seed, mesh_jitter: None (default) keeps Triangle's rectangle mesh; a seed perturbs its interior
+        nodes (``_realize``).
     """
     p = get_preset(preset)
     _check_positive(length_m=length_m, diameter_m=diameter_m, bar_diameter_m=bar_diameter_m,
@@ -330,9 +347,10 @@ def cylinder(preset: str | Preset, length_m: float, diameter_m: float, rock: Mat
     x_front, x_back = -0.5 * length_m, 0.5 * length_m
     nodes, tris = _mesh_rectangle(x_front, x_back, diameter_m, p.specimen_h_m, p)
     centre, r_c = _centre_set(nodes, tris, (0.0, 0.0), CENTRE_RADIUS_FRACTION * min(length_m, diameter_m))
+    front, back = np.flatnonzero(nodes[:, 0] == x_front), np.flatnonzero(nodes[:, 0] == x_back)
+    nodes = _realize(nodes, tris, [front, back], [centre], mesh_seed, mesh_jitter)
     specimen = Body("cylinder", nodes, tris, rock, thickness=bar_thickness(diameter_m), fracturable=True,
-                    node_sets={"front_face": np.flatnonzero(nodes[:, 0] == x_front),
-                               "back_face": np.flatnonzero(nodes[:, 0] == x_back)},
+                    node_sets={"front_face": front, "back_face": back},
                     element_sets={"centre": centre})
 
     incident, transmission, gauge_x = _bars(p, bar, bar_diameter_m, x_front - _gap(face_gap_m), x_back, L_i, L_t,
@@ -346,7 +364,7 @@ def cylinder(preset: str | Preset, length_m: float, diameter_m: float, rock: Mat
                        "thickness_m": bar_thickness(diameter_m)},
         bar_material=bar, bar_diameter_m=float(bar_diameter_m), bar_thickness_m=bar_thickness(bar_diameter_m),
         bar_length_m=(L_i, float(L_t)), window_s=float(window_s), loading="gauge_injection",
-        element_size_m=_sizes(p), centre_radius_m=r_c)
+        element_size_m=_sizes(p), centre_radius_m=r_c, mesh_seed=mesh_seed, mesh_jitter=float(mesh_jitter))
 
 
 def plot_geometry(geometry: Geometry, path, *, zoom_m: float | None = None) -> None:
@@ -386,6 +404,22 @@ def plot_geometry(geometry: Geometry, path, *, zoom_m: float | None = None) -> N
                      + ", ".join(f"{k} {v} triangles" for k, v in counts.items()), fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=150)
+
+
+# --------------------------------------------------------------------------------------------------
+# Mesh realizations
+# --------------------------------------------------------------------------------------------------
+
+def _realize(nodes: np.ndarray, tris: np.ndarray, node_sets: list, element_sets: list,
+             mesh_seed: int | None, jitter: float) -> np.ndarray:
+    """The specimen's nodes for ``mesh_seed`` (None: unchanged). The sets were found on the
+    unperturbed mesh and their nodes stay put: the contact faces are on the boundary anyway, and the
+    ``centre`` probe keeps its triangles, so it averages over the same region in every realization."""
+    if mesh_seed is None:
+        return nodes
+    keep = np.concatenate([np.asarray(s, np.int64).ravel() for s in node_sets]
+                          + [tris[np.asarray(s, np.int64)].ravel() for s in element_sets])
+    return perturb_interior_nodes(nodes, tris, keep, mesh_seed, jitter)
 
 
 # --------------------------------------------------------------------------------------------------

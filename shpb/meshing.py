@@ -251,3 +251,114 @@ def _centre_set(nodes: np.ndarray, tris: np.ndarray, centre: tuple[float, float]
     if np.count_nonzero(r <= radius) < CENTRE_MIN_TRIANGLES:
         radius = float(np.sort(r)[CENTRE_MIN_TRIANGLES - 1])
     return np.flatnonzero(r <= radius), float(radius)
+
+
+# --------------------------------------------------------------------------------------------------
+# Mesh realizations (issue 30): random perturbation of the specimen's interior nodes
+# --------------------------------------------------------------------------------------------------
+
+#: Default radius of an interior node's random move, as a fraction of the shortest edge at the node.
+MESH_JITTER = 0.25
+#: A perturbed triangle may not be sharper than this fraction of the unperturbed mesh's minimum angle.
+MIN_ANGLE_KEEP = 0.5
+#: A move that breaks that is halved up to this many times, then dropped (the node stays).
+MAX_HALVINGS = 4
+
+
+def perturb_interior_nodes(nodes: np.ndarray, tris: np.ndarray, keep: np.ndarray, mesh_seed: int | None,
+                           jitter: float = MESH_JITTER) -> np.ndarray:
+    """One mesh realization: every node off the boundary and not in ``keep`` moves by a random vector,
+    uniform in a disc of radius ``jitter`` x the shortest edge at that node, drawn from
+    ``numpy.random.default_rng(mesh_seed)``; the topology does not change.
+
+    The boundary stays (the specimen's shape and area, its contact faces), and so do the ``keep``
+    nodes (node and element sets: the probes keep their triangles). Nodes move one after the other in
+    index order; a move that would invert a triangle or make one sharper than MIN_ANGLE_KEEP x the
+    mesh's minimum angle is halved, up to MAX_HALVINGS times, then dropped. ``mesh_seed=None``
+    returns ``nodes`` itself (today's mesh, bit for bit).
+    """
+    if mesh_seed is None:
+        return nodes
+    _check_mesh_seed(mesh_seed, jitter)
+    fixed = _boundary_nodes(tris, len(nodes))
+    fixed[np.asarray(keep, dtype=np.int64)] = True
+    # One draw per node, fixed or not, so that node i's draw depends on the seed and i only.
+    move = _draws_in_unit_disc(np.random.default_rng(mesh_seed), len(nodes))
+    move *= (jitter * _shortest_edge_at_nodes(nodes, tris))[:, None]
+    floor = MIN_ANGLE_KEEP * float(_min_angles(nodes, tris).min())
+    star = _triangles_at_nodes(tris, len(nodes))
+    out = np.array(nodes, dtype=np.float64, copy=True)
+    for i in np.flatnonzero(~fixed):
+        out[i] = _accepted_position(out, tris[star[i]], i, move[i], floor)
+    return out
+
+
+def _check_mesh_seed(mesh_seed, jitter: float) -> None:
+    if isinstance(mesh_seed, bool) or not isinstance(mesh_seed, (int, np.integer)) or mesh_seed < 0:
+        raise ValueError(f"mesh_seed must be None or an integer >= 0, got {mesh_seed!r}")
+    # Half an edge would let two neighbours meet; a quarter keeps the mesh's quality (MIN_ANGLE_KEEP).
+    if not (np.isfinite(jitter) and 0.0 <= jitter < 0.5):
+        raise ValueError(f"mesh jitter must be in [0, 0.5) (a fraction of the shortest edge), got {jitter!r}")
+
+
+def _edges(tris: np.ndarray) -> np.ndarray:
+    """Every triangle's three edges as sorted node pairs, triangle by triangle (3 m rows)."""
+    return np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
+
+
+def _boundary_nodes(tris: np.ndarray, n_nodes: int) -> np.ndarray:
+    """Mask of the nodes on the mesh's boundary: the ends of edges that belong to one triangle only
+    (read from the topology, so it holds for the disc, the flattened disc and the rectangle alike)."""
+    e, count = np.unique(_edges(tris), axis=0, return_counts=True)
+    mask = np.zeros(n_nodes, dtype=bool)
+    mask[e[count == 1].ravel()] = True
+    return mask
+
+
+def _shortest_edge_at_nodes(nodes: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    e = _edges(tris)
+    length = np.linalg.norm(nodes[e[:, 0]] - nodes[e[:, 1]], axis=1)
+    h = np.full(len(nodes), np.inf)
+    np.minimum.at(h, e[:, 0], length)
+    np.minimum.at(h, e[:, 1], length)
+    return h
+
+
+def _draws_in_unit_disc(rng: np.random.Generator, n: int) -> np.ndarray:
+    """n points uniform in the unit disc (radius sqrt(U): uniform per area, not per radius)."""
+    u = rng.random((n, 2))
+    r, phi = np.sqrt(u[:, 0]), 2.0 * np.pi * u[:, 1]
+    return np.column_stack([r * np.cos(phi), r * np.sin(phi)])
+
+
+def _triangles_at_nodes(tris: np.ndarray, n_nodes: int) -> list[np.ndarray]:
+    """For each node, the indices of the triangles that use it (its star)."""
+    order = np.argsort(tris.ravel(), kind="stable")
+    counts = np.bincount(tris.ravel(), minlength=n_nodes)
+    return np.split(order // 3, np.cumsum(counts)[:-1])
+
+
+def _min_angles(nodes: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """Smallest interior angle of each triangle [rad]; 0 for an inverted (clockwise) one."""
+    p = nodes[tris]
+    ang = []
+    for i in range(3):
+        u = p[:, (i + 1) % 3] - p[:, i]
+        w = p[:, (i + 2) % 3] - p[:, i]
+        cross = u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0]
+        ang.append(np.arctan2(cross, np.sum(u * w, axis=1)))  # signed: negative when inverted
+    return np.maximum(np.min(ang, axis=0), 0.0)
+
+
+def _accepted_position(nodes: np.ndarray, star: np.ndarray, i: int, move: np.ndarray, floor: float) -> np.ndarray:
+    """Node i's new position: the largest of move, move/2, ... that keeps every triangle of its star
+    counter-clockwise and no sharper than ``floor`` [rad]; the old position if none does."""
+    old = nodes[i].copy()
+    for k in range(MAX_HALVINGS + 1):
+        nodes[i] = old + move * 0.5**k
+        if _min_angles(nodes, star).min() >= floor:
+            new = nodes[i].copy()
+            nodes[i] = old
+            return new
+    nodes[i] = old
+    return old

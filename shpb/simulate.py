@@ -84,7 +84,8 @@ def _measured_incident(record):
 def build(geometry: str, preset: str, params: dict | None = None, record=None,
           pulse: TrapezoidPulse | None = None, window_s: float | None = None,
           specimen_size_m: tuple[float, float] | None = None, unbreakable: bool = False,
-          injection_distance_m: float | None = None):
+          injection_distance_m: float | None = None, mesh_seed: int | None = None,
+          mesh_jitter: float = geo.MESH_JITTER):
     """Assemble the FDEM model, loads and probes of one SHPB simulation.
 
     The cylinder is driven by a measured record's incident wave (record) or, for verification, by
@@ -92,6 +93,9 @@ def build(geometry: str, preset: str, params: dict | None = None, record=None,
     injection_distance_m: cylinder only, where the incident wave enters the model, measured from
     the specimen (default: the record's incident gauge, 1.25 m, so the model sees the pulse the lab
     gauge saw, after the same dispersion).
+    mesh_seed, mesh_jitter: the specimen mesh's realization (None: today's mesh; a seed moves its
+    interior nodes at random, ``shpb.meshing.perturb_interior_nodes``): replicate runs that differ
+    only in the mesh measure the simulator's own variability.
 
     Returns a dict with the model, traction BCs, probes and metadata (geometry object, parameters,
     arrival time, window).
@@ -108,7 +112,7 @@ def build(geometry: str, preset: str, params: dict | None = None, record=None,
                                transmission_gauge_m=DISC_GAUGE_M,
                                incident_length_m=DISC_INCIDENT_LENGTH_M,
                                transmission_length_m=DISC_TRANSMISSION_LENGTH_M, enforce_window=False,
-                               face_gap_m=p["face_gap.gap_m"])
+                               face_gap_m=p["face_gap.gap_m"], mesh_seed=mesh_seed, mesh_jitter=mesh_jitter)
         pulse = pulse or TrapezoidPulse()
         t_v, v_v = pulse.history()
         bar = g.bar_material
@@ -128,7 +132,8 @@ def build(geometry: str, preset: str, params: dict | None = None, record=None,
         inj = {} if injection_distance_m is None else {"incident_gauge_m": float(injection_distance_m)}
         g = geo.cylinder(preset, L, D, Material(p["E"], p["nu"], p["rho"]),
                          transmission_length_m=CYL_TRANSMISSION_LENGTH_M, enforce_window=False,
-                         face_gap_m=p["face_gap.gap_m"], **inj)
+                         face_gap_m=p["face_gap.gap_m"], mesh_seed=mesh_seed, mesh_jitter=mesh_jitter,
+                         **inj)
         bar = g.bar_material
         if red is not None:
             t_g, eps_g = red.incident_wave_at_gauge()
@@ -198,7 +203,8 @@ def simulate(geometry: str, preset: str = "fast", params: dict | None = None, re
              pulse: TrapezoidPulse | None = None, safety: float = DEFAULT_SAFETY,
              specimen_size_m: tuple[float, float] | None = None,
              unbreakable: bool = False, injection_distance_m: float | None = None,
-             dt: float | None = None, snapshots=None) -> SimulationOutput:
+             dt: float | None = None, snapshots=None, mesh_seed: int | None = None,
+             mesh_jitter: float = geo.MESH_JITTER) -> SimulationOutput:
     """Run one SHPB simulation and return (and optionally write) its curve and run record.
 
     t_end: end of the recorded window after the incident wave reaches the specimen [s] (default:
@@ -207,11 +213,12 @@ def simulate(geometry: str, preset: str = "fast", params: dict | None = None, re
     curve's axis [s] (snapshot_times); with out_dir, the mesh and joint damage are written at those
     times, at the failure peak and at the window's end to out_dir/snapshots/ (VTK, shpb.snapshots),
     with PNG damage maps of the peak and the end. run.json always carries the failure pattern
-    (``fracture``, shpb.fracture).
+    (``fracture``, shpb.fracture). mesh_seed, mesh_jitter: the specimen mesh's realization (build);
+    run.json records both.
     """
     t0 = time.perf_counter()
     setup = build(geometry, preset, params, record, pulse, t_end, specimen_size_m, unbreakable,
-                  injection_distance_m)
+                  injection_distance_m, mesh_seed=mesh_seed, mesh_jitter=mesh_jitter)
     model, g, p = setup["model"], setup["geometry"], setup["params"]
     arrival = setup["arrival_s"]
     t_total = arrival + setup["window_s"]
@@ -251,6 +258,7 @@ def simulate(geometry: str, preset: str = "fast", params: dict | None = None, re
     info = {
         "status": status, "reason": reason, "geometry": g.kind, "preset": g.preset,
         "params": {k: float(v) for k, v in p.items()}, "record": setup["record"],
+        "mesh_seed": None if g.mesh_seed is None else int(g.mesh_seed), "mesh_jitter": float(g.mesh_jitter),
         "n_triangles": int(model.n_triangles), "n_joints": int(model.n_joints),
         "specimen_triangles": int(np.sum(model.tri_body == model.body_index(g.specimen))),
         "steps": int(res.steps), "dt_s": float(res.dt), "time_step_safety": float(safety),
