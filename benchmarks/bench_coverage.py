@@ -1,187 +1,208 @@
-"""Coverage of the posterior intervals over many twins (issue 18), at the `fast` preset.
+"""Coverage of the workflow's posterior over twins drawn from the whole prior box: a check that can fail.
 
-Do the reported intervals mean what they say? ``--twins`` twin experiments of the Brazilian disc
-(default 20), each with its own truth and seed: truths on a Latin hypercube of the central 80 % of the
-Table 2 box (sigma_t 4-60 MPa, E_t 200-2400 J/m^2), 1 % white noise on the reference curve, N = 25
-members, three emulator-assisted ES-MDA analyses as the workflow runs them (tempering 4^(K-1-k)), and the
-last ensemble simulated too (the workflow's iterations 0..3). Two posteriors per twin:
+Each twin is the default twin (``config/config.yaml``'s ``twin_ref``: the Brazilian disc at ``fast``,
+N = 25, three emulator-assisted ES-MDA analyses, its observation window 0-160 us with the failure peak
+and the post-peak, 1 % white noise, its error model and stop rule) with its own truth and seed, run
+through the workflow's own analysis step (:func:`calibration.experiment.analysis_step`) and its own
+choice of the reported ensemble. The truths are a scrambled Latin hypercube of the *whole* Table 2
+box, so a posterior that returns the prior covers everything and shows up as ``width_over_prior``
+near 1 and in the SBC ranks, not as a good coverage.
 
-* ``ensemble``: the last simulated ensemble (what ``summary.json`` reported before issue 18);
-* ``ces``: the emcee sample of the emulator posterior on all 100 runs (:mod:`enkf.ces`).
+Two sets:
 
-and the stop tests (chi2 of the ensemble-mean curve against R, the workflow's, and against R + the
-emulator's measured error, the candidate) at every iteration: in how many twins each passes.
+* ``well_specified`` (``--twins``, default 50): data and model at ``fast``.
+* ``misspecified`` (``--misspecified``, default 10): data from the ``standard`` mesh, model at
+  ``fast`` (the mesh is a model error the calibration must absorb through its discrepancy term).
 
-Prints one JSON object: per twin the truth, the errors of the posterior means and whether the 50 % and
-90 % central intervals contain the truth; per posterior the coverage fractions, the share of twins
-within 2 % (sigma_t) / 10 % (E_t), and the wall time. The goal (issue 18): 90 % intervals cover in
-80-97 % of twins per parameter, 50 % intervals in 35-65 %, mean errors within the bar in >= 90 %.
+Per set: coverage of the 50 % and 90 % intervals per parameter with Clopper-Pearson 95 % intervals;
+simulation-based-calibration ranks (the fraction of posterior members below the truth, randomised
+over ties), with a chi-square test of uniformity on 5 bins and a Kolmogorov-Smirnov test; the 90 %
+width relative to the prior's 90 % width; the restated accuracy bar (mean within 2 % / 10 % of the
+truth, or a 90 % interval wider than that bar which contains the truth) and the median 90 %
+half-widths relative to the truth; the stop reasons.
 
-The simulations of each twin are cached (``--cache``, one ``.npz`` per twin: runs, observations,
-truth), so the posterior step can be re-run without simulating again.
+Each twin's result is cached as JSON under ``--cache`` (default ``benchmarks/cache/coverage``), so an
+interrupted run resumes where it stopped. Prints one JSON object (and writes it with ``--out``), with
+the wall time of the twins simulated in this call and the machine's core count.
 
-Run: ``python benchmarks/bench_coverage.py --twins 20 --cores 2 > benchmarks/results/bench_coverage_<date>.json``
-(about 45 min on 2 idle cores: 101 fast simulations per twin).
+Run: ``python benchmarks/bench_coverage.py --cores 2 --out benchmarks/results/bench_coverage_<date>.json``
+(about 2 min per twin on 2 cores: up to 101 fast simulations each).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import time
 from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from scipy import stats
 from scipy.stats import qmc
 
-from bench_twin_seeds import GRID, LOWER, UPPER, _simulate
-from enkf import emulated_esmda_update, latin_hypercube
-from enkf.ces import emulator_posterior, interval_summary
-from calibration.observations import twin_observations
+from calibration.experiment import (ExperimentSpec, analysis_step, initial_ensemble, params_frame, reported_ensemble,
+                                    rng_for)
+from calibration.observations import curve_on_grid, observation_grid, twin_observations
+from calibration.workflow_io import load_yaml, validate_config
 
-NAMES = ("sigma_t", "E_t")
+ROOT = Path(__file__).resolve().parents[1]
+EXPERIMENT = "twin_ref"
 BAR = {"sigma_t": 0.02, "E_t": 0.10}
-INTERVALS = {"50": ("q25", "q75"), "90": ("q05", "q95")}
+LEVELS = {"50": (0.25, 0.75), "90": (0.05, 0.95)}
 
 
-def truths(n: int, seed: int) -> np.ndarray:
-    """``n`` truth points: a scrambled Latin hypercube of the box's central 80 %."""
-    lo, hi = LOWER + 0.1 * (UPPER - LOWER), UPPER - 0.1 * (UPPER - LOWER)
-    return qmc.scale(qmc.LatinHypercube(d=2, seed=seed).random(n), lo, hi)
+def twin_experiment() -> dict:
+    cfg = validate_config(load_yaml(ROOT / "config" / "config.yaml"), ROOT / "config" / "schema.yaml", base_dir=ROOT)
+    return cfg["experiments"][EXPERIMENT]
 
 
-def simulate_twin(pool, truth, seed, n_members=25, analyses=3) -> dict:
-    """The twin's runs: iterations 0..analyses, each simulated, as the workflow's loop."""
+def truths(n: int, lower, upper, seed: int) -> np.ndarray:
+    """``n`` truths: a scrambled Latin hypercube of the whole box."""
+    return qmc.scale(qmc.LatinHypercube(d=len(lower), seed=seed).random(n), lower, upper)
+
+
+def _simulate(task):
+    from shpb.simulate import simulate
+
+    preset, params, t_end, sample_dt, grid = task
+    out = simulate("brazilian_disc", preset, params, t_end=t_end, sample_dt=sample_dt)
+    if out.run["status"] != "ok":
+        return np.full(grid.size, np.nan)
+    return curve_on_grid(out.curve["time_s"].to_numpy(), out.curve["stress_Pa"].to_numpy(), grid)
+
+
+def run_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: str) -> dict:
+    """One twin through the workflow's analysis steps; the reported posterior's numbers."""
+    spec = ExperimentSpec.from_config(EXPERIMENT, {**exp, "seed": seed})
+    o, sim = exp["observations"], exp["simulation"]
+    grid = observation_grid(o["t_start"], o["t_end"], o["dt"])
+    names = list(spec.names)
+    task = lambda p, preset: (preset, dict(zip(names, map(float, p))), sim["t_end"], sim["sample_dt"], grid)  # noqa: E731
+    ref = pool.map(_simulate, [task(truth, data_preset)])[0]
+    obs = twin_observations(pd.DataFrame({"time_s": grid, "stress_Pa": ref}), grid, rng=rng_for(seed, "noise"),
+                            relative_sigma=o["noise"]["relative_sigma"])
+    params, responses, analyses = [initial_ensemble(spec)], [], []
+    for k in range(spec.max_iterations + 1):
+        Y = np.array(pool.map(_simulate, [task(p, exp["preset"]) for p in params[k][names].to_numpy()]))
+        ok = np.all(np.isfinite(Y), axis=1)
+        status = pd.DataFrame({"member": params[k]["member"], "status": np.where(ok, "ok", "failed"),
+                               "reason": np.where(ok, "", "simulation failed")})
+        a = analysis_step(spec, k, params[k], Y, status, obs, params[0], list(zip(params[:k], responses)))
+        analyses.append(a)
+        responses.append(Y)
+        if a["decision"]["stop"] or a["next_params"] is None:
+            break
+        params.append(params_frame(np.array(a["next_params"]["values"]), names))
+    R, P, alive = reported_ensemble(spec, analyses, params)
+    return _twin_record(spec, truth, seed, data_preset, P[names].to_numpy(float)[alive], analyses, R)
+
+
+def _twin_record(spec, truth, seed, data_preset, post: np.ndarray, analyses, R) -> dict:
     rng = np.random.default_rng(seed)
-    ref = pool.map(_simulate, [truth])[0]
-    obs = twin_observations(pd.DataFrame({"time_s": GRID, "stress_Pa": ref}), GRID, rng=rng, relative_sigma=0.01)
-    d, err = obs.values, obs.error_model()
-    P = latin_hypercube(LOWER, UPPER, n_members, rng)
-    X, Y, it = np.empty((0, 2)), np.empty((0, GRID.size)), np.empty(0, int)
-    for k in range(analyses + 1):
-        Yk = np.array(pool.map(_simulate, list(P)))
-        ok = np.all(np.isfinite(Yk), axis=1)
-        X, Y, it = np.vstack([X, P[ok]]), np.vstack([Y, Yk[ok]]), np.r_[it, np.full(int(ok.sum()), k)]
-        if k < analyses:
-            P = emulated_esmda_update(X, Y, it == k, d, err, lower=LOWER, upper=UPPER, n_members=n_members,
-                                      rng=rng, times=GRID, temper=4.0 ** (analyses - 1 - k)).params
-    return {"X": X, "Y": Y, "iteration": it, "d": d, "sigma": err.std, "truth": np.asarray(truth, float),
-            "seed": seed}
-
-
-def _scores(summary: dict, truth: np.ndarray) -> dict:
-    out = {"rel_error": {}, "in_50": {}, "in_90": {}, "interval": {}}
-    for j, p in enumerate(NAMES):
-        s = summary[p]
-        out["rel_error"][p] = s["mean"] / truth[j] - 1.0
-        out["interval"][p] = [s["q05"], s["q25"], s["q75"], s["q95"]]
-        for level, (a, b) in INTERVALS.items():
-            out[f"in_{level}"][p] = bool(s[a] <= truth[j] <= s[b])
-    out["within_bar"] = bool(all(abs(out["rel_error"][p]) <= BAR[p] for p in NAMES))
+    out = {"seed": int(seed), "data_preset": data_preset, "truth": dict(zip(spec.names, map(float, truth))),
+           "reported_iteration": int(R), "stop_reason": analyses[-1]["decision"]["reason"],
+           "converged": bool(analyses[-1]["decision"]["converged"]), "n_analyses": len(analyses) - 1,
+           "stop_chi2_per_obs": analyses[-1]["misfit"]["stop_chi2_per_obs"],
+           "median_chi2_per_obs": analyses[R]["misfit"]["median_chi2_per_obs"],
+           "discrepancy": (analyses[R].get("model_error") or {}).get("discrepancy"), "params": {}}
+    for j, p in enumerate(spec.names):
+        x = post[:, j]
+        q = dict(zip(("q05", "q25", "q75", "q95"), np.quantile(x, [0.05, 0.25, 0.75, 0.95]).tolist()))
+        below, ties = int(np.sum(x < truth[j])), int(np.sum(x == truth[j]))
+        out["params"][p] = {"mean": float(x.mean()), **q, "n": int(x.size),
+                            "sbc_u": float((below + rng.uniform(0, ties + 1)) / (x.size + 1))}
     return out
 
 
-def stopping(run: dict) -> dict:
-    """The stop tests at each iteration k: the chi2 per observation of iteration k's ensemble-mean curve
-    against R (the workflow's test, taken after the untempered last analysis, k = 3) and against R + the
-    emulator's leave-one-out AR(1) error at iteration k's runs (emulator of runs 0..k; the candidate
-    rule, recorded in analysis.json as a diagnostic, docs/inference.md)."""
-    from enkf import DenseError, DiagonalError
-    from enkf.emulated import emulator_error_model
-    from enkf.emulator import CurveEmulator
-
-    X, Y, it, d = run["X"], run["Y"], run["iteration"], run["d"]
-    R = DiagonalError(run["sigma"])
-    target = 1.0 + 2.0 * np.sqrt(2.0 / d.size)
-    out = []
-    for k in range(1, int(it.max()) + 1):
-        upto, latest = it <= k, (it == k)[it <= k]
-        em = CurveEmulator(X[upto], Y[upto], LOWER, UPPER)
-        emu, _ = emulator_error_model(em.loo_residuals()[latest], GRID)
-        r = Y[it == k].mean(axis=0) - d
-        C = DenseError(R.dense() + emu.dense(), _symmetric=True)
-        out.append({"iteration": k, "chi2_per_obs": float(R.chi2(r) / d.size),
-                    "chi2_per_obs_model_error": float(C.chi2(r) / d.size)})
-    last = out[-1]
-    return {"target": target, "per_iteration": out, "converged": bool(last["chi2_per_obs_model_error"] <= target),
-            "converged_without_model_error": bool(last["chi2_per_obs"] <= target),
-            "first_passing_iteration": next((o["iteration"] for o in out if o["chi2_per_obs_model_error"] <= target),
-                                            None),
-            "first_passing_iteration_without_model_error": next(
-                (o["iteration"] for o in out if o["chi2_per_obs"] <= target), None)}
+def _ci(k: int, n: int) -> list:
+    if n == 0:
+        return [None, None]
+    ci = stats.binomtest(k, n).proportion_ci(0.95, method="exact")
+    return [float(ci.low), float(ci.high)]
 
 
-def posteriors(run: dict) -> dict:
-    from enkf import DiagonalError
+def score(records: list, lower, upper, names) -> dict:
+    """Coverage, SBC, widths and the restated bar over a set of twins."""
+    n = len(records)
+    out = {"n_twins": n, "converged": sum(r["converged"] for r in records),
+           "stop_reasons": dict(pd.Series([r["stop_reason"] for r in records]).value_counts()), "params": {}}
+    for j, p in enumerate(names):
+        rows = [r["params"][p] for r in records]
+        t = np.array([r["truth"][p] for r in records])
+        res = {}
+        for level, (a, b) in LEVELS.items():
+            lo = np.array([row[f"q{int(a * 100):02d}"] for row in rows])
+            hi = np.array([row[f"q{int(b * 100):02d}"] for row in rows])
+            k = int(np.sum((lo <= t) & (t <= hi)))
+            res[f"coverage_{level}"] = {"fraction": k / n if n else None, "ci95": _ci(k, n)}
+        lo90, hi90 = np.array([row["q05"] for row in rows]), np.array([row["q95"] for row in rows])
+        mean = np.array([row["mean"] for row in rows])
+        inside = (lo90 <= t) & (t <= hi90)
+        near = np.abs(mean / t - 1.0) <= BAR[p]
+        wide = 0.5 * (hi90 - lo90) > BAR[p] * t
+        u = np.array([row["sbc_u"] for row in rows])
+        counts = np.histogram(u, bins=5, range=(0.0, 1.0))[0]
+        res.update({
+            "sbc": {"bin_counts_5": counts.tolist(), "chi2_p": float(stats.chisquare(counts).pvalue) if n else None,
+                    "ks_p": float(stats.kstest(u, "uniform").pvalue) if n else None},
+            "width_over_prior_median": float(np.median((hi90 - lo90) / (0.9 * (upper[j] - lower[j])))),
+            "half_width_90_rel_median": float(np.median(0.5 * (hi90 - lo90) / t)),
+            "mean_rel_error_median_abs": float(np.median(np.abs(mean / t - 1.0))),
+            "bar": {"within_bar": int(np.sum(near)), "wider_and_covers": int(np.sum(~near & wide & inside)),
+                    "fraction_met": float(np.mean(near | (wide & inside)))},
+        })
+        out["params"][p] = res
+    return out
 
-    X, Y, it, truth = run["X"], run["Y"], run["iteration"], run["truth"]
-    last = it == it.max()
-    err = DiagonalError(run["sigma"])
-    t0 = time.perf_counter()
-    ces = emulator_posterior(X, Y, last, run["d"], err, lower=LOWER, upper=UPPER, times=GRID,
-                             rng=np.random.default_rng([int(run["seed"]), 18]), start=X[last], names=NAMES)
-    ces_s = time.perf_counter() - t0
-    return {"ensemble": _scores(interval_summary(X[last], NAMES), truth),
-            "ces": {**_scores(ces.summary, truth), "sampler": {k: ces.diagnostics[k] for k in (
-                "steps", "autocorr_time", "acceptance_fraction", "effective_samples", "converged_chain",
-                "emulator_error", "emulator", "emulated_mean_chi2_per_obs")}, "wall_s": ces_s},
-            "stopping": stopping(run)}
 
-
-def aggregate(rows: list[dict], method: str) -> dict:
-    res = [r[method] for r in rows]
-    return {
-        "coverage_50": {p: float(np.mean([r["in_50"][p] for r in res])) for p in NAMES},
-        "coverage_90": {p: float(np.mean([r["in_90"][p] for r in res])) for p in NAMES},
-        "within_bar": float(np.mean([r["within_bar"] for r in res])),
-        "mean_abs_rel_error": {p: float(np.mean([abs(r["rel_error"][p]) for r in res])) for p in NAMES},
-        "max_abs_rel_error": {p: float(np.max([abs(r["rel_error"][p]) for r in res])) for p in NAMES},
-    }
-
-
-def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--twins", type=int, default=20)
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--twins", type=int, default=50)
+    ap.add_argument("--misspecified", type=int, default=10)
     ap.add_argument("--cores", type=int, default=2)
-    ap.add_argument("--seed", type=int, default=18, help="seed of the truth design; twin i uses seed + 1 + i")
-    ap.add_argument("--cache", type=Path, default=Path("benchmarks/results/coverage_cache"))
-    args = ap.parse_args()
-    args.cache.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
-    rows, sim_s, cached = [], 0.0, 0
-    with get_context("fork").Pool(args.cores) as pool:
-        for i, truth in enumerate(truths(args.twins, args.seed)):
-            seed = args.seed + 1 + i
-            path = args.cache / f"twin_{seed}.npz"
-            run = dict(np.load(path)) if path.is_file() else None
-            if run is None or not np.allclose(run["truth"], truth, rtol=1e-12):  # a cache of another design
-                run = None
-            cached += run is not None
-            if run is None:
-                ts = time.perf_counter()
-                run = simulate_twin(pool, truth, seed)
-                sim_s += time.perf_counter() - ts
-                tmp = path.with_suffix(".tmp.npz")
-                np.savez(tmp, **run)
+    ap.add_argument("--seed", type=int, default=30)
+    ap.add_argument("--cache", default=str(ROOT / "benchmarks" / "cache" / "coverage"))
+    ap.add_argument("--out", default=None)
+    args = ap.parse_args(argv)
+    exp = twin_experiment()
+    spec = ExperimentSpec.from_config(EXPERIMENT, exp)
+    cache = Path(args.cache)
+    cache.mkdir(parents=True, exist_ok=True)
+    sets = {"well_specified": (args.twins, "fast", args.seed), "misspecified": (args.misspecified, "standard",
+                                                                               args.seed + 1)}
+    started, simulated, result = time.time(), 0, {}
+    with get_context("spawn").Pool(args.cores) as pool:
+        for name, (n, data_preset, seed) in sets.items():
+            records = []
+            for i, truth in enumerate(truths(n, spec.lower, spec.upper, seed)):
+                path = cache / f"{name}_{seed}_{i:03d}.json"
+                if path.is_file():
+                    records.append(json.loads(path.read_text()))
+                    continue
+                rec = run_twin(pool, exp, truth, 1000 * seed + i, data_preset)
+                tmp = path.with_suffix(".tmp")
+                tmp.write_text(json.dumps(rec, default=float))
                 tmp.replace(path)
-            rows.append({"seed": seed, "truth": dict(zip(NAMES, run["truth"].tolist())),
-                         "n_runs": int(run["X"].shape[0]), **posteriors(run)})
-    print(json.dumps({
-        "benchmark": "posterior_interval_coverage", "preset": "fast", "twins": args.twins, "n_members": 25,
-        "analyses": 3, "noise": "1 % of the peak, white", "truth_design": "LHS of the central 80 % of the box",
-        "goal": {"coverage_90": [0.80, 0.97], "coverage_50": [0.35, 0.65], "within_bar": 0.90},
-        "ensemble": aggregate(rows, "ensemble"), "ces": aggregate(rows, "ces"),
-        "stopping": {"converged_at_last_iteration": float(np.mean([r["stopping"]["converged"] for r in rows])),
-                     "converged_without_model_error": float(np.mean([r["stopping"]["converged_without_model_error"]
-                                                                     for r in rows])),
-                     "first_passing_iteration": [r["stopping"]["first_passing_iteration"] for r in rows],
-                     "first_passing_iteration_without_model_error": [
-                         r["stopping"]["first_passing_iteration_without_model_error"] for r in rows]},
-        "runs": rows,
-        "twins_from_cache": cached, "simulation_wall_s": sim_s, "wall_s": time.perf_counter() - t0, "cores": args.cores,
-    }, indent=2))
+                records.append(rec)
+                simulated += 1
+                print(f"{name} {i + 1}/{n}: {rec['stop_reason']}", file=__import__("sys").stderr, flush=True)
+            result[name] = {"summary": score(records, spec.lower, spec.upper, spec.names), "twins": records}
+    out = {"benchmark": "bench_coverage", "experiment": EXPERIMENT, "method": exp["method"],
+           "ensemble_size": exp["ensemble_size"], "window_s": [exp["observations"]["t_start"],
+                                                               exp["observations"]["t_end"]],
+           "model_error": exp["observations"].get("model_error"), "cores": os.cpu_count(),
+           "pool_workers": args.cores, "twins_simulated_this_call": simulated,
+           "wall_s_this_call": time.time() - started, **result}
+    text = json.dumps(out, indent=1, default=lambda v: v.item() if hasattr(v, "item") else str(v))
+    if args.out:
+        tmp = Path(args.out).with_suffix(".tmp")
+        tmp.write_text(text)
+        tmp.replace(args.out)
+    print(text)
+    return out
 
 
 if __name__ == "__main__":
