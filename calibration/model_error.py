@@ -147,8 +147,10 @@ def compare_with_inflated_noise(obs: Observations, Y: np.ndarray, alive: np.ndar
         sub = obs.of_record(rec)
         infl = predictive_coverage(Y[:, sl], obs.values[sl], _scaled(sub.error_model(), factor), rng, 0.9, alive=alive)
         ar1 = predictive_coverage(Y[:, sl], obs.values[sl], _dense(Cd[sl, sl]), rng, 0.9, alive=alive)
+        bare = predictive_coverage(Y[:, sl], obs.values[sl], sub.error_model(), rng, 0.9, alive=alive)
         out[rec] = {"inflation_factor": factor, "loglik_inflated": ll_inf, "loglik_ar1": ll_ar1,
                     "coverage_90_inflated": infl["all"], "coverage_90_ar1": ar1["all"],
+                    "coverage_90_noise_only": bare["all"],
                     "discrepancy_sigma": disc["records"][rec]["sigma"],
                     "discrepancy_corr_time_s": disc["records"][rec]["corr_time_s"]}
     return out

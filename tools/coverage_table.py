@@ -1,0 +1,84 @@
+"""The README's coverage table, generated from the coverage benchmark's JSON (one source for the numbers).
+
+    python tools/coverage_table.py benchmarks/results/bench_coverage_<date>.json          # print it
+    python tools/coverage_table.py benchmarks/results/bench_coverage_<date>.json --readme  # rewrite README's block
+
+The block sits between ``<!-- coverage-table:start -->`` and ``<!-- coverage-table:end -->`` in
+README.md; ``tests/test_docs_tables.py`` checks that it equals what this tool makes from the JSON named
+in the block.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+START, END = "<!-- coverage-table:start -->", "<!-- coverage-table:end -->"
+NAMES = ("sigma_t", "E_t")
+
+
+def _pct(x) -> str:
+    return "-" if x is None else f"{100 * x:.0f} %"
+
+
+def _cov(c: dict) -> str:
+    lo, hi = c["ci95"]
+    return f"{_pct(c['fraction'])} [{_pct(lo)}, {_pct(hi)}]"
+
+
+def table(bench: dict, source: str) -> str:
+    rows = ["| twins | n | converged | 90 % covers (`sigma_t` / `E_t`) | 50 % covers | SBC uniformity p (chi^2) "
+            "| 90 % width / prior's | median 90 % half-width | restated bar met |",
+            "|---|---|---|---|---|---|---|---|---|"]
+    for name in ("well_specified", "misspecified"):
+        if name not in bench or not bench[name]["twins"]:
+            continue
+        s = bench[name]["summary"]
+        p = s["params"]
+
+        def both(f):
+            return " / ".join(f(p[q]) for q in NAMES)
+
+        def sbc(q):
+            return f"{q['sbc']['chi2_p']:.2g}"
+
+        def width(q):
+            return f"{q['width_over_prior_median']:.2f}"
+
+        rows.append(
+            f"| {name.replace('_', '-')} | {s['n_twins']} | {s['converged']} "
+            f"| {both(lambda q: _cov(q['coverage_90']))} | {both(lambda q: _cov(q['coverage_50']))} "
+            f"| {both(sbc)} | {both(width)} | {both(lambda q: _pct(q['half_width_90_rel_median']))} "
+            f"| {both(lambda q: _pct(q['bar']['fraction_met']))} |")
+    head = (f"From `{source}` ({bench['method']}, N = {bench['ensemble_size']}, window "
+            f"{bench['window_s'][0] * 1e6:.0f}-{bench['window_s'][1] * 1e6:.0f} us; brackets: binomial 95 % intervals):")
+    return "\n".join([head, "", *rows])
+
+
+def block(path: str) -> str:
+    bench = json.loads((ROOT / path).read_text())
+    return f"{START}\n{table(bench, path)}\n{END}"
+
+
+def readme_block_source(text: str) -> str:
+    """The JSON path named in README's block."""
+    inner = text.split(START, 1)[1].split(END, 1)[0]
+    return inner.split("`", 2)[1]
+
+
+def main(argv) -> int:
+    path = argv[1]
+    if "--readme" in argv:
+        readme = ROOT / "README.md"
+        text = readme.read_text()
+        a, b = text.index(START), text.index(END) + len(END)
+        readme.write_text(text[:a] + block(path) + text[b:])
+    else:
+        print(block(path))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv))
