@@ -14,7 +14,7 @@ from shpb.atomic import atomic_write_text
 __all__ = ["PARAM_NAMES", "ConfigError", "atomic_write_text", "atomic_write_json", "atomic_write_csv", "read_json",
            "record_name", "experiment_records", "known_parameters"]
 
-#: Parameter names the simulator accepts (``--param NAME=VALUE``), SI units (DESIGN section 6).
+#: Parameter names the simulator accepts (``--param NAME=VALUE``), SI units (docs/workflow.md, "What goes where").
 PARAM_NAMES = ("sigma_n", "sigma_t", "E_n", "E_t", "a", "b", "c", "E", "nu", "rho")
 
 

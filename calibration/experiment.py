@@ -12,7 +12,7 @@ steps the Snakemake checkpoint loop runs as separate jobs, each a pure function 
    schedule is not exhausted), even if the decision is to stop: the decision is re-taken by the
    workflow from the stored numbers with the *current* stopping rule (:func:`decide`), so that
    changing a tolerance or the iteration budget never invalidates finished iterations.
-4. :func:`summary` -- ``summary.json`` (DESIGN section 6) from all iterations and the forecast.
+4. :func:`summary` -- ``summary.json`` (docs/workflow.md, "What goes where") from all iterations and the forecast.
 
 Randomness: one integer seed per experiment. Every draw uses its own generator
 ``default_rng(SeedSequence(seed, spawn_key=(purpose, k)))`` (:func:`rng_for`): the LHS design, the
@@ -390,7 +390,7 @@ def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], 
             wall_s: float | None, simulation_wall_s: float, sensitivity: Mapping | None = None,
             iteration_params: Sequence[pd.DataFrame] | None = None, posterior_samples: pd.DataFrame | None = None,
             posterior_sampler: Mapping | None = None, predictive: Mapping | None = None) -> dict:
-    """``summary.json`` (DESIGN section 6): experiment, iterations, converged, stop_reason,
+    """``summary.json`` (docs/workflow.md, "What goes where"): experiment, iterations, converged, stop_reason,
     n_simulations, posterior, truth (twins), misfit per iteration, wall_s, per-record before/after
     misfits (before = prior ensemble mean, after = forecast with the posterior mean), and the
     ``verdict`` (calibration.verdict: ok, box_limited, worse_than_prior or not_converged, with the numbers and

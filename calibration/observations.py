@@ -1,6 +1,6 @@
 """Observations of a calibration: the observed specimen stress on a time grid, with its error model.
 
-Two sources (DESIGN section 1, steps 3 and 6):
+Two sources (docs/workflow.md, "The loop"):
 
 * **Twin experiments** (paper section 5.2): a reference simulation with known parameters gives the
   "truth" curve; it is sampled on the observation grid and noise drawn from the declared error model is

@@ -18,7 +18,7 @@ Nothing here imports Snakemake.
   ``curve.csv`` and ``run.json`` atomically whatever happened, except for a genuine crash before the
   last attempt, which raises so that Snakemake retries the job.
 
-Units are SI everywhere (DESIGN section 6).
+Units are SI everywhere (docs/workflow.md, "What goes where").
 """
 
 from __future__ import annotations

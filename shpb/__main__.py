@@ -1,7 +1,7 @@
 """Command line: `python -m shpb simulate ...` runs one SHPB simulation into a folder
 (`python -m shpb --version`: the package version).
 
-Writes DIR/curve.csv and DIR/run.json (DESIGN section 6). Exit codes: 0 ok, 3 the simulation
+Writes DIR/curve.csv and DIR/run.json (docs/workflow.md, "What goes where"). Exit codes: 0 ok, 3 the simulation
 failed numerically (run.json says why), 2 bad arguments or input files.
 """
 from __future__ import annotations

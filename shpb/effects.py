@@ -1,4 +1,4 @@
-"""Effect catalogue: switchable model extensions for the discrepancy loop (DESIGN section 4, issue 8).
+"""Effect catalogue: switchable model extensions for the discrepancy loop (docs/closing-the-loop.md).
 
 The base model declares none of these. Each effect is a named entry with its parameters (named
 ``<effect>.<param>``, SI units), a prior box, a null value (the value at which the effect is off and

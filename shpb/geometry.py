@@ -1,6 +1,6 @@
 """Meshed 2D SHPB geometries: incident bar, specimen, transmission bar, along x.
 
-Two set-ups (DESIGN section 4):
+Two set-ups (docs/shpb-models.md):
 
 * ``brazilian_disc`` -- the paper's case (Godinez & Rougier 2021, Figure 1): a granite disc between two
   steel bars, loaded by a velocity history at the incident bar's free end.

@@ -1,4 +1,4 @@
-"""Model parameters of the SHPB simulations: names (DESIGN section 6), defaults and validation.
+"""Model parameters of the SHPB simulations: names (docs/workflow.md, "What goes where"), defaults and validation.
 
 Names follow the paper: sigma_n, sigma_t [Pa] tensile and shear strength; E_n, E_t [J/m^2] mode I
 and mode II specific fracture energies; a, b, c the softening-curve shape; E [Pa], nu, rho [kg/m^3]

@@ -1,4 +1,4 @@
-"""Mesh-resolution presets of the SHPB geometries (DESIGN section 7).
+"""Mesh-resolution presets of the SHPB geometries (docs/shpb-models.md).
 
 A preset fixes element sizes, not triangle counts: the specimen's target mean edge length, the bars'
 edge length far from the specimen and near it. The counts then follow from the specimen's size. For the

@@ -1,6 +1,6 @@
 """One SHPB simulation: geometry + parameters + loading -> FDEM run -> lab-style curves.
 
-Measurement chain (DESIGN section 4): the specimen stress is computed from the bar-specimen contact
+Measurement chain (docs/shpb-models.md): the specimen stress is computed from the bar-specimen contact
 forces, F_front on the incident bar and F_back on the transmission bar: Brazilian disc
 sigma = 2 F / (pi d h), cylinder sigma = F / A_s with A_s = pi D^2 / 4; `stress_Pa` (the quantity
 the lab reports) uses F_back. Force balance R = 2 |F_front - F_back| / (F_front + F_back). Bar

@@ -11,7 +11,7 @@ from shpb.geometry import (GRANITE, STEEL_BAR, TITANIUM_BAR, Geometry, bar_thick
 from shpb.presets import PRESETS, Preset, get_preset
 
 PRESET_NAMES = ("fast", "standard", "paper")
-# DESIGN section 7 bands of specimen triangles; "paper" is ~17,500 (Godinez & Rougier 2021, section 3).
+# docs/shpb-models.md bands of specimen triangles; "paper" is ~17,500 (Godinez & Rougier 2021, section 3).
 DISC_BANDS = {"fast": (1000, 2000), "standard": (4000, 6000), "paper": (16000, 19000)}
 
 

@@ -6,7 +6,7 @@ failures, and end-to-end runs of `snakemake --cores 2`.
   test_workflow_analysis.py.
 * ``test_workflow_runs_end_to_end_and_a_second_run_has_nothing_to_do``: the real simulator
   (``python -m shpb simulate``, fast preset), a twin experiment with N = 8 and two ES-MDA analyses;
-  checks the DESIGN section 6 files, ``summary.json``, the misfit falling, and that a second
+  checks the files of docs/workflow.md ("What goes where"), ``summary.json``, the misfit falling, and that a second
   invocation has nothing to do.
 * Robustness tests (failed members, kill and resume, malformed observations) drive the workflow
   with a *stand-in* simulator written by this file into the test's folder (an analytic pulse through

@@ -1,6 +1,6 @@
 r"""Reduction of measured SHPB records to specimen stress, strain rate, strain and force balance.
 
-This is DESIGN section 4 ("Data reduction of measured records"). Input: a :class:`shpb.lab.records.RawRecord`
+The reduction of docs/measured-records.md. Input: a :class:`shpb.lab.records.RawRecord`
 (time axis + raw gauge channels of both bars) and a :class:`BarSetup`. Output: a :class:`ReducedRecord`
 on a common time axis at the specimen faces. Conventions: SI units, **compression positive**.
 
