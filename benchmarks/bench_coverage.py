@@ -21,8 +21,9 @@ width relative to the prior's 90 % width; the restated accuracy bar (mean within
 truth, or a 90 % interval wider than that bar which contains the truth) and the median 90 %
 half-widths relative to the truth; the stop reasons.
 
-Each twin's result is cached as JSON under ``--cache`` (default ``benchmarks/cache/coverage``), so an
-interrupted run resumes where it stopped. Prints one JSON object (and writes it with ``--out``), with
+Each twin's result is cached as JSON under ``--cache`` (default ``benchmarks/cache/coverage``, committed),
+so an interrupted run resumes where it stopped; ``--score-only`` scores what is cached (``complete``
+says whether every planned twin is in). Prints one JSON object (and writes it with ``--out``), with
 the wall time of the twins simulated in this call and the machine's core count.
 
 Run: ``python benchmarks/bench_coverage.py --cores 2 --out benchmarks/results/bench_coverage_<date>.json``
@@ -166,21 +167,26 @@ def main(argv=None) -> dict:
     ap.add_argument("--seed", type=int, default=30)
     ap.add_argument("--cache", default=str(ROOT / "benchmarks" / "cache" / "coverage"))
     ap.add_argument("--out", default=None)
+    ap.add_argument("--score-only", action="store_true",
+                    help="score the cached twins without simulating the missing ones (a partial result says so)")
     args = ap.parse_args(argv)
     exp = twin_experiment()
     spec = ExperimentSpec.from_config(EXPERIMENT, exp)
     cache = Path(args.cache)
     cache.mkdir(parents=True, exist_ok=True)
-    sets = {"well_specified": (args.twins, "fast", args.seed), "misspecified": (args.misspecified, "standard",
-                                                                               args.seed + 1)}
+    # the small misspecified set first, so that a run cut short has both
+    sets = {"misspecified": (args.misspecified, "standard", args.seed + 1),
+            "well_specified": (args.twins, "fast", args.seed)}
     started, simulated, result = time.time(), 0, {}
-    with get_context("spawn").Pool(args.cores) as pool:
+    with get_context("spawn").Pool(max(1, args.cores)) as pool:
         for name, (n, data_preset, seed) in sets.items():
             records = []
             for i, truth in enumerate(truths(n, spec.lower, spec.upper, seed)):
                 path = cache / f"{name}_{seed}_{i:03d}.json"
                 if path.is_file():
                     records.append(json.loads(path.read_text()))
+                    continue
+                if args.score_only:
                     continue
                 rec = run_twin(pool, exp, truth, 1000 * seed + i, data_preset)
                 tmp = path.with_suffix(".tmp")
@@ -189,7 +195,9 @@ def main(argv=None) -> dict:
                 records.append(rec)
                 simulated += 1
                 print(f"{name} {i + 1}/{n}: {rec['stop_reason']}", file=__import__("sys").stderr, flush=True)
-            result[name] = {"summary": score(records, spec.lower, spec.upper, spec.names), "twins": records}
+            result[name] = {"planned": n, "complete": len(records) == n,
+                            "summary": score(records, spec.lower, spec.upper, spec.names) if records else None,
+                            "twins": records}
     out = {"benchmark": "bench_coverage", "experiment": EXPERIMENT, "method": exp["method"],
            "ensemble_size": exp["ensemble_size"], "window_s": [exp["observations"]["t_start"],
                                                                exp["observations"]["t_end"]],

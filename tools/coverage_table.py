@@ -35,6 +35,7 @@ def table(bench: dict, source: str) -> str:
     for name in ("well_specified", "misspecified"):
         if name not in bench or not bench[name]["twins"]:
             continue
+        done = "" if bench[name].get("complete", True) else f" of {bench[name]['planned']} planned"
         s = bench[name]["summary"]
         p = s["params"]
 
@@ -48,7 +49,7 @@ def table(bench: dict, source: str) -> str:
             return f"{q['width_over_prior_median']:.2f}"
 
         rows.append(
-            f"| {name.replace('_', '-')} | {s['n_twins']} | {s['converged']} "
+            f"| {name.replace('_', '-')} | {s['n_twins']}{done} | {s['converged']} "
             f"| {both(lambda q: _cov(q['coverage_90']))} | {both(lambda q: _cov(q['coverage_50']))} "
             f"| {both(sbc)} | {both(width)} | {both(lambda q: _pct(q['half_width_90_rel_median']))} "
             f"| {both(lambda q: _pct(q['bar']['fraction_met']))} |")

@@ -1,0 +1,59 @@
+"""The coverage benchmark's scoring can tell a calibrated posterior from an overconfident one and from
+the prior (benchmarks/bench_coverage.py ``score``), on synthetic posteriors with known calibration.
+
+Each synthetic twin: a truth drawn from the box; a posterior sample of 25 members drawn around a
+centre that is itself drawn from N(truth, s^2), with spread s (calibrated: the truth is then a draw
+from the posterior's predictive of the centre), or s/3 (overconfident), or the whole box (the prior).
+"""
+
+import numpy as np
+import pytest
+
+from benchmarks.bench_coverage import score
+
+NAMES = ("sigma_t", "E_t")
+LOWER, UPPER = np.array([4e6, 200.0]), np.array([6e7, 2400.0])
+
+
+def _records(kind: str, n: int = 200, seed: int = 0) -> list:
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(n):
+        truth = LOWER + (UPPER - LOWER) * rng.uniform(0.2, 0.8, 2)
+        s = 0.03 * truth
+        if kind == "prior":
+            post = LOWER + (UPPER - LOWER) * rng.uniform(0, 1, (400, 2))
+        else:
+            centre = truth + s * rng.standard_normal(2)
+            post = centre + (s if kind == "calibrated" else s / 3) * rng.standard_normal((400, 2))
+        rec = {"truth": dict(zip(NAMES, truth)), "converged": True, "stop_reason": "discrepancy", "params": {}}
+        for j, p in enumerate(NAMES):
+            x = post[:, j]
+            q = dict(zip(("q05", "q25", "q75", "q95"), np.quantile(x, [0.05, 0.25, 0.75, 0.95])))
+            rec["params"][p] = {"mean": x.mean(), **q, "sbc_u": (np.sum(x < truth[j]) + 0.5) / (x.size + 1)}
+        out.append(rec)
+    return out
+
+
+def test_a_calibrated_posterior_passes_the_coverage_and_rank_checks():
+    """Centre ~ N(truth, s^2), posterior N(centre, s^2): the flat-prior posterior of one Gaussian
+    observation, calibrated by construction."""
+    s = score(_records("calibrated"), LOWER, UPPER, NAMES)
+    for p in NAMES:
+        r = s["params"][p]
+        lo, hi = r["coverage_90"]["ci95"]
+        assert lo <= 0.9 <= hi
+        lo, hi = r["coverage_50"]["ci95"]
+        assert lo <= 0.5 <= hi
+        assert r["sbc"]["chi2_p"] > 0.01 and r["sbc"]["ks_p"] > 0.01
+        assert r["width_over_prior_median"] < 0.2
+
+
+def test_overconfidence_fails_the_rank_test_and_the_prior_shows_as_width():
+    over = score(_records("overconfident"), LOWER, UPPER, NAMES)
+    prior = score(_records("prior"), LOWER, UPPER, NAMES)
+    for p in NAMES:
+        assert over["params"][p]["coverage_90"]["ci95"][1] < 0.8
+        assert over["params"][p]["sbc"]["chi2_p"] < 0.01
+        assert prior["params"][p]["coverage_90"]["fraction"] == pytest.approx(1.0, abs=0.05)
+        assert prior["params"][p]["width_over_prior_median"] == pytest.approx(1.0, abs=0.05)
