@@ -553,7 +553,7 @@ def experiment_outcome(*, name: str, exp: Mapping, params: Sequence[pd.DataFrame
     R = reported_ensemble(spec, analyses, params)[0]
     # The band of the reported ensemble's members (also under posterior: emulator_mcmc, whose samples
     # have no simulated curves) with the full error model of its analysis.
-    predictive = posterior_predictive(obs, np.asarray(responses[R], float), np.asarray(analyses[R]["alive"], bool),
+    predictive, predictive_check = posterior_predictive(obs, np.asarray(responses[R], float), np.asarray(analyses[R]["alive"], bool),
                                       analyses[R], rng_for(spec.seed, "predictive"))
     out = summary(spec=spec, exp=exp, analyses=analyses, decision=decision, final_params=params[K],
                   final_alive=alive, forecast_misfit=fc_misfit,
@@ -561,6 +561,7 @@ def experiment_outcome(*, name: str, exp: Mapping, params: Sequence[pd.DataFrame
                   wall_s=None if started is None or finished is None else finished - started,
                   simulation_wall_s=sim_wall, sensitivity=sens, iteration_params=params,
                   posterior_samples=posterior_samples, posterior_sampler=posterior_sampler, predictive=predictive)
+    out["predictive_check_90"] = predictive_check
     if posterior_samples is not None:
         return out, posterior_samples
     R = int(out["posterior_iteration"])

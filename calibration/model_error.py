@@ -96,12 +96,20 @@ def misfit_block(Y: np.ndarray, obs: Observations, noise: ObservationError, tota
 
 
 def posterior_predictive(obs: Observations, Y: np.ndarray, alive: np.ndarray, analysis: Mapping,
-                         rng: np.random.Generator, level: float = 0.9) -> dict:
-    """``{record: coverage}``: the fraction of each record's observations inside the ``level``
-    posterior-predictive band of the members ``Y`` with the full error model of ``analysis``."""
+                         rng: np.random.Generator, level: float = 0.9) -> tuple[dict, dict]:
+    """``({record: coverage}, {record: check})``: the fraction of each record's observations inside the
+    ``level`` posterior-predictive band of the members ``Y`` with the full error model of
+    ``analysis``, and the check of that fraction against its spread for data drawn from the
+    predictive itself (``expected_5_95``; ``consistent`` when the fraction lies inside)."""
     C = stored_error(obs, analysis)
-    cov = predictive_coverage(Y, obs.values, C, rng, level, groups=obs.groups, alive=alive)
-    return {rec: cov["groups"][i] for i, rec in enumerate(obs.records)}
+    cov = predictive_coverage(Y, obs.values, C, rng, level, groups=obs.groups, alive=alive, n_replicates=400)
+    fractions = {rec: cov["groups"][i] for i, rec in enumerate(obs.records)}
+    checks = {}
+    for i, rec in enumerate(obs.records):
+        lo, hi = cov["reference"][i]
+        checks[rec] = {"coverage": fractions[rec], "expected_5_95": [lo, hi],
+                       "consistent": bool(lo <= fractions[rec] <= hi)}
+    return fractions, checks
 
 
 

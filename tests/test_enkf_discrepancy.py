@@ -151,3 +151,21 @@ def test_predictive_coverage_is_calibrated_with_the_full_error_model_and_not_wit
     assert 0.80 <= full["all"] <= 0.98
     assert all(0.75 <= v <= 0.99 for v in full["groups"].values())
     assert bare["all"] < 0.5
+
+
+def test_the_predictive_check_judges_coverage_against_its_own_spread():
+    """With an error correlated over the whole record (tau = 100 steps), a correct model's coverage
+    fraction is nearly all-or-nothing: the reference range is wide and holds the observed fraction;
+    an error model 5 times too small is caught."""
+    rng = np.random.default_rng(4)
+    t1 = np.arange(M) * DT
+    from enkf import DenseError
+    C = DenseError(np.eye(M) * SIGMA_E ** 2 + ar1_covariance(SIGMA_D, 100 * DT, t1), _symmetric=True)
+    Y = pulse(np.array([100.0, 200e-6]), t1)[None, :] * (1.0 + 0.001 * rng.standard_normal((8, 1)))
+    d = Y[0] + C.sample(rng, 1)[0]
+    ok = predictive_coverage(Y, d, C, 1, n_replicates=400)
+    lo, hi = ok["reference"][0]
+    assert lo <= ok["all"] <= hi and hi - lo > 0.2
+    small = DenseError(C.dense() / 25.0, _symmetric=True)
+    bad = predictive_coverage(Y, d, small, 1, n_replicates=400)
+    assert not (bad["reference"][0][0] <= bad["all"] <= bad["reference"][0][1])
