@@ -1,0 +1,58 @@
+"""The default run's results as a Markdown table, generated from its ``summary.json`` files (one source).
+
+    python tools/results_table.py results twin_ref marble_loop
+
+Per experiment: the verdict and its flags, how the loop stopped, the posterior mean with its 90 %
+interval per parameter (and the truth for twins), the estimated discrepancy per record (its RMS size
+and correlation time against the instrument noise) and the posterior-predictive check per record.
+Units: MPa for stresses, J/m^2 for energies.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+SCALE = {"sigma_t": (1e-6, "MPa"), "sigma_n": (1e-6, "MPa"), "E_t": (1.0, "J/m^2"), "E_n": (1.0, "J/m^2")}
+
+
+def _param(name: str, post: dict, truth: dict | None) -> str:
+    f, unit = SCALE.get(name, (1.0, ""))
+    text = f"`{name}` {post['mean'] * f:.4g} [{post['q05'] * f:.4g}, {post['q95'] * f:.4g}] {unit}"
+    if truth and name in truth:
+        text += f" (truth {truth[name] * f:.4g})"
+    return text
+
+
+def _discrepancy(s: dict) -> str:
+    disc = (s.get("discrepancy") or {}).get("records") or {}
+    if not disc:
+        return "none"
+    return "; ".join(f"{rec}: {v['sigma'] / 1e6:.3g} MPa ({v['sigma_over_noise']:.3g} x noise), "
+                     f"{v['corr_time_s'] * 1e6:.3g} us" for rec, v in disc.items())
+
+
+def _check(s: dict) -> str:
+    checks = s.get("predictive_check_90") or {}
+    return "; ".join(f"{rec}: {c['coverage']:.2f} (expected {c['expected_5_95'][0]:.2f}-{c['expected_5_95'][1]:.2f}"
+                     f"{', consistent' if c['consistent'] else ', NOT consistent'})" for rec, c in checks.items())
+
+
+def row(s: dict) -> str:
+    v = s["verdict"]
+    stop = f"{s['stop_reason']} after {s['iterations']} analyses"
+    params = "<br>".join(_param(p, s["posterior"][p], s.get("truth")) for p in s["posterior"])
+    return (f"| `{s['experiment']}` | {v['verdict']} ({', '.join(v['flags']) or 'no flags'}) | {stop} | {params} "
+            f"| {_discrepancy(s)} | {_check(s)} |")
+
+
+def table(folder: Path, names) -> str:
+    rows = ["| experiment | verdict (flags) | stop | posterior mean [90 % interval] | discrepancy (RMS, correlation time) "
+            "| 90 % predictive coverage per record |", "|---|---|---|---|---|---|"]
+    rows += [row(json.loads((folder / n / "summary.json").read_text())) for n in names]
+    return "\n".join(rows)
+
+
+if __name__ == "__main__":
+    print(table(Path(sys.argv[1]), sys.argv[2:]))
