@@ -34,6 +34,10 @@ from scipy.stats import qmc
 from enkf import BoxTransform, assimilate, esmda_alphas, latin_hypercube
 from enkf.covariance import ObservationError
 from enkf.diagnosis import Candidate, CalibrationResult, curve_errors, diagnose_loop, finite_difference_sensitivity
+# the report writers and the effect catalogue, for the workflow's diagnosis step (scripts/ reach enkf
+# and shpb through calibration only)
+from enkf.diagnosis import covariate_trends, report_to_json, write_report  # noqa: F401
+from shpb.effects import get_effect  # noqa: F401
 from enkf.emulator import CurveEmulator, with_emulator_error
 
 from shpb import effects as fx

@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 # the base contracts, re-exported: the scripts and tests import them from here
+from shpb.contract import CURVE_COLUMNS as _SIM_CURVE_COLUMNS, EXIT_BAD_INPUT, EXIT_NUMERICAL, EXIT_OK
 from .contracts import (PARAM_NAMES, ConfigError, atomic_write_csv, atomic_write_json,  # noqa: F401
                         atomic_write_text, experiment_records, known_parameters, read_json, record_name)
 from .config_files import config_sources, error_origin, load_config_file  # noqa: F401
@@ -54,9 +55,9 @@ __all__ = [
     "read_responses", "known_parameters", "coerce_yaml_floats",
 ]
 
-#: Columns of a simulated curve (``python -m shpb simulate`` contract).
-CURVE_COLUMNS = ("time_s", "stress_Pa", "stress_front_Pa", "stress_back_Pa", "force_balance", "centre_sxx_Pa",
-                 "eps_incident_gauge", "eps_transmitted_gauge")
+#: Columns of a simulated curve: the simulator's own definition (``python -m shpb simulate`` contract),
+#: so that a failed member's header cannot drift from a successful member's.
+CURVE_COLUMNS = tuple(_SIM_CURVE_COLUMNS)
 
 #: Default simulator command: the package's command-line entry.
 DEFAULT_SIMULATOR = "python -m shpb simulate"
@@ -214,26 +215,7 @@ def _semantic_errors(config: Mapping, base: Path) -> list[str]:
             for key in ("truth", "incident_record"):
                 if obs.get(key) is not None:
                     errors.append(f"{where}.observations.{key}: only twin experiments take it")
-        diag = exp.get("diagnosis")
-        if diag is not None:
-            if exp.get("kind") != "measured":
-                errors.append(f"{where}.diagnosis: the discrepancy loop runs on measured experiments (a twin "
-                              f"knows its model; the planted-effect tests cover twins)")
-            held = diag.get("heldout_records") or []
-            calib = {record_name(r) for r in obs.get("records") or []}
-            for r in held:
-                p = Path(r) if Path(r).is_absolute() else base / r
-                if not p.is_file():
-                    errors.append(f"{where}.diagnosis.heldout_records: file not found: {r} (looked at {p})")
-                if record_name(r) in calib:
-                    errors.append(f"{where}.diagnosis.heldout_records: {record_name(r)} is also a calibration "
-                                  f"record; held-out data must not be used to calibrate")
-            for key in diag.get("physical_upper") or {}:
-                if key.split(".")[0] not in (diag.get("candidates") or []):
-                    errors.append(f"{where}.diagnosis.physical_upper.{key}: not a parameter of a listed candidate")
-            for key in diag.get("scopes") or {}:
-                if key not in (diag.get("candidates") or []):
-                    errors.append(f"{where}.diagnosis.scopes.{key}: not a listed candidate")
+        errors += _diagnosis_errors(where, exp, obs, base)
         method = exp.get("method")
         if method == "esmda" and exp.get("esmda", {}).get("alphas") is not None:
             alphas = np.asarray(exp["esmda"]["alphas"], float)
@@ -258,6 +240,33 @@ def _semantic_errors(config: Mapping, base: Path) -> list[str]:
 
 
 _YAML11_FLOAT = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)[eE][+-]?\d+$")
+
+
+def _diagnosis_errors(where: str, exp: Mapping, obs: Mapping, base: Path) -> list[str]:
+    """The semantic checks of an experiment's ``diagnosis`` block."""
+    diag = exp.get("diagnosis")
+    errors: list[str] = []
+    if diag is None:
+        return errors
+    if exp.get("kind") != "measured":
+        errors.append(f"{where}.diagnosis: the discrepancy loop runs on measured experiments (a twin "
+                      f"knows its model; the planted-effect tests cover twins)")
+    held = diag.get("heldout_records") or []
+    calib = {record_name(r) for r in obs.get("records") or []}
+    for r in held:
+        p = Path(r) if Path(r).is_absolute() else base / r
+        if not p.is_file():
+            errors.append(f"{where}.diagnosis.heldout_records: file not found: {r} (looked at {p})")
+        if record_name(r) in calib:
+            errors.append(f"{where}.diagnosis.heldout_records: {record_name(r)} is also a calibration "
+                          f"record; held-out data must not be used to calibrate")
+    for key in diag.get("physical_upper") or {}:
+        if key.split(".")[0] not in (diag.get("candidates") or []):
+            errors.append(f"{where}.diagnosis.physical_upper.{key}: not a parameter of a listed candidate")
+    for key in diag.get("scopes") or {}:
+        if key not in (diag.get("candidates") or []):
+            errors.append(f"{where}.diagnosis.scopes.{key}: not a listed candidate")
+    return errors
 
 
 def coerce_yaml_floats(obj):
@@ -347,6 +356,14 @@ def simulate_argv(command: Sequence[str], *, geometry: str, preset: str, params:
     return argv + ["--out", str(out_dir)]
 
 
+def failure_card(path, text: str):
+    """A picture saying why a run has no fracture snapshots (:func:`shpb.snapshots.failure_card`; imported
+    here on call, so that member jobs do not load matplotlib)."""
+    from shpb.snapshots import failure_card as card
+
+    return card(path, text)
+
+
 def failed_curve_text() -> str:
     """The curve file of a failed member: the contract's header and no rows (all values missing)."""
     return ",".join(CURVE_COLUMNS) + "\n"
@@ -405,7 +422,7 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
                                         f"--- stdout\n{proc.stdout}\n--- stderr\n{proc.stderr}\n")
         run_json, curve_csv = tmp / "run.json", tmp / "curve.csv"
         extra = dict(extra_run or {}, attempt=attempt, exit_code=proc.returncode)
-        if proc.returncode == 0 and run_json.is_file() and curve_csv.is_file():
+        if proc.returncode == EXIT_OK and run_json.is_file() and curve_csv.is_file():
             run = read_json(run_json)
             run.update(extra)
             if (tmp / "snapshots").is_dir():
@@ -414,10 +431,10 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
             os.replace(curve_csv, curve_path)
             atomic_write_json(run_path, _jsonable(run))
             return run
-        if proc.returncode == 2:
+        if proc.returncode == EXIT_BAD_INPUT:
             raise SimulatorRejected(f"the simulator rejected its arguments or input (exit code 2): "
                                     f"{_tail(proc.stderr, 600) or 'no message'}\n  command: {shlex.join(argv)}")
-        if proc.returncode == 3:
+        if proc.returncode == EXIT_NUMERICAL:
             run = read_json(run_json) if run_json.is_file() else {}
             reason = run.get("reason") or _tail(proc.stderr) or f"exit code {proc.returncode}"
             run.update({"status": "failed", "reason": f"numerical failure: {reason}", "geometry": geometry,

@@ -3,10 +3,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from enkf.diagnosis import covariate_trends, report_to_json, write_report
-from shpb import effects as fx
-from calibration.diagnose import (EmulatedSHPB, diagnose, emulators_from_design, errors_per_record, model_grid,
-                                  record_calibrations, record_covariates, record_prior_centres)
+from calibration.diagnose import (EmulatedSHPB, covariate_trends, diagnose, emulators_from_design, errors_per_record,
+                                  get_effect, model_grid, record_calibrations, record_covariates, record_prior_centres,
+                                  report_to_json, write_report)
 from calibration.observations import read_curve, read_observations
 from calibration.workflow_io import atomic_write_csv, atomic_write_json, read_json
 
@@ -31,7 +30,7 @@ info = {**obs.meta.get("record_info", {}), **(held.meta.get("record_info", {}) i
 # per-record effects measured by the records' own waves (the face closure before load) centre their priors
 model = EmulatedSHPB(emulators, names, model_t, obs_times, record_centres=record_prior_centres(info, d["candidates"]))
 
-report = diagnose(model, base_names=meta["base_names"], candidates=[fx.get_effect(c) for c in d["candidates"]],
+report = diagnose(model, base_names=meta["base_names"], candidates=[get_effect(c) for c in d["candidates"]],
                   calib_records=obs.records, obs=obs.values, obs_error=obs.error_model(), times=obs.time,
                   heldout_records=held.records if held is not None else (),
                   heldout_obs=held.values if held is not None else None,

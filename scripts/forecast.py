@@ -2,8 +2,7 @@
 snapshots (a failed run gets a picture saying so instead of the damage maps)."""
 from pathlib import Path
 
-from shpb.snapshots import failure_card
-from calibration.workflow_io import read_json, run_member, simulator_command
+from calibration.workflow_io import failure_card, read_json, run_member, simulator_command
 
 sim = snakemake.params.sim
 run = run_member(command=simulator_command(sim["command"]), geometry=sim["geometry"], preset=sim["preset"],

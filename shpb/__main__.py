@@ -9,6 +9,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from . import contract
+
 
 def _parse_params(items):
     out = {}
@@ -85,15 +87,15 @@ def main(argv=None) -> int:
                        snapshots=_parse_snapshots(args.snapshots), mesh_seed=args.mesh_seed)
     except (ValueError, FileNotFoundError, KeyError) as exc:
         print(f"python -m shpb simulate: error: {exc}", file=sys.stderr)
-        return 2
+        return contract.EXIT_BAD_INPUT
     r = out.run
     print(f"{r['status']}: {r['geometry']} {r['preset']}, {r['n_triangles']} triangles, "
           f"{r['n_joints']} joints, {r['steps']} steps, {r['wall_s']:.1f} s, "
           f"peak {out.curve['stress_Pa'].max() / 1e6:.1f} MPa -> {args.out}")
     if r["status"] != "ok":
         print(f"simulation failed: {r['reason']}", file=sys.stderr)
-        return 3
-    return 0
+        return contract.EXIT_NUMERICAL
+    return contract.EXIT_OK
 
 
 if __name__ == "__main__":

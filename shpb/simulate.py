@@ -20,6 +20,7 @@ import pandas as pd
 from fdem import ContactParams, JointParams, Material, TractionBC, build_model, run
 from fdem.model import DEFAULT_SAFETY
 
+from . import contract
 from . import geometry as geo
 from .atomic import atomic_write_text
 from .fracture import PEAK_DROP, PEAK_FLOOR_PA, summarize
@@ -45,8 +46,7 @@ DISC_FLAT_HALF_ANGLE_DEG = 10.0
 # 150 us; the window ends before the fragments' free flight, which the curve does not need.
 DEFAULT_WINDOW = {"brazilian_disc": 160e-6, "cylinder": 400e-6}
 
-CURVE_COLUMNS = ["time_s", "stress_Pa", "stress_front_Pa", "stress_back_Pa", "force_balance",
-                 "centre_sxx_Pa", "centre_syy_Pa", "eps_incident_gauge", "eps_transmitted_gauge"]
+CURVE_COLUMNS = list(contract.CURVE_COLUMNS)
 
 
 @dataclass

@@ -112,3 +112,32 @@ def test_the_checker_sees_a_planted_circle_and_a_wrong_layer(tmp_path, monkeypat
     graph = _graph()
     assert graph["shpb.a"] == {"shpb.b"} and graph["shpb.b"] == {"shpb.a"}
     assert _cycles(graph) == [["shpb.a", "shpb.b", "shpb.a"]]
+
+
+def test_rule_scripts_reach_the_packages_through_calibration_only():
+    """scripts/ are the Snakemake rules' adapters: read inputs, call calibration, write outputs."""
+    bad = []
+    for path in sorted((REPO / "scripts").glob("*.py")):
+        for m in _imports("scripts." + path.stem, path):
+            if m and m.split(".")[0] in ("fdem", "shpb", "enkf"):
+                bad.append(f"{path.name} imports {m}")
+    assert not bad, bad
+
+
+#: Functions still over the limit, with their length as a ceiling that may only fall (issue 34: the
+#: residual diagnosis loop and the Freiburg reduction are to be split with the rework of each).
+MAX_FUNCTION_LINES = 120
+STILL_LONG = {"enkf/diagnosis/loop.py:diagnose_loop": 277, "shpb/lab/reduction.py:reduce_record": 210}
+
+
+def test_no_function_outside_the_engine_is_over_120_lines():
+    long = {}
+    for pkg in ("shpb", "enkf", "calibration", "scripts"):
+        for path in (REPO / pkg).rglob("*.py"):
+            for node in ast.walk(ast.parse(path.read_text())):
+                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    n = node.end_lineno - node.lineno + 1
+                    key = f"{path.relative_to(REPO)}:{node.name}"
+                    if n > STILL_LONG.get(key, MAX_FUNCTION_LINES):
+                        long[key] = n
+    assert not long, long
