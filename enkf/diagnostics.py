@@ -177,6 +177,10 @@ def member_table(params, names: Sequence[str] | None = None, responses=None, obs
     return table
 
 
-def _alive_mask(y: np.ndarray, alive) -> np.ndarray:
+def alive_mask(y: np.ndarray, alive=None) -> np.ndarray:
+    """Rows of ``y`` that are finite and (if ``alive`` is given) flagged alive."""
     finite = np.all(np.isfinite(y), axis=1)
     return finite if alive is None else finite & np.asarray(alive, bool)
+
+
+_alive_mask = alive_mask

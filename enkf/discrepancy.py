@@ -41,6 +41,7 @@ import numpy as np
 from scipy import linalg, optimize
 
 from .covariance import DenseError, ObservationError
+from .diagnostics import alive_mask
 
 __all__ = ["RecordDiscrepancy", "DiscrepancyEstimate", "ar1_covariance", "record_loglik",
            "fit_record_discrepancy", "estimate_discrepancy", "inflated_noise_factor", "combined_error"]
@@ -207,13 +208,11 @@ def estimate_discrepancy(residuals, noise: ObservationError, times, groups=None,
     """Profile-likelihood discrepancy from member residuals ``d - y_i`` (rows = members, NaN = failed).
 
     The member with the largest summed maximised log-likelihood gives the estimate (see the module
-    docstring), found by coordinate ascent (:func:`estimate_discrepancy`'s comment). ``split_times``: ``{group: t_s}``,
+    docstring), found by coordinate ascent (the comment in the body). ``split_times``: ``{group: t_s}``,
     where the amplitude may change (none: one amplitude per record).
     """
     Rr = np.atleast_2d(np.asarray(residuals, float))
-    ok = np.all(np.isfinite(Rr), axis=1)
-    if alive is not None:
-        ok &= np.asarray(alive, bool)
+    ok = alive_mask(Rr, alive)
     if not np.any(ok):
         raise ValueError("no alive member with a finite residual to estimate the discrepancy from")
     blocks, R, t, labels = _group_blocks(noise, times, groups)

@@ -15,6 +15,7 @@ import numpy as np
 
 from ._rng import RngLike, as_generator
 from .covariance import ObservationError
+from .diagnostics import alive_mask
 
 __all__ = ["predictive_band", "predictive_coverage"]
 
@@ -26,9 +27,7 @@ def predictive_band(responses, error: ObservationError, rng: RngLike, level: flo
     if not 0.0 < level < 1.0:
         raise ValueError("level must lie in (0, 1)")
     Y = np.atleast_2d(np.asarray(responses, float))
-    ok = np.all(np.isfinite(Y), axis=1)
-    if alive is not None:
-        ok &= np.asarray(alive, bool)
+    ok = alive_mask(Y, alive)
     if not np.any(ok):
         raise ValueError("no alive member to build a predictive band from")
     Ya = Y[ok]
@@ -59,7 +58,7 @@ def predictive_coverage(responses, obs, error: ObservationError, rng: RngLike, l
     out = {"all": float(np.mean(inside)), "groups": per, "level": level}
     if n_replicates > 0:
         Y = np.atleast_2d(np.asarray(responses, float))
-        ok = np.all(np.isfinite(Y), axis=1) & (np.ones(Y.shape[0], bool) if alive is None else np.asarray(alive, bool))
+        ok = alive_mask(Y, alive)
         pick = gen.choice(np.flatnonzero(ok), n_replicates)
         rep = Y[pick] + error.sample(gen, n_replicates)
         rin = (rep >= lo) & (rep <= hi)
