@@ -164,6 +164,17 @@ def compare_with_inflated_noise(obs: Observations, Y: np.ndarray, alive: np.ndar
     return out
 
 
+def linear_posterior_std(P: np.ndarray, Y: np.ndarray, obs_values: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """The Gauss-linear posterior std of each parameter, ``sqrt(diag((G^T C^-1 G)^-1))``, with ``G`` the
+    least-squares sensitivity of the members' responses to their parameters (flat prior): how wide an
+    error model ``C`` makes the intervals, other things equal."""
+    X = np.hstack([np.ones((P.shape[0], 1)), P - P.mean(axis=0)])
+    G = np.linalg.lstsq(X, Y, rcond=None)[0][1:].T
+    L = np.linalg.cholesky(C)
+    W = np.linalg.solve(L, G)
+    return np.sqrt(np.diag(np.linalg.inv(W.T @ W)))
+
+
 def _dense(C: np.ndarray):
     from enkf import DenseError
 

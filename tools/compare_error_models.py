@@ -5,7 +5,8 @@
 For the reported ensemble of each experiment (``summary.json``'s ``posterior_iteration``): per record
 the log-likelihood of the member carrying the discrepancy estimate, under ``R + D`` and under ``R``
 inflated until that member's chi^2 per observation is 1, and the 90 % posterior-predictive coverage
-of the members with either error model. Prints JSON.
+of the members with either error model; and the Gauss-linear posterior std of each parameter under
+either (the members' regression sensitivity): how wide each makes the intervals. Prints JSON.
 """
 
 from __future__ import annotations
@@ -17,7 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from calibration.experiment import rng_for
-from calibration.model_error import compare_with_inflated_noise
+import pandas as pd
+
+from calibration.model_error import compare_with_inflated_noise, linear_posterior_std, stored_error
 from calibration.observations import read_observations
 from calibration.workflow_io import read_responses
 
@@ -29,8 +32,18 @@ def compare(folder: Path) -> dict:
     analysis = json.loads((folder / f"iter_{R}" / "analysis.json").read_text())
     _, Y = read_responses(folder / f"iter_{R}" / "responses.csv")
     alive = np.asarray(analysis["alive"], bool)
-    return {"experiment": summary["experiment"], "iteration": R,
-            "records": compare_with_inflated_noise(obs, Y, alive, analysis, rng_for(summary["seed"], "predictive", 1))}
+    records = compare_with_inflated_noise(obs, Y, alive, analysis, rng_for(summary["seed"], "predictive", 1))
+    names = list(summary["posterior"])
+    P = pd.read_csv(folder / f"iter_{R}" / "params.csv")[names].to_numpy(float)[alive]
+    Cd = stored_error(obs, analysis).dense()
+    Ci = np.zeros_like(Cd)
+    for rec in obs.records:
+        sl = obs.record_slice(rec)
+        Ci[sl, sl] = records[rec]["inflation_factor"] * obs.of_record(rec).error_model().dense()
+    widths = {"ar1_discrepancy": linear_posterior_std(P, Y[alive], obs.values, Cd),
+              "inflated_noise": linear_posterior_std(P, Y[alive], obs.values, Ci)}
+    return {"experiment": summary["experiment"], "iteration": R, "records": records,
+            "linear_posterior_std": {k: dict(zip(names, v.tolist())) for k, v in widths.items()}}
 
 
 if __name__ == "__main__":
