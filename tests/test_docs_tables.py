@@ -1,0 +1,23 @@
+"""Numbers quoted in the README come from one generated source: the coverage table between its markers
+is exactly what tools/coverage_table.py makes from the benchmark JSON it names."""
+
+import importlib.util
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _tool():
+    spec = importlib.util.spec_from_file_location("coverage_table", ROOT / "tools" / "coverage_table.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_the_readme_coverage_table_is_generated_from_the_committed_benchmark_json():
+    tool = _tool()
+    text = (ROOT / "README.md").read_text()
+    source = tool.readme_block_source(text)
+    assert (ROOT / source).is_file(), source
+    start, end = text.index(tool.START), text.index(tool.END) + len(tool.END)
+    assert text[start:end] == tool.block(source)
