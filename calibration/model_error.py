@@ -17,9 +17,9 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from enkf import ObservationError
+from enkf import DenseError, ObservationError
 from enkf.diagnostics import member_misfit, mean_misfit
-from enkf.discrepancy import combined_error, estimate_discrepancy, inflated_noise_factor
+from enkf.discrepancy import combined_error, estimate_discrepancy, inflated_noise_factor, record_loglik
 from enkf.predictive import predictive_coverage
 
 from .observations import Observations
@@ -136,8 +136,6 @@ def compare_with_inflated_noise(obs: Observations, Y: np.ndarray, alive: np.ndar
     """The workflow's error model (``R + D`` of ``analysis``) against the simplest honest baseline, ``R``
     inflated per record until the carrying member's chi^2 per observation is 1: log-likelihood of that
     member's residual and 90 % predictive coverage, per record."""
-    from enkf.discrepancy import record_loglik
-
     disc = (analysis.get("model_error") or {}).get("discrepancy")
     if not disc:
         raise ValueError("this analysis has no estimated discrepancy to compare")
@@ -164,7 +162,7 @@ def compare_with_inflated_noise(obs: Observations, Y: np.ndarray, alive: np.ndar
     return out
 
 
-def linear_posterior_std(P: np.ndarray, Y: np.ndarray, obs_values: np.ndarray, C: np.ndarray) -> np.ndarray:
+def linear_posterior_std(P: np.ndarray, Y: np.ndarray, C: np.ndarray) -> np.ndarray:
     """The Gauss-linear posterior std of each parameter, ``sqrt(diag((G^T C^-1 G)^-1))``, with ``G`` the
     least-squares sensitivity of the members' responses to their parameters (flat prior): how wide an
     error model ``C`` makes the intervals, other things equal."""
@@ -175,9 +173,7 @@ def linear_posterior_std(P: np.ndarray, Y: np.ndarray, obs_values: np.ndarray, C
     return np.sqrt(np.diag(np.linalg.inv(W.T @ W)))
 
 
-def _dense(C: np.ndarray):
-    from enkf import DenseError
-
+def _dense(C: np.ndarray) -> DenseError:
     return DenseError(C, _symmetric=True)
 
 

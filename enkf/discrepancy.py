@@ -13,19 +13,19 @@ records independent. Without a split time ``sigma_pre = sigma_post`` (a stationa
 Why AR(1): a missing effect leaves a residual that is smooth on the scale of the observation step
 (a shifted onset, a peak too high, a fall too fast), so a white inflation would count each of the
 ``m`` correlated residuals as independent evidence; AR(1) is the simplest Markov process with a
-correlation time, and its two hyperparameters are identifiable from one record of ``m >> T / tau``
-samples.
+correlation time.
 
-How ``(sigma_d, tau_d)`` are estimated: by maximum likelihood jointly with the parameters, the
-parameters restricted to the ensemble's members (a profile likelihood over the sample of ``theta``
-the ensemble is). For each alive member ``i`` and record ``g`` the Gaussian log-likelihood
-``l_ig(h) = log N(d_g; y_ig, R_g + D_g(h))`` is maximised over ``h = (sigma_d, tau_d)``; the member
-with the largest ``sum_g max_h l_ig`` gives the estimate (a hyperparameter per record, because records
-at different strain rates miss by different amounts). Called at every analysis on that iteration's
-members, this is an iterative re-weighting: early (prior) ensembles carry parameter error in their
-best residual and get a larger ``D``, which damps their update; as the ensemble closes in, ``D``
-falls to what the best parameters cannot explain. ``sigma_d = 0`` is allowed (the noise-only model
-is always a candidate), so a model that fits to the noise gets no discrepancy.
+How ``h = (sigma_pre, sigma_post, tau_d)`` is estimated: by maximum likelihood jointly with the
+parameters, the parameters restricted to the ensemble's members (a profile likelihood over the sample
+of ``theta`` the ensemble is), one ``h`` per record (records at different strain rates miss by
+different amounts): ``max_i max_h sum_g log N(d_g; y_ig, R_g + D_g(h_g))``, found by coordinate ascent
+(fit the member of smallest residual, rank every member at its ``h``, refit the best if it differs).
+Called at every analysis on that iteration's members, this is an iterative re-weighting: early
+(prior) ensembles carry parameter error in their best residual and get a larger ``D``, which damps
+their update; as the ensemble closes in, ``D`` falls to what the best parameters cannot explain. A
+zero discrepancy is always a candidate, so a model that fits to the noise gets none. The estimate is
+biased low by the choice of the best member among N, which matters after the peak, where a record
+holds few correlation times.
 
 The simplest honest baseline, an inflation of ``R`` by the factor that brings the best member's
 chi^2 per observation to 1 (:func:`inflated_noise_factor`), is reported beside it for comparison.
@@ -82,7 +82,8 @@ def record_loglik(residual, noise_cov: np.ndarray, times, sigma: float, corr_tim
 
 @dataclass(frozen=True)
 class RecordDiscrepancy:
-    """The estimated discrepancy of one record and what it buys in likelihood."""
+    """The estimated discrepancy of one record and what it buys in likelihood. ``sigma``: the RMS of
+    ``s(t)`` over the record's observations, the discrepancy's size in one number."""
 
     sigma_pre: float
     sigma_post: float
@@ -92,15 +93,7 @@ class RecordDiscrepancy:
     loglik_noise_only: float
     n_obs: int
     noise_sigma: float
-    times: tuple = ()
-
-    @property
-    def sigma(self) -> float:
-        """The RMS of ``s(t)`` over the record's observations: the discrepancy's size in one number."""
-        t = np.asarray(self.times, float)
-        if t.size == 0:
-            return float(max(self.sigma_pre, self.sigma_post))
-        return float(np.sqrt(np.mean(_amplitude(self.sigma_pre, self.sigma_post, self.split_time, t) ** 2)))
+    sigma: float
 
     def term(self) -> tuple:
         return (self.sigma_pre, self.sigma_post, self.corr_time, self.split_time)
@@ -125,7 +118,7 @@ def fit_record_discrepancy(residual, noise_cov: np.ndarray, times, split_time: f
     t = np.asarray(times, float)
     noise_sigma = float(np.sqrt(np.mean(np.diag(noise_cov))))
     l0 = record_loglik(r, noise_cov, t, 0.0, 0.0)
-    none = RecordDiscrepancy(0.0, 0.0, 0.0, None, l0, l0, int(r.size), noise_sigma, tuple(t))
+    none = RecordDiscrepancy(0.0, 0.0, 0.0, None, l0, l0, int(r.size), noise_sigma, 0.0)
     rms = float(np.sqrt(np.mean(r * r)))
     if rms <= 0.0 or t.size < 4:
         return none
@@ -153,7 +146,8 @@ def fit_record_discrepancy(residual, noise_cov: np.ndarray, times, split_time: f
     if not math.isfinite(l1) or l1 <= l0:
         return none
     s_pre, s_post, tau = unpack(res.x)
-    return RecordDiscrepancy(s_pre, s_post, tau, split_time, l1, l0, int(r.size), noise_sigma, tuple(t))
+    rms = float(np.sqrt(np.mean(_amplitude(s_pre, s_post, split_time, t) ** 2)))
+    return RecordDiscrepancy(s_pre, s_post, tau, split_time, l1, l0, int(r.size), noise_sigma, rms)
 
 
 @dataclass(frozen=True)
@@ -180,7 +174,7 @@ class DiscrepancyEstimate:
 
 def combined_error(noise: ObservationError, times, groups, terms: Mapping, *, as_matrix: bool = False):
     """``R`` plus one AR(1) term per group, ``terms = {group: (sigma_pre, sigma_post, tau, split_time)}``
-    (or ``(sigma, tau)`` for a stationary term; missing groups: none).
+    (``split_time`` None: one amplitude, ``sigma_pre``; missing groups: none).
 
     Returns the dense matrix or (default) a :class:`DenseError`.
     """
@@ -188,7 +182,7 @@ def combined_error(noise: ObservationError, times, groups, terms: Mapping, *, as
     g = np.zeros(t.size, int) if groups is None else np.asarray(groups)
     C = noise.dense()
     for label, term in terms.items():
-        s_pre, s_post, tau, split = term if len(term) == 4 else (term[0], term[0], term[1], None)
+        s_pre, s_post, tau, split = term
         idx = np.flatnonzero(g == label)
         if idx.size and (s_pre > 0 or s_post > 0):
             C[np.ix_(idx, idx)] += ar1_covariance(float(s_pre), float(tau), t[idx], float(s_post), split)

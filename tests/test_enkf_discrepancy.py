@@ -116,7 +116,7 @@ def test_ar1_discrepancy_beats_the_inflated_noise_baseline_in_likelihood():
 def test_combined_error_adds_the_term_only_inside_its_record():
     t1 = np.arange(5) * DT
     times, groups = np.tile(t1, 2), np.repeat([0, 1], 5)
-    C = combined_error(DiagonalError(1.0, m=10), times, groups, {1: (2.0, DT)}, as_matrix=True)
+    C = combined_error(DiagonalError(1.0, m=10), times, groups, {1: (2.0, 2.0, DT, None)}, as_matrix=True)
     assert np.allclose(C[:5, :5], np.eye(5))
     assert C[5, 5] == pytest.approx(5.0) and C[5, 6] == pytest.approx(4.0 * math.exp(-1.0))
     assert np.all(C[:5, 5:] == 0.0)

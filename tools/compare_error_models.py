@@ -40,8 +40,8 @@ def compare(folder: Path) -> dict:
     for rec in obs.records:
         sl = obs.record_slice(rec)
         Ci[sl, sl] = records[rec]["inflation_factor"] * obs.of_record(rec).error_model().dense()
-    widths = {"ar1_discrepancy": linear_posterior_std(P, Y[alive], obs.values, Cd),
-              "inflated_noise": linear_posterior_std(P, Y[alive], obs.values, Ci)}
+    widths = {"ar1_discrepancy": linear_posterior_std(P, Y[alive], Cd),
+              "inflated_noise": linear_posterior_std(P, Y[alive], Ci)}
     return {"experiment": summary["experiment"], "iteration": R, "records": records,
             "linear_posterior_std": {k: dict(zip(names, v.tolist())) for k, v in widths.items()}}
 
