@@ -1,8 +1,10 @@
 """Command line: `python -m shpb simulate ...` runs one SHPB simulation into a folder
-(`python -m shpb --version`: the package version).
+(`python -m shpb --version`: the package version); `python -m shpb reduce SHEET.yaml` reduces a test
+sheet's record (curves.csv, force_balance.png, checks.json; docs/own-data.md); `python -m shpb
+sheet-from-freiburg RAW --out SHEET.yaml` writes the sheet of a Freiburg record.
 
-Writes DIR/curve.csv and DIR/run.json (docs/workflow.md, "What goes where"). Exit codes: 0 ok, 3 the simulation
-failed numerically (run.json says why), 2 bad arguments or input files.
+simulate writes DIR/curve.csv and DIR/run.json (docs/workflow.md, "What goes where"). Exit codes: 0 ok, 3 the
+simulation failed numerically (run.json says why), 2 bad arguments or input files (a bad sheet).
 """
 from __future__ import annotations
 
@@ -77,7 +79,17 @@ def main(argv=None) -> int:
     sim.add_argument("--mesh-seed", type=int, metavar="N",
                      help="a realization of the specimen mesh: its interior nodes move at random (seed N >= 0; "
                      "default: the unperturbed mesh)")
+    red = sub.add_parser("reduce", help="reduce a test sheet's record and run the lab checks")
+    red.add_argument("sheet", help="the test sheet (YAML)")
+    red.add_argument("--out", help="output folder (default: reduced/<test name>)")
+    fb = sub.add_parser("sheet-from-freiburg", help="write the test sheet of a Freiburg raw record")
+    fb.add_argument("raw", help="Freiburg raw record Rae2021/SHPBdata/<lith>/<name>.txt")
+    fb.add_argument("--out", required=True, help="the sheet to write (YAML)")
     args = ap.parse_args(argv)
+    if args.command == "reduce":
+        return _reduce(args)
+    if args.command == "sheet-from-freiburg":
+        return _sheet_from_freiburg(args)
 
     from .simulate import simulate
     try:
@@ -95,6 +107,46 @@ def main(argv=None) -> int:
     if r["status"] != "ok":
         print(f"simulation failed: {r['reason']}", file=sys.stderr)
         return contract.EXIT_NUMERICAL
+    return contract.EXIT_OK
+
+
+def _reduce(args) -> int:
+    from pathlib import Path
+
+    from .lab.lab_reduce import lab_checks, reduce_sheet, transit_time, write_reduction
+    from .lab.sheet_readers import check_sheet
+    try:
+        sheet, raw = check_sheet(args.sheet)
+        red = reduce_sheet(sheet, raw)
+    except (ValueError, FileNotFoundError) as exc:
+        print(f"python -m shpb reduce: error: {exc}", file=sys.stderr)
+        return contract.EXIT_BAD_INPUT
+    checks = lab_checks(red, transit_time(sheet))
+    out = Path(args.out) if args.out else Path("reduced") / sheet.name
+    write_reduction(red, checks, out, title=sheet.name)
+    fb, al, nz = checks["force_balance"], checks["pulse_alignment"], checks["noise"]
+    word = {True: "ok", False: "CHECK"}
+    print(f"{sheet.name}: peak {red.peak_stress / 1e6:.1f} MPa at {red.peak_time * 1e6:.1f} us -> {out}\n"
+          f"  force balance: mean R {fb['mean_R_half_peak_to_peak']:.3f} from half peak to peak "
+          f"(limit {fb['limit']}) {word[fb['ok']]}\n"
+          f"  pulse alignment: best shift of F2 {al['best_shift_back_s'] * 1e6:+.2f} us "
+          f"(limit +-{al['limit_s'] * 1e6:.2f} us) {word[al['ok']]}\n"
+          f"  noise: {nz['noise_over_peak']:.2%} of the peak (limit {nz['limit']:.0%}) {word[nz['ok']]}")
+    return contract.EXIT_OK
+
+
+def _sheet_from_freiburg(args) -> int:
+    from pathlib import Path
+
+    from .lab.sheet_freiburg import freiburg_sheet, write_sheet
+    try:
+        doc = freiburg_sheet(args.raw, Path(args.out).parent)
+    except (ValueError, FileNotFoundError, KeyError) as exc:
+        print(f"python -m shpb sheet-from-freiburg: error: {exc}", file=sys.stderr)
+        return contract.EXIT_BAD_INPUT
+    write_sheet(doc, args.out, header=f"Test sheet of the Freiburg record {Path(args.raw).name}, generated from "
+                                      f"its spreadsheets (python -m shpb sheet-from-freiburg)")
+    print(f"{doc['name']} -> {args.out}")
     return contract.EXIT_OK
 
 
