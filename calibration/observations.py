@@ -248,23 +248,38 @@ def twin_observations(truth_curve: pd.DataFrame, grid: np.ndarray, *, rng: np.ra
 # Measured records
 # --------------------------------------------------------------------------------------------------
 def reduce_measured_record(path: str | Path):
-    """Read and reduce a Freiburg raw record with its spreadsheet row and the Freiburg bars.
+    """Read and reduce a measured record: a test sheet (``.yaml``, :mod:`shpb.lab.sheet`: its signals,
+    bars and specimen) or a Freiburg raw record (its spreadsheet row and the Freiburg bars).
 
-    Returns ``(ReducedRecord, spreadsheet row, NoiseEstimate of the stress)``. The noise estimate is
-    taken from the pre-trigger part of the averaged transmitted-bar signal (the one the specimen stress
-    is made of), converted to Pa with ``E_b A_b / A_s``.
+    Returns ``(ReducedRecord, metadata, NoiseEstimate of the stress)``; metadata is the spreadsheet
+    row, or the sheet's ``metadata`` block. The noise estimate is taken from the pre-trigger part of
+    the averaged transmitted-bar signal (the one the specimen stress is made of), converted to Pa with
+    the reduction's own strain-to-stress factor.
     """
-    from shpb.lab.records import freiburg_specimen, read_freiburg_raw
-    from shpb.lab.reduction import FREIBURG_BAR, reduce_record
-
     path = Path(path)
-    raw = read_freiburg_raw(path, bar=FREIBURG_BAR)
-    spec = freiburg_specimen(path)
-    red = reduce_record(raw, FREIBURG_BAR, float(spec["length_m"]), float(spec["diameter_m"]))
+    from shpb.lab.sheet import is_sheet
+
+    if is_sheet(path):
+        from shpb.lab.lab_reduce import reduce_sheet
+        from shpb.lab.sheet_readers import check_sheet
+
+        sheet, raw = check_sheet(path)
+        red = reduce_sheet(sheet, raw)
+        spec = dict(sheet.metadata)
+    else:
+        from shpb.lab.records import freiburg_specimen, read_freiburg_raw
+        from shpb.lab.reduction import FREIBURG_BAR, reduce_record
+
+        raw = read_freiburg_raw(path, bar=FREIBURG_BAR)
+        spec = freiburg_specimen(path)
+        red = reduce_record(raw, FREIBURG_BAR, float(spec["length_m"]), float(spec["diameter_m"]))
     bar = red.bar
     k_pa = bar.E * bar.area / (math.pi * red.specimen_diameter ** 2 / 4.0)
+    if is_sheet(path) and sheet.geometry == "brazilian_disc":  # stress 2F/(pi D t), not F/(pi D^2/4)
+        k_pa *= red.specimen_diameter / (2.0 * float(sheet.specimen["thickness"]))
     used = [raw.transmitted_channels.index(c) for c in red.channels_used["transmitted"]]
-    tra = bar.compression_sign * bar.strain_per_volt_transmitted * raw.transmitted[used].mean(axis=0)
+    spv = 1.0 if raw.unit == "strain" else bar.strain_per_volt_transmitted
+    tra = bar.compression_sign * spv * raw.transmitted[used].mean(axis=0)
     i_a = int(np.searchsorted(raw.time, red.arrival_time_gauge))
     i_pre = i_a - max(1, int(round(10.0e-6 / raw.dt)))
     noise = estimate_noise(k_pa * tra[:i_pre], raw.dt, model="ar1")

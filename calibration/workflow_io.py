@@ -202,16 +202,7 @@ def _semantic_errors(config: Mapping, base: Path) -> list[str]:
             if exp.get("geometry") != "cylinder":
                 errors.append(f"{where}.geometry: measured records are compression tests; use 'cylinder' "
                               f"(the measured incident wave is injected into the cylinder model)")
-            records = obs.get("records") or []
-            if not records:
-                errors.append(f"{where}.observations.records: list at least one raw record file")
-            names = [record_name(r) for r in records]
-            for dup in sorted({n for n in names if names.count(n) > 1}):
-                errors.append(f"{where}.observations.records: record {dup!r} listed twice")
-            for r in records:
-                p = Path(r) if Path(r).is_absolute() else base / r
-                if not p.is_file():
-                    errors.append(f"{where}.observations.records: file not found: {r} (looked at {p})")
+            errors += _record_errors(where, exp, obs.get("records") or [], base)
             for key in ("truth", "incident_record"):
                 if obs.get(key) is not None:
                     errors.append(f"{where}.observations.{key}: only twin experiments take it")
@@ -236,6 +227,39 @@ def _semantic_errors(config: Mapping, base: Path) -> list[str]:
     for name in config.get("run", []) or []:
         if name not in exps:
             errors.append(f"run: experiment {name!r} is not defined under experiments ({sorted(exps)})")
+    return errors
+
+
+def _record_errors(where: str, exp: Mapping, records: Sequence, base: Path) -> list[str]:
+    """A measured experiment's records: listed, once each, found, named safely for a Snakemake wildcard
+    (the name is a folder of every member), and a test sheet valid with its signals readable and its
+    specimen the experiment's geometry (shpb.lab.sheet: each problem names the sheet, field, expectation)."""
+    from shpb.lab.sheet import WILDCARD_SAFE, SheetError, is_sheet
+    from shpb.lab.sheet_readers import check_sheet
+
+    errors = []
+    if not records:
+        errors.append(f"{where}.observations.records: list at least one raw record file or test sheet")
+    names = [record_name(r) for r in records]
+    for dup in sorted({n for n in names if names.count(n) > 1}):
+        errors.append(f"{where}.observations.records: record {dup!r} listed twice")
+    for r in records:
+        p = Path(r) if Path(r).is_absolute() else base / r
+        if not WILDCARD_SAFE.match(record_name(r)):
+            errors.append(f"{where}.observations.records: the record name {record_name(r)!r} (from {r}) is not safe "
+                          f"as a Snakemake wildcard and folder name; expected letters, digits, '_', '.', '-' "
+                          f"and no spaces: rename the file")
+        if not p.is_file():
+            errors.append(f"{where}.observations.records: file not found: {r} (looked at {p})")
+        elif is_sheet(p):
+            try:
+                sheet, _ = check_sheet(p)
+            except SheetError as exc:
+                errors += [f"{where}.observations.records: {line}" for line in exc.problems]
+                continue
+            if sheet.geometry != exp.get("geometry"):
+                errors.append(f"{where}.observations.records: {p}: specimen.geometry is {sheet.geometry!r} but "
+                              f"the experiment's geometry is {exp.get('geometry')!r}")
     return errors
 
 

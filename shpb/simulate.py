@@ -64,12 +64,27 @@ def write_outputs(out_dir, curve: pd.DataFrame, run_info: dict) -> None:
 
 
 def _measured_incident(record):
-    """Reduce a measured record; returns (reduced, specimen length, diameter, rock dict)."""
-    from .lab.records import freiburg_specimen, read_freiburg_raw, rock_properties
-    from .lab.reduction import reduce_record
+    """Reduce a measured record: a test sheet (``.yaml``: its bars, specimen and rock, shpb.lab.sheet)
+    or a Freiburg raw file (the Freiburg bars, its spreadsheet row and lithology). Returns a dict:
+    ``reduced``, ``length``, ``diameter`` [m], ``rock`` (E, nu, rho) and ``bars`` (None for the
+    Freiburg layout, whose bars are the geometry's defaults; else the sheet's material, diameter and
+    gauge distances), ``geometry`` (the specimen's)."""
     path = Path(record)
     if not path.is_file():
         raise FileNotFoundError(f"measured record {path} not found")
+    from .lab.sheet import is_sheet
+    if is_sheet(path):
+        from .lab.lab_reduce import reduce_sheet
+        from .lab.sheet_readers import check_sheet
+        sheet, raw = check_sheet(path)
+        b = sheet.bar
+        bars = {"material": Material(b.E, sheet.bar_nu, b.rho), "diameter_m": b.diameter,
+                "gauge_distance_m": (b.gauge_distance_incident, b.gauge_distance_transmitted),
+                "label": sheet.bar_material}
+        return {"reduced": reduce_sheet(sheet, raw), "length": sheet.specimen_length, "diameter": sheet.specimen_diameter,
+                "rock": dict(sheet.rock), "bars": bars, "geometry": sheet.geometry, "specimen": dict(sheet.specimen)}
+    from .lab.records import freiburg_specimen, read_freiburg_raw, rock_properties
+    from .lab.reduction import reduce_record
     raw = read_freiburg_raw(path)
     spec = freiburg_specimen(path)
     L, D = float(spec["length_m"]), float(spec["diameter_m"])
@@ -78,7 +93,19 @@ def _measured_incident(record):
     rock = rock_properties(lith)
     if np.isfinite(spec.get("E_Pa", np.nan)):
         rock = dict(rock, E=float(spec["E_Pa"]))
-    return red, L, D, rock
+    return {"reduced": red, "length": L, "diameter": D, "rock": rock, "bars": None, "geometry": "cylinder",
+            "specimen": {"geometry": "cylinder", "length": L, "diameter": D}}
+
+
+def _sheet_bars(bars) -> dict:
+    """The cylinder builder's bar arguments for a sheet's bars (empty: the Freiburg defaults). The
+    transmission bar ends in an absorbing boundary 0.1 m past its gauge (1.10 m for Freiburg's 1.00 m)."""
+    if bars is None:
+        return {}
+    d_i, d_t = bars["gauge_distance_m"]
+    return {"bar": bars["material"], "bar_diameter_m": float(bars["diameter_m"]), "incident_gauge_m": float(d_i),
+            "transmission_gauge_m": float(d_t),
+            "transmission_length_m": max(CYL_TRANSMISSION_LENGTH_M, float(d_t) + 0.10)}
 
 
 def build(geometry: str, preset: str, params: dict | None = None, record=None,
@@ -122,18 +149,24 @@ def build(geometry: str, preset: str, params: dict | None = None, record=None,
         if record is None and (specimen_size_m is None or pulse is None):
             raise ValueError("the cylinder geometry needs --record <Freiburg raw file> (its measured "
                              "incident wave drives the model)")
+        bar_kw = {"transmission_length_m": CYL_TRANSMISSION_LENGTH_M}
         if record is not None:
-            red, L, D, rock = _measured_incident(record)
+            m = _measured_incident(record)
+            if m["geometry"] != "cylinder":
+                raise ValueError(f"--record {record}: the sheet's specimen is a {m['geometry']}, not a cylinder "
+                                 f"(use --geometry {m['geometry']})")
+            red, L, D, rock = m["reduced"], m["length"], m["diameter"], m["rock"]
             base = {"E": rock["E"], "nu": rock["nu"], "rho": rock["rho"]}
+            bar_kw.update(_sheet_bars(m["bars"]))
         else:
             red, (L, D), base = None, specimen_size_m, {}
         base.update(p_given)
         p = resolve(geometry, base)
-        inj = {} if injection_distance_m is None else {"incident_gauge_m": float(injection_distance_m)}
-        g = geo.cylinder(preset, L, D, Material(p["E"], p["nu"], p["rho"]),
-                         transmission_length_m=CYL_TRANSMISSION_LENGTH_M, enforce_window=False,
+        if injection_distance_m is not None:
+            bar_kw["incident_gauge_m"] = float(injection_distance_m)
+        g = geo.cylinder(preset, L, D, Material(p["E"], p["nu"], p["rho"]), enforce_window=False,
                          face_gap_m=p["face_gap.gap_m"], mesh_seed=mesh_seed, mesh_jitter=mesh_jitter,
-                         **inj)
+                         **bar_kw)
         bar = g.bar_material
         if red is not None:
             t_g, eps_g = red.incident_wave_at_gauge()
@@ -267,6 +300,8 @@ def simulate(geometry: str, preset: str = "fast", params: dict | None = None, re
         "energy_balance_rel": float(abs(err) / W) if W > 0 else float("nan"),
         "external_work_J": W, "broken_joints": int(res.broken[-1]) if len(res.broken) else 0,
         "t_end_s": float(setup["window_s"]), "arrival_s": float(arrival),
+        "bars": {**g.summary()["bar"], "gauge_distance_m": [float(x) for x in g.gauge_distance_m]},
+        "specimen": {k: float(v) for k, v in g.specimen_dims.items()},
         "contact_rebuilds": int(res.contact_rebuilds),
         "max_penetration_m": float(np.max(res.penetration)) if len(res.penetration) else 0.0,
         "max_penetration_over_h": (float(np.max(res.penetration)) / g.element_size_m["specimen"]

@@ -160,3 +160,46 @@ def test_a_malformed_sheet_names_the_sheet_the_field_and_the_expectation(tmp_pat
     lines = [ln for ln in info.value.problems if f"{path}: {field}: " in ln]
     assert lines, info.value.problems
     assert any(expected in ln for ln in lines), lines
+
+
+@pytest.mark.parametrize("what, edit, field, expected", MALFORMED, ids=[m[0] for m in MALFORMED])
+def test_a_malformed_sheet_stops_the_config_validation_before_any_job(tmp_path, what, edit, field, expected):
+    """The workflow validates its config (and so every sheet it names) before any job runs."""
+    from calibration.workflow_io import ConfigError, validate_config
+
+    doc = copy.deepcopy(_good_doc())
+    path = _write(tmp_path, doc)
+    if callable(edit):
+        edit(tmp_path)
+    else:
+        _set(doc, *edit)
+        path = _write(tmp_path, doc)
+    cfg = {"experiments": {"byo": {
+        "kind": "measured", "geometry": "cylinder", "preset": "fast", "seed": 1, "ensemble_size": 4,
+        "parameters": {"sigma_t": [1.0e7, 1.2e8], "E_t": [100.0, 5000.0]},
+        "simulation": {"t_end": 1.0e-4}, "observations": {"t_end": 1.0e-4, "records": [str(path)]}}}}
+    with pytest.raises(ConfigError) as info:
+        validate_config(cfg, REPO / "config" / "schema.yaml")
+    lines = [ln for ln in str(info.value).splitlines() if f"experiments.byo.observations.records: {path}: {field}: " in ln]
+    assert lines and any(expected in ln for ln in lines), str(info.value)
+
+
+def test_snakemake_stops_on_a_malformed_sheet_before_any_job(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    doc = _good_doc()
+    doc["specimen"]["diameter"] = 0.025
+    path = _write(tmp_path, doc)
+    cfg = {"run": ["byo"], "experiments": {"byo": {
+        "kind": "measured", "geometry": "cylinder", "preset": "fast", "seed": 1, "ensemble_size": 4,
+        "parameters": {"sigma_t": [1.0e7, 1.2e8], "E_t": [100.0, 5000.0]},
+        "simulation": {"t_end": 1.0e-4}, "observations": {"t_end": 1.0e-4, "records": [str(path)]}}}}
+    (tmp_path / "config.yaml").write_text(yaml.safe_dump(cfg))
+    out = subprocess.run([sys.executable, "-m", "snakemake", "--snakefile", str(REPO / "Snakefile"), "--directory",
+                          str(tmp_path), "--configfile", str(tmp_path / "config.yaml"), "--workflow-profile", "none",
+                          "--cores", "1"], capture_output=True, text=True, timeout=300, env=dict(os.environ))
+    assert out.returncode != 0
+    assert f"{path}: specimen.diameter: expected at most the bar diameter 0.02 m" in out.stderr
+    assert not (tmp_path / "results").exists()
