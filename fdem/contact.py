@@ -25,22 +25,6 @@ def surface_nodes(edges, edge_active, n_nodes):
 
 
 @njit(cache=True)
-def _excluded(n, p, q, node_vertex, node_body, node_tri, e_tri, tri, body_fracturable):
-    if node_tri[n] == e_tri:
-        return True
-    # A copy of one of the edge triangle's own mesh vertices: at the edge's ends the node-to-edge
-    # projection is ambiguous (the faces of a broken joint are kept apart by the joint's compressive
-    # branch), and at the opposite vertex it would read the whole altitude as a penetration.
-    vn = node_vertex[n]
-    if vn == node_vertex[tri[e_tri, 0]] or vn == node_vertex[tri[e_tri, 1]] or vn == node_vertex[tri[e_tri, 2]]:
-        return True
-    b = node_body[n]
-    if b == node_body[p] and not body_fracturable[b]:
-        return True
-    return False
-
-
-@njit(cache=True)
 def build_pairs(x, edges, edge_active, edge_tri, snodes, node_vertex, node_body, node_tri, tri,
                 body_fracturable, buffer):
     """All (node, edge) pairs with node-to-segment distance <= buffer, excluding a node against an
@@ -108,6 +92,12 @@ def build_pairs(x, edges, edge_active, edge_tri, snodes, node_vertex, node_body,
                 counts[c + 1] += counts[c]
             fill = counts[:-1].copy()
             cell_edges = np.empty(counts[ncx * ncy], np.int64)
+            # The edge's geometry copied beside each cell entry (p, q - p, |q - p|^2), so the query
+            # below streams through memory: almost every candidate is rejected on distance, and
+            # gathering each one's nodes from x dominated the rebuild once fragments filled the grid.
+            cell_geo = np.empty((counts[ncx * ncy], 5))
+            # and what _excluded asks of the edge: its triangle, that triangle's mesh vertices, its body
+            cell_ref = np.empty((counts[ncx * ncy], 5), np.int64)
         for k in range(ne):
             e = act[k]
             p = edges[e, 0]
@@ -120,13 +110,29 @@ def build_pairs(x, edges, edge_active, edge_tri, snodes, node_vertex, node_body,
             j0 = max(j0, 0)
             i1 = min(i1, ncx - 1)
             j1 = min(j1, ncy - 1)
+            if pass_ == 1:
+                ex = x[q, 0] - x[p, 0]
+                ey = x[q, 1] - x[p, 1]
+                l2 = ex * ex + ey * ey
             for ii in range(i0, i1 + 1):
                 for jj in range(j0, j1 + 1):
                     c = jj * ncx + ii
                     if pass_ == 0:
                         counts[c + 1] += 1
                     else:
-                        cell_edges[fill[c]] = e
+                        slot = fill[c]
+                        cell_edges[slot] = e
+                        cell_geo[slot, 0] = x[p, 0]
+                        cell_geo[slot, 1] = x[p, 1]
+                        cell_geo[slot, 2] = ex
+                        cell_geo[slot, 3] = ey
+                        cell_geo[slot, 4] = l2
+                        te = edge_tri[e]
+                        cell_ref[slot, 0] = te
+                        cell_ref[slot, 1] = node_vertex[tri[te, 0]]
+                        cell_ref[slot, 2] = node_vertex[tri[te, 1]]
+                        cell_ref[slot, 3] = node_vertex[tri[te, 2]]
+                        cell_ref[slot, 4] = node_body[p]
                         fill[c] += 1
     npair = 0
     out_n = np.empty(16, np.int64)
@@ -134,26 +140,35 @@ def build_pairs(x, edges, edge_active, edge_tri, snodes, node_vertex, node_body,
     b2 = buffer * buffer
     for k in range(nn):
         n = snodes[k]
-        ii = int((x[n, 0] - xmin) / cs)
-        jj = int((x[n, 1] - ymin) / cs)
+        xn = x[n, 0]
+        yn = x[n, 1]
+        tn = node_tri[n]
+        vn = node_vertex[n]
+        bn = node_body[n]
+        rigid_n = not body_fracturable[bn]
+        ii = int((xn - xmin) / cs)
+        jj = int((yn - ymin) / cs)
         c = jj * ncx + ii
         for m in range(counts[c], counts[c + 1]):
-            e = cell_edges[m]
-            p = edges[e, 0]
-            q = edges[e, 1]
-            if _excluded(n, p, q, node_vertex, node_body, node_tri, edge_tri[e], tri, body_fracturable):
-                continue
-            ex = x[q, 0] - x[p, 0]
-            ey = x[q, 1] - x[p, 1]
-            rx = x[n, 0] - x[p, 0]
-            ry = x[n, 1] - x[p, 1]
-            L2 = ex * ex + ey * ey
-            s = (rx * ex + ry * ey) / L2
+            ex = cell_geo[m, 2]
+            ey = cell_geo[m, 3]
+            rx = xn - cell_geo[m, 0]
+            ry = yn - cell_geo[m, 1]
+            s = (rx * ex + ry * ey) / cell_geo[m, 4]
             s = min(max(s, 0.0), 1.0)
             dx = rx - s * ex
             dy = ry - s * ey
             if dx * dx + dy * dy > b2:
                 continue
+            # Excluded: an edge of the node's own triangle; an edge of a triangle that has a copy of
+            # the node's mesh vertex (at the edge's ends the node-to-edge projection is ambiguous, the
+            # faces of a broken joint being kept apart by the joint's compressive branch, and at the
+            # opposite vertex it would read the whole altitude as a penetration); a pair inside a body
+            # that cannot fracture.
+            if (tn == cell_ref[m, 0] or vn == cell_ref[m, 1] or vn == cell_ref[m, 2] or vn == cell_ref[m, 3]
+                    or (rigid_n and bn == cell_ref[m, 4])):
+                continue
+            e = cell_edges[m]
             if npair == out_n.shape[0]:
                 tmp_n = np.empty(2 * npair, np.int64)
                 tmp_e = np.empty(2 * npair, np.int64)
