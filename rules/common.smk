@@ -72,3 +72,29 @@ def runtime_min(exp, preset=None):
     """Scheduler wall time [min] of a simulation job: the simulator's own limit plus 5 minutes, so
     that the member stops itself (and is dropped as failed) before Slurm would kill the job."""
     return -(-time_limit_s(exp, preset) // 60) + 5
+
+
+#: Parent name of every simulation group id: the Slurm profile's `group-components: [simulations=...]`
+#: lets a group span the disconnected simulations that share one id (Snakemake's default is one
+#: connected component per group job). Snakemake looks a group id up under its parent name
+#: (`workflow.parent_groupids`, filled the same way for a group name with wildcards).
+SIMULATION_GROUPS = "simulations"
+
+
+def simulation_group(exp, stage, index, n_index, record, record_names):
+    """Group id of one simulation job (the `group:` of the simulation rules; docs/cluster.md).
+
+    The n = n_index x len(record_names) simulations of one stage of one experiment (an ensemble
+    iteration, the sensitivity design, the diagnosis design, the diagnosis check), numbered member by
+    member, are cut into max(1, n // k) contiguous groups of nearly equal size, k the config's
+    `simulations_per_cluster_job` for the experiment's preset: a group holds at least k simulations
+    (all n if n < k) and fewer than 2k, and never mixes stages, iterations or experiments. A cluster
+    run with `--group-components simulations=1000` (profiles/slurm) submits each group as one job;
+    local runs ignore groups."""
+    names = list(record_names)
+    n = int(n_index) * len(names)
+    i = int(index) * len(names) + names.index(record)
+    k = int(config["simulations_per_cluster_job"][EXPERIMENTS[exp]["preset"]])
+    gid = f"sim-{exp}-{stage}-{i * max(1, n // k) // n}"
+    workflow.parent_groupids[gid] = SIMULATION_GROUPS
+    return gid

@@ -72,6 +72,7 @@ rule diagnosis_member:
         max_attempts=config["member_retries"] + 1,
     threads: 1
     retries: config["member_retries"]
+    group: lambda wc: simulation_group(wc.exp, "diagnosis", wc.point, diagnosis_cfg(wc.exp)["design_points"], wc.record, design_records(wc.exp))
     resources:
         attempt=lambda wc, attempt: attempt,
         time_limit_s=lambda wc: time_limit_s(wc.exp),
@@ -135,6 +136,7 @@ rule diagnosis_check_member:
         max_attempts=config["member_retries"] + 1,
     threads: 1
     retries: config["member_retries"]
+    group: lambda wc: simulation_group(wc.exp, "check", ["before", "after"].index(wc.which), 2, wc.record, design_records(wc.exp))
     resources:
         attempt=lambda wc, attempt: attempt,
         time_limit_s=lambda wc: time_limit_s(wc.exp),

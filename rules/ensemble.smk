@@ -50,6 +50,7 @@ rule member:
         max_attempts=config["member_retries"] + 1,
     threads: 1
     retries: config["member_retries"]
+    group: lambda wc: simulation_group(wc.exp, f"iter_{wc.it}", wc.member, EXPERIMENTS[wc.exp]["ensemble_size"], wc.record, records(wc.exp))
     resources:
         attempt=lambda wc, attempt: attempt,
         time_limit_s=lambda wc: time_limit_s(wc.exp, None),

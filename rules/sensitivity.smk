@@ -61,6 +61,7 @@ rule sensitivity_member:
         max_attempts=config["member_retries"] + 1,
     threads: 1
     retries: config["member_retries"]
+    group: lambda wc: simulation_group(wc.exp, "sensitivity", wc.sample, sensitivity_spec(wc.exp).n_simulations, wc.record, [wc.record])
     resources:
         attempt=lambda wc, attempt: attempt,
         time_limit_s=lambda wc: time_limit_s(wc.exp),

@@ -1,0 +1,199 @@
+"""Cluster jobs worth scheduling (issue 33, item 4): on Slurm, the simulations of one ensemble iteration
+run in jobs of `simulations_per_cluster_job` simulations instead of one job of a few seconds each.
+
+How (docs/cluster.md): the simulation rules carry a `group:` id per experiment, stage (ensemble
+iteration, sensitivity or diagnosis design, diagnosis check) and block of simulations
+(rules/common.smk, simulation_group); profiles/slurm lets a group span those disconnected jobs
+(`group-components: [simulations=1000]`) and gives every Slurm job one simulation slot, so that a group
+job is sized for its simulations in series.
+
+Checked here without a cluster: the dry run of profiles/slurm prints every group job with its jobs; a run
+whose `sbatch` is a stand-in that records its arguments and refuses the job shows what a group job asks
+Slurm for; a local run does not group. A few seconds each; the runs that execute jobs use one core.
+"""
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import pytest
+import yaml
+
+from calibration.workflow_io import ConfigError, validate_config
+
+REPO = Path(__file__).resolve().parents[1]
+SCHEMA = REPO / "config" / "schema.yaml"
+SLURM_PROFILE = REPO / "profiles" / "slurm"
+DEFAULT_PROFILE = REPO / "profiles" / "default"
+
+
+def twin(seed: int, ensemble_size: int) -> dict:
+    return {
+        "kind": "twin", "geometry": "brazilian_disc", "preset": "fast", "seed": seed,
+        "ensemble_size": ensemble_size, "method": "esmda", "esmda": {"steps": 2},
+        "parameters": {"sigma_t": [4.0e6, 60.0e6], "E_t": [200.0, 2400.0]},
+        "simulation": {"t_end": 1.2e-4, "sample_dt": 1.0e-6},
+        "observations": {"t_end": 1.0e-4, "dt": 1.0e-6, "truth": {"sigma_t": 45.0e6, "E_t": 500.0},
+                         "noise": {"relative_sigma": 0.01}},
+    }
+
+
+def write_config(workdir: Path, **top) -> None:
+    """Two fast twins: `big` with 25 members, `small` with 8."""
+    cfg = {"run": ["big", "small"], **top, "experiments": {"big": twin(3, 25), "small": twin(4, 8)}}
+    workdir.mkdir(parents=True, exist_ok=True)
+    (workdir / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+
+
+def snakemake(workdir: Path, *args: str, profile: Path | None = SLURM_PROFILE, env: dict | None = None,
+              timeout: float = 120.0) -> subprocess.CompletedProcess:
+    """Snakemake as on the command line: --profile profiles/slurm, and profiles/default as the workflow
+    profile (which Snakemake reads from the repository root in every run)."""
+    cmd = [sys.executable, "-m", "snakemake", "--snakefile", str(REPO / "Snakefile"), "--directory", str(workdir),
+           "--configfile", str(workdir / "config.yaml"), "--workflow-profile", str(DEFAULT_PROFILE)]
+    if profile is not None:
+        cmd += ["--profile", str(profile)]
+    return subprocess.run(cmd + list(args), capture_output=True, text=True, timeout=timeout, cwd=workdir,
+                          env={**os.environ, **(env or {})})
+
+
+def group_jobs(plan: str) -> list[tuple[str, list[tuple[str, dict]]]]:
+    """The group jobs of a dry run's plan, each as (group id, [(rule, wildcards)]): Snakemake prints a
+    group job as `Group job <id> (jobs in lexicogr. order):` followed by its jobs, indented."""
+    groups, current, rule = [], None, None
+    for line in plan.splitlines():
+        m = re.search(r"Group job (\S+) \(jobs in lexicogr\. order\):", line)
+        if m:
+            current = []
+            groups.append((m.group(1), current))
+            continue
+        if re.match(r"(rule|localrule|checkpoint) \w+:|Job stats:", line):  # a job outside any group
+            current = None
+            continue
+        if current is None:
+            continue
+        m = re.match(r"\s+(?:rule|checkpoint) (\w+):", line)
+        if m:
+            rule = m.group(1)
+            continue
+        m = re.match(r"\s+wildcards: (.*)", line)
+        if m:
+            current.append((rule, dict(kv.split("=", 1) for kv in m.group(1).split(", "))))
+    return groups
+
+
+def job_count(plan: str, rule: str) -> int:
+    m = re.search(rf"^{rule}\s+(\d+)$", plan, re.M)
+    return int(m.group(1)) if m else 0
+
+
+def sizes_per_iteration(groups) -> dict[tuple[str, str], list[int]]:
+    out = defaultdict(list)
+    for _, jobs in groups:
+        out[(jobs[0][1]["exp"], jobs[0][1]["it"])].append(len(jobs))
+    return {k: sorted(v, reverse=True) for k, v in out.items()}
+
+
+# Targets: big's iteration 1 (which brings its iteration 0 along: propose <- analysis <- iteration 0)
+# and small's iteration 0, so the plan holds member jobs of two iterations and two experiments.
+TARGETS = ["results/big/iter_1/responses.csv", "results/small/iter_0/responses.csv"]
+N_MEMBERS = 25 + 25 + 8
+
+
+@pytest.mark.parametrize("size, expected", [
+    # the default (fast: 12): a stage of n simulations -> n // 12 jobs of nearly equal size
+    (None, {("big", "0"): [13, 12], ("big", "1"): [13, 12], ("small", "0"): [8]}),
+    (5, {("big", "0"): [5] * 5, ("big", "1"): [5] * 5, ("small", "0"): [8]}),
+])
+def test_the_slurm_dry_run_groups_the_members_of_each_iteration_into_jobs_of_the_configured_size(
+        tmp_path, size, expected):
+    write_config(tmp_path, **({"simulations_per_cluster_job": {"fast": size}} if size else {}))
+    out = snakemake(tmp_path, "-n", *TARGETS)
+    plan = out.stdout + out.stderr
+    assert out.returncode == 0, plan[-3000:]
+    assert job_count(plan, "member") == N_MEMBERS
+    groups = group_jobs(plan)
+    members = [(w["exp"], w["it"], w["member"]) for _, jobs in groups for rule, w in jobs if rule == "member"]
+    assert sorted(members) == sorted(set(members)) and len(members) == N_MEMBERS, \
+        "every member job in exactly one group job"
+    for gid, jobs in groups:
+        assert {rule for rule, _ in jobs} == {"member"}, gid
+        assert len({(w["exp"], w["it"]) for _, w in jobs}) == 1, f"{gid} mixes iterations or experiments"
+        numbers = sorted(int(w["member"]) for _, w in jobs)
+        assert numbers == list(range(numbers[0], numbers[-1] + 1)), f"{gid}: not a block of members"
+    assert sizes_per_iteration(groups) == expected
+
+
+def test_without_the_profiles_group_components_every_simulation_is_its_own_job(tmp_path):
+    # The profile's `group-components` is what makes a group span its disconnected member jobs: given
+    # as 1 (the command line replaces the profile's list), the plan is one job per member again.
+    write_config(tmp_path)
+    out = snakemake(tmp_path, "-n", *TARGETS, "--group-components", "simulations=1")
+    plan = out.stdout + out.stderr
+    assert out.returncode == 0, plan[-3000:]
+    groups = group_jobs(plan)
+    assert len(groups) == N_MEMBERS and {len(jobs) for _, jobs in groups} == {1}
+
+
+FAKE_SLURM = """#!/bin/sh
+# Stand-in for the Slurm client commands (tests/test_slurm_grouping.py): record the call; sbatch refuses.
+echo "$(basename "$0") $*" >> "$FAKE_SLURM_LOG"
+if [ "$(basename "$0")" = sbatch ]; then echo "sbatch: error: stand-in sbatch" >&2; exit 1; fi
+exit 0
+"""
+
+
+def test_a_group_job_asks_slurm_for_one_cpu_the_memory_of_one_simulation_and_the_sum_of_runtimes(tmp_path):
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    for name in ("sbatch", "squeue", "sacct", "scontrol", "sinfo", "sacctmgr", "sshare", "scancel", "srun"):
+        (bin_dir / name).write_text(FAKE_SLURM)
+        (bin_dir / name).chmod(0o755)
+    log = tmp_path / "slurm_calls.log"
+    work = tmp_path / "run"
+    write_config(work)
+    # Executes the Latin hypercube (a local rule, one core); every submission is refused, --keep-going
+    # submits every ready group job once per attempt (member_retries 1: twice).
+    out = snakemake(work, "results/big/iter_0/responses.csv", "--keep-going", "--local-cores", "1",
+                    "--slurm-no-account", env={"PATH": f"{bin_dir}{os.pathsep}{os.environ['PATH']}",
+                                                "FAKE_SLURM_LOG": str(log)})
+    calls = log.read_text().splitlines() if log.exists() else []
+    submissions = [c for c in calls if c.startswith("sbatch ") and "'member:exp=big,it=0," in c]
+    assert submissions, (out.stdout + out.stderr)[-3000:]
+    asked = set()
+    for call in submissions:
+        n = len(re.findall(r"'member:exp=big,it=0,member=\d+,record=synthetic'", call))
+        runtime = int(re.search(r" -t (\d+) ", call).group(1))
+        mem = int(re.search(r" --mem (\d+) ", call).group(1))
+        cpus = int(re.search(r" --cpus-per-task=(\d+) ", call).group(1))
+        asked.add((n, cpus, mem, runtime))
+    # fast members: runtime 15 min each (member_time_limit_s 600 s + 5 min), mem_mb 1000 (profile)
+    assert asked == {(13, 1, 1000, 13 * 15), (12, 1, 1000, 12 * 15)}
+
+
+def test_a_local_run_does_not_group_and_the_default_profile_has_no_cluster_settings(tmp_path):
+    from test_workflow import write_stand_in
+
+    p = yaml.safe_load((DEFAULT_PROFILE / "config.yaml").read_text())
+    assert not {"group-components", "groups", "resources", "set-resource-scopes"} & set(p)
+    write_config(tmp_path, simulator=write_stand_in(tmp_path))
+    targets = [f"results/small/iter_0/members/00{i}/synthetic/run.json" for i in (0, 1)]
+    out = snakemake(tmp_path, "--cores", "1", *targets, profile=None)
+    log = out.stdout + out.stderr
+    assert out.returncode == 0, log[-3000:]
+    assert all((tmp_path / t).exists() for t in targets)
+    assert "Group job" not in log
+    assert len(re.findall(r"Finished jobid: \d+ \(Rule: member\)", log)) == 2  # two jobs, one member each
+
+
+def test_the_group_size_is_a_validated_config_key_with_per_preset_defaults():
+    cfg = {"experiments": {"big": twin(3, 25)}}
+    assert validate_config(cfg, SCHEMA)["simulations_per_cluster_job"] == {"fast": 12, "standard": 5, "paper": 1}
+    with pytest.raises(ConfigError, match="simulations_per_cluster_job"):
+        validate_config({**cfg, "simulations_per_cluster_job": {"fast": 0}}, SCHEMA)
+    with pytest.raises(ConfigError, match="simulations_per_cluster_job"):
+        validate_config({**cfg, "simulations_per_cluster_job": {"fastest": 3}}, SCHEMA)
