@@ -42,6 +42,7 @@ import numpy as np
 
 # the base contracts, re-exported: the scripts and tests import them from here
 from shpb.contract import CURVE_COLUMNS as _SIM_CURVE_COLUMNS, EXIT_BAD_INPUT, EXIT_NUMERICAL, EXIT_OK
+from shpb.lab.sheet import is_sheet
 from .contracts import (PARAM_NAMES, ConfigError, atomic_write_csv, atomic_write_json,  # noqa: F401
                         atomic_write_text, experiment_records, known_parameters, read_json, record_name)
 from .config_files import config_sources, error_origin, load_config_file  # noqa: F401
@@ -199,9 +200,10 @@ def _semantic_errors(config: Mapping, base: Path) -> list[str]:
                 if not p.is_file():
                     errors.append(f"{where}.observations.incident_record: file not found: {inc} (looked at {p})")
         elif exp.get("kind") == "measured":
-            if exp.get("geometry") != "cylinder":
-                errors.append(f"{where}.geometry: measured records are compression tests; use 'cylinder' "
-                              f"(the measured incident wave is injected into the cylinder model)")
+            if exp.get("geometry") != "cylinder" and not all(is_sheet(r) for r in obs.get("records") or []):
+                errors.append(f"{where}.geometry: a measured Brazilian disc takes test sheets whose "
+                              f"specimen.geometry is brazilian_disc (a Freiburg raw file is a cylinder); use "
+                              f"'cylinder' or name the records' sheets")
             errors += _record_errors(where, exp, obs.get("records") or [], base)
             for key in ("truth", "incident_record"):
                 if obs.get(key) is not None:

@@ -97,6 +97,23 @@ def _measured_incident(record):
             "specimen": {"geometry": "cylinder", "length": L, "diameter": D}}
 
 
+def _measured_disc(record):
+    """(reduced record, brazilian_disc arguments, rock) of a disc test sheet. The lab's incident wave,
+    read at its gauge, enters the model DISC_INCIDENT_LENGTH_M from the disc as it is: the model's bars
+    stay short (the wave's travel over the lab's longer distance is the 1D shift the reduction makes
+    too, and it would only add simulated time), but their material and diameter are the sheet's."""
+    m = _measured_incident(record)
+    if m["geometry"] != "brazilian_disc":
+        raise ValueError(f"--record {record}: the record's specimen is a {m['geometry']}, not a Brazilian disc "
+                         f"(use --geometry {m['geometry']})")
+    spec, bars = m["specimen"], m["bars"]
+    kw = {"diameter_m": float(spec["diameter"]), "thickness_m": float(spec["thickness"]),
+          "flat_half_angle_deg": 0.5 * float(spec["flat_angle_deg"]), "bar": bars["material"],
+          "bar_diameter_m": float(bars["diameter_m"])}
+    rock = m["rock"]
+    return m["reduced"], kw, {"E": rock["E"], "nu": rock["nu"], "rho": rock["rho"]}
+
+
 def _sheet_bars(bars) -> dict:
     """The cylinder builder's bar arguments for a sheet's bars (empty: the Freiburg defaults). The
     transmission bar ends in an absorbing boundary 0.1 m past its gauge (1.10 m for Freiburg's 1.00 m)."""
@@ -130,21 +147,26 @@ def build(geometry: str, preset: str, params: dict | None = None, record=None,
     p_given = dict(params or {})
     window = DEFAULT_WINDOW.get(geometry) if window_s is None else float(window_s)
     if geometry == "brazilian_disc":
+        red, disc_kw, base = None, {}, {}
         if record is not None:
-            raise ValueError("--record is for the cylinder geometry (measured compression records)")
-        p = resolve(geometry, p_given)
+            red, disc_kw, base = _measured_disc(record)
+        base.update(p_given)
+        p = resolve(geometry, base)
         disc = Material(p["E"], p["nu"], p["rho"])
         g = geo.brazilian_disc(preset, disc=disc, incident_gauge_m=DISC_GAUGE_M,
-                               flat_half_angle_deg=DISC_FLAT_HALF_ANGLE_DEG,
                                transmission_gauge_m=DISC_GAUGE_M,
                                incident_length_m=DISC_INCIDENT_LENGTH_M,
                                transmission_length_m=DISC_TRANSMISSION_LENGTH_M, enforce_window=False,
-                               face_gap_m=p["face_gap.gap_m"], mesh_seed=mesh_seed, mesh_jitter=mesh_jitter)
-        pulse = pulse or TrapezoidPulse()
-        t_v, v_v = pulse.history()
+                               face_gap_m=p["face_gap.gap_m"], mesh_seed=mesh_seed, mesh_jitter=mesh_jitter,
+                               **{"flat_half_angle_deg": DISC_FLAT_HALF_ANGLE_DEG, **disc_kw})
         bar = g.bar_material
-        sigma_I = (t_v, bar.rho * bar.c_bar * v_v)
-        measured = None
+        if red is not None:
+            t_g, eps_g = red.incident_wave_at_gauge()
+            sigma_I = (np.asarray(t_g, float), bar.E * np.asarray(eps_g, float))
+        else:
+            t_v, v_v = (pulse or TrapezoidPulse()).history()
+            sigma_I = (t_v, bar.rho * bar.c_bar * v_v)
+        measured = red
     elif geometry == "cylinder":
         if record is None and (specimen_size_m is None or pulse is None):
             raise ValueError("the cylinder geometry needs --record <Freiburg raw file> (its measured "
