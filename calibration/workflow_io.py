@@ -200,10 +200,11 @@ def _semantic_errors(config: Mapping, base: Path) -> list[str]:
                 if not p.is_file():
                     errors.append(f"{where}.observations.incident_record: file not found: {inc} (looked at {p})")
         elif exp.get("kind") == "measured":
-            if exp.get("geometry") != "cylinder" and not all(is_sheet(r) for r in obs.get("records") or []):
-                errors.append(f"{where}.geometry: a measured Brazilian disc takes test sheets whose "
-                              f"specimen.geometry is brazilian_disc (a Freiburg raw file is a cylinder); use "
-                              f"'cylinder' or name the records' sheets")
+            recs = obs.get("records") or []
+            if exp.get("geometry") != "cylinder" and not (recs and all(is_sheet(r) for r in recs)):
+                errors.append(f"{where}.geometry: measured records of a Brazilian disc must be test sheets "
+                              f"whose specimen.geometry is brazilian_disc (a Freiburg raw file is a cylinder); "
+                              f"use 'cylinder' or name the records' sheets")
             errors += _record_errors(where, exp, obs.get("records") or [], base)
             for key in ("truth", "incident_record"):
                 if obs.get(key) is not None:
