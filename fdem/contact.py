@@ -25,16 +25,8 @@ def surface_nodes(edges, edge_active, n_nodes):
 
 
 @njit(cache=True)
-def build_pairs(x, edges, edge_active, edge_tri, snodes, node_vertex, node_body, node_tri, tri,
-                body_fracturable, buffer):
-    """All (node, edge) pairs with node-to-segment distance <= buffer, excluding a node against an
-    edge of its own triangle, an edge of a triangle that has a copy of the node's mesh vertex, and pairs
-    inside a body that cannot fracture.
-
-    Also returns the outward unit normal of every surface node (mean of its active edges' normals),
-    which the contact kernel uses to reject an edge facing the same way (node-to-segment corner
-    ambiguity). Returns (pair_node, pair_edge, node_normal).
-    """
+def node_normals(x, edges, edge_active):
+    """Outward unit normal of every surface node (mean of its active edges' normals; zero elsewhere)."""
     node_normal = np.zeros((x.shape[0], 2))
     act = np.nonzero(edge_active)[0]
     for k in range(act.shape[0]):
@@ -53,10 +45,35 @@ def build_pairs(x, edges, edge_active, edge_tri, snodes, node_vertex, node_body,
         if L > 0.0:
             node_normal[n, 0] /= L
             node_normal[n, 1] /= L
+    return node_normal
+
+
+@njit(cache=True)
+def build_pairs(x, edges, edge_active, edge_tri, snodes, node_vertex, node_body, node_tri, tri,
+                body_fracturable, buffer):
+    """All (node, edge) pairs with node-to-segment distance <= buffer, excluding a node against an
+    edge of its own triangle, an edge of a triangle that has a copy of the node's mesh vertex, and pairs
+    inside a body that cannot fracture.
+
+    Also returns the outward unit normal of every surface node (mean of its active edges' normals),
+    which the contact kernel uses to reject an edge facing the same way (node-to-segment corner
+    ambiguity). Returns (pair_node, pair_edge, node_normal), the pairs ordered by node (as snodes)
+    and, per node, by edge index.
+    """
+    pn, pe = grid_pairs(x, edges, np.nonzero(edge_active)[0], snodes, buffer, edge_tri, node_vertex,
+                        node_body, node_tri, tri, body_fracturable)
+    return pn, pe, node_normals(x, edges, edge_active)
+
+
+@njit(cache=True)
+def grid_pairs(x, edges, act, snodes, buffer, edge_tri, node_vertex, node_body, node_tri, tri,
+               body_fracturable):
+    """The pairs of build_pairs between the nodes snodes and the edges act (both ascending), on a
+    uniform cell grid."""
     ne = act.shape[0]
     nn = snodes.shape[0]
     if ne == 0 or nn == 0:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64), node_normal
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
     xmin = np.inf
     ymin = np.inf
     xmax = -np.inf
@@ -179,4 +196,80 @@ def build_pairs(x, edges, edge_active, edge_tri, snodes, node_vertex, node_body,
             out_n[npair] = n
             out_e[npair] = e
             npair += 1
-    return out_n[:npair].copy(), out_e[:npair].copy(), node_normal
+    return out_n[:npair].copy(), out_e[:npair].copy()
+
+
+@njit(cache=True)
+def filter_pairs(x, cand_node, cand_edge, edges, edge_active, surface, buffer):
+    """The pairs build_pairs would return (in the same order, by the same arithmetic) taken from a
+    candidate list that holds every pair within the distance: those whose node is on an active edge
+    (surface), whose edge is active and whose distance is <= buffer now."""
+    keep = np.empty(cand_node.shape[0], np.bool_)
+    b2 = buffer * buffer
+    m = 0
+    for k in range(cand_node.shape[0]):
+        n = cand_node[k]
+        e = cand_edge[k]
+        keep[k] = False
+        if not (surface[n] and edge_active[e]):
+            continue
+        p = edges[e, 0]
+        q = edges[e, 1]
+        ex = x[q, 0] - x[p, 0]
+        ey = x[q, 1] - x[p, 1]
+        l2 = ex * ex + ey * ey
+        rx = x[n, 0] - x[p, 0]
+        ry = x[n, 1] - x[p, 1]
+        s = (rx * ex + ry * ey) / l2
+        s = min(max(s, 0.0), 1.0)
+        dx = rx - s * ex
+        dy = ry - s * ey
+        if dx * dx + dy * dy > b2:
+            continue
+        keep[k] = True
+        m += 1
+    pn = np.empty(m, np.int64)
+    pe = np.empty(m, np.int64)
+    m = 0
+    for k in range(cand_node.shape[0]):
+        if keep[k]:
+            pn[m] = cand_node[k]
+            pe[m] = cand_edge[k]
+            m += 1
+    return pn, pe
+
+
+@njit(cache=True)
+def refresh_pairs(x, edges, edge_active, edge_tri, node_vertex, node_body, node_tri, tri, body_fracturable,
+                  buffer, margin, cand_node, cand_edge, x_cand, all_edges, edge_nodes):
+    """The contact list of build_pairs at x, through a candidate list of every pair (active or not)
+    within buffer + margin at x_cand.
+
+    A pair closer than buffer now was closer than buffer + 2 d at x_cand, d the largest travel of a
+    node since, so while 2 d <= margin the candidates hold it, and the list is the candidates
+    filtered: crack faces that appear need no new search (they made the rebuilds of a fragmenting
+    specimen, every few steps, the larger part of a run). Otherwise the candidates are searched
+    afresh at x (x_cand is updated in place). all_edges: every edge index; edge_nodes: every node on
+    an edge (both ascending).
+    Returns (pair_node, pair_edge, node_normal, surface nodes, cand_node, cand_edge).
+    """
+    d2 = 0.0
+    for k in range(edge_nodes.shape[0]):
+        i = edge_nodes[k]
+        dx = x[i, 0] - x_cand[i, 0]
+        dy = x[i, 1] - x_cand[i, 1]
+        if dx * dx + dy * dy > d2:
+            d2 = dx * dx + dy * dy
+    if cand_node.shape[0] == 0 or 4.0 * d2 > margin * margin:
+        cand_node, cand_edge = grid_pairs(x, edges, all_edges, edge_nodes, buffer + margin, edge_tri,
+                                          node_vertex, node_body, node_tri, tri, body_fracturable)
+        for k in range(edge_nodes.shape[0]):
+            i = edge_nodes[k]
+            x_cand[i, 0] = x[i, 0]
+            x_cand[i, 1] = x[i, 1]
+    snodes = surface_nodes(edges, edge_active, x.shape[0])
+    surface = np.zeros(x.shape[0], np.bool_)
+    for k in range(snodes.shape[0]):
+        surface[snodes[k]] = True
+    pn, pe = filter_pairs(x, cand_node, cand_edge, edges, edge_active, surface, buffer)
+    return pn, pe, node_normals(x, edges, edge_active), snodes, cand_node, cand_edge

@@ -11,7 +11,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .contact import build_pairs, surface_nodes
+from .contact import refresh_pairs, surface_nodes
 from .kernels import contact_forces, joint_forces, triangle_cauchy, triangle_forces
 from .softening import z
 
@@ -23,6 +23,10 @@ STATUS_OK = 0
 STATUS_NONFINITE = 1
 STATUS_ENERGY = 2
 STATUS_RUNAWAY = 3
+
+# The contact candidates' extra reach, in contact buffers (fdem.contact.refresh_pairs): larger means
+# fewer searches for candidates and more candidates to filter at each refresh of the list.
+CANDIDATE_MARGIN = 2.0
 
 
 @njit(cache=True)
@@ -127,10 +131,17 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
     E = np.zeros(8)
     # Contact state
     snodes = surface_nodes(edges, edge_active, n)
+    # candidate pairs within buffer + margin, from which the contact list is filtered (refresh_pairs)
+    margin = CANDIDATE_MARGIN * buffer
+    all_edges = np.arange(edges.shape[0])
+    edge_nodes = surface_nodes(edges, np.ones(edges.shape[0], np.bool_), n)
+    x_cand = x.copy()
+    cand_node = np.zeros(0, np.int64)
+    cand_edge = np.zeros(0, np.int64)
     if use_contact:
-        pair_node, pair_edge, node_normal = build_pairs(x, edges, edge_active, edge_tri, snodes,
-                                                        node_vertex, node_body, node_tri, tri,
-                                                        body_fracturable, buffer)
+        pair_node, pair_edge, node_normal, snodes, cand_node, cand_edge = refresh_pairs(
+            x, edges, edge_active, edge_tri, node_vertex, node_body, node_tri, tri, body_fracturable,
+            buffer, margin, cand_node, cand_edge, x_cand, all_edges, edge_nodes)
     else:
         pair_node = np.zeros(0, np.int64)
         pair_edge = np.zeros(0, np.int64)
@@ -205,10 +216,10 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
                     if dd > dmax2:
                         dmax2 = dd
                 if dmax2 > 0.25 * buffer * buffer or (pending_faces and steps_since >= 5):
-                    snodes = surface_nodes(edges, edge_active, n)
-                    pair_node, pair_edge, node_normal = build_pairs(
-                        x, edges, edge_active, edge_tri, snodes, node_vertex, node_body, node_tri, tri,
-                        body_fracturable, buffer)
+                    pair_node, pair_edge, node_normal, snodes, cand_node, cand_edge = refresh_pairs(
+                        x, edges, edge_active, edge_tri, node_vertex, node_body, node_tri, tri,
+                        body_fracturable, buffer, margin, cand_node, cand_edge, x_cand, all_edges,
+                        edge_nodes)
                     for i in range(n):
                         x_ref[i, 0] = x[i, 0]
                         x_ref[i, 1] = x[i, 1]
