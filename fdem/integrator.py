@@ -229,10 +229,12 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
             # forces at t (velocity-dependent terms use the half-step velocity)
             f[:, :] = 0.0
             bforce[:, :] = 0.0
-            Us, Pd = triangle_forces(x, v, tri, dminv, vol0, lam, mu, eta, f)
+            # the stored energies are booked at the output samples only
+            sampled = step % sample_every == 0
+            Us, Pd = triangle_forces(x, v, tri, dminv, vol0, lam, mu, eta, f, sampled)
             Psi, dis, nnew, ndam = joint_forces(x, v, jn, jarea, kn, kt, ft, fs, dn, dtm, tanphi, sa,
                                                 sb, sc, Dmax, broken, f, newly, newly_dam, jrate, jdif,
-                                                slip_p, kappa, zeta_j)
+                                                slip_p, kappa, zeta_j, sampled)
             E[4] += dis
             for k in range(ndam):
                 j_onset[newly_dam[k]] = t

@@ -49,7 +49,7 @@ def _corotational(x, tri, dminv, lam, mu, e):
 
 
 @njit(cache=True)
-def triangle_forces(x, v, tri, dminv, vol0, lam, mu, eta, f):
+def triangle_forces(x, v, tri, dminv, vol0, lam, mu, eta, f, energy=True):
     """Internal forces of 3-node constant-strain triangles in plane stress.
 
     Co-rotational linear elasticity, total Lagrangian: deformation gradient F = Ds Dm^-1, polar
@@ -59,7 +59,7 @@ def triangle_forces(x, v, tri, dminv, vol0, lam, mu, eta, f):
     rotated body carries no stress; unlike St. Venant-Kirchhoff the stiffness does not vanish under
     strong compression, so crushed fragments do not collapse or invert. vol0 = reference area *
     thickness [m^3]. Optional viscous stress S_v = eta dE/dt on the Green-Lagrange rate (eta [Pa s]),
-    whose dissipated power is returned.
+    whose dissipated power is returned. energy=False skips the strain energy (returned as 0).
 
     Returns (strain energy [J], damping power [W]).
     """
@@ -75,7 +75,8 @@ def triangle_forces(x, v, tri, dminv, vol0, lam, mu, eta, f):
         m22 = dminv[e, 1, 1]
         F11, F12, F21, F22, P11, P12, P21, P22, w = _corotational(x, tri, dminv, lam, mu, e)
         V = vol0[e]
-        U += V * w
+        if energy:
+            U += V * w
         if eta[e] > 0.0:
             w11 = v[j, 0] - v[i, 0]
             w21 = v[j, 1] - v[i, 1]
@@ -133,7 +134,7 @@ def _psi_branch(u, k, fmax):
 
 @njit(cache=True)
 def joint_forces(x, v, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax, broken, f,
-                 newly_broken, newly_damaged, jrate, jdif, slip_p, kappa, zeta_j):
+                 newly_broken, newly_damaged, jrate, jdif, slip_p, kappa, zeta_j, energy=True):
     """Cohesive 4-node joints (Munjiza's combined single and smeared crack, paper Appendix A).
 
     Nodes (a1, a2, b1, b2): a1->a2 is the edge of triangle A in its counter-clockwise order, b1/b2 the
@@ -183,6 +184,9 @@ def joint_forces(x, v, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax
     (one per Gauss point, kept for the layout); both hold the joint's value. zeta_j caches z(Dmax) per
     joint (1 while undamaged): the softening curve's exponential and power are then evaluated only
     when the damage grows, not for every damaged joint at every step.
+
+    energy=False skips the stored energy of joints whose damage does not grow (returned as 0); the
+    forces and the dissipation are the same.
 
     Returns (stored joint energy [J], dissipated energy this call [J], number newly broken,
     number newly damaged).
@@ -251,31 +255,36 @@ def joint_forces(x, v, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax
         o_pos = o if o > 0.0 else 0.0
         ex_o = o_pos - f_t / k_n
         ex_o = ex_o if ex_o > 0.0 else 0.0
-        D = math.sqrt((ex_o * dif / dn[jj]) ** 2 + (kappa[jj, 0] * dif / dt_[jj]) ** 2)
-        psi_n = _psi_branch(o_pos, k_n, f_t)
-        # The linear part, integrated by the two-point rule: the Gauss points sit at -+1/sqrt(3)
-        # of the half-length, so its energy per unit area is (k lo^2 + k_t ls^2) / 6.
-        psi_b = (k_n * lo * lo + k_t * ls * ls) / 6.0
-        if D > dm:
-            if dm <= 0.0:
-                newly_damaged[ndam] = jj
-                ndam += 1
-            zeta_new = z(D, a, b, c)
-            dissipated += W * (zeta - zeta_new) * (psi_n + psi_b)
-            Dmax[jj, 0] = D
-            Dmax[jj, 1] = D
-            zeta_j[jj] = zeta_new
-            zeta = zeta_new
-        psi = W * (zeta * (psi_n + psi_b) + 0.5 * sig_c * o + 0.5 * tau * tau / k_t)
-        if Dmax[jj, 0] >= 1.0:
-            # Breaking releases what the joint still stores (its compressive and elastic shear
-            # parts, if any); from now on its faces interact through contact only.
-            dissipated += psi
-            broken[jj] = True
-            newly_broken[nnew] = jj
-            nnew += 1
-            continue
-        Psi += psi
+        D = 0.0
+        if ex_o > 0.0 or kappa[jj, 0] > 0.0:
+            D = math.sqrt((ex_o * dif / dn[jj]) ** 2 + (kappa[jj, 0] * dif / dt_[jj]) ** 2)
+        # The stored energy is needed where the damage grows (the release it books) and, for the
+        # bookkeeping, when asked (the integrator asks at its output samples only).
+        if energy or D > dm:
+            psi_n = _psi_branch(o_pos, k_n, f_t)
+            # The linear part, integrated by the two-point rule: the Gauss points sit at -+1/sqrt(3)
+            # of the half-length, so its energy per unit area is (k lo^2 + k_t ls^2) / 6.
+            psi_b = (k_n * lo * lo + k_t * ls * ls) / 6.0
+            if D > dm:
+                if dm <= 0.0:
+                    newly_damaged[ndam] = jj
+                    ndam += 1
+                zeta_new = z(D, a, b, c)
+                dissipated += W * (zeta - zeta_new) * (psi_n + psi_b)
+                Dmax[jj, 0] = D
+                Dmax[jj, 1] = D
+                zeta_j[jj] = zeta_new
+                zeta = zeta_new
+            psi = W * (zeta * (psi_n + psi_b) + 0.5 * sig_c * o + 0.5 * tau * tau / k_t)
+            if Dmax[jj, 0] >= 1.0:
+                # Breaking releases what the joint still stores (its compressive and elastic shear
+                # parts, if any); from now on its faces interact through contact only.
+                dissipated += psi
+                broken[jj] = True
+                newly_broken[nnew] = jj
+                nnew += 1
+                continue
+            Psi += psi
         sig = sig_c + zeta * min(k_n * o_pos, f_t)
         # forces on side A (a1, a2) = -dPsi/dx_A: the mean part acts equally on both ends, the linear
         # part (+-lo, +-ls at the ends) with weight 1/3 of the joint (two-point rule)
