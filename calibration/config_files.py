@@ -14,7 +14,7 @@ from pathlib import Path
 
 from .contracts import ConfigError
 
-__all__ = ["load_config_file", "config_sources", "error_origin"]
+__all__ = ["load_config_file", "config_sources", "error_origin", "coerce_numbers"]
 
 
 def load_config_file(path: str | Path):
@@ -91,3 +91,37 @@ def error_origin(message: str, sources: Sequence[tuple[str, Mapping]]) -> str:
     inside = [n for n, ks in keys if any(k == key or k.startswith(key + ".") for k, _ in ks)]
     names = value[-1:] or inside
     return f" (set in {', '.join(names)})" if names else ""
+
+
+def coerce_numbers(instance, schema: Mapping):
+    """Numbers given as strings where the schema wants a number, recursively.
+
+    Snakemake's ``--config key={"paper": 14400}`` hands the inner values over as strings ('14400'),
+    so without this a documented override fails as "'14400' is not of type 'integer'". Only fields
+    whose schema type is integer or number (and not string) are converted, and only when the whole
+    string is the number; everything else is left for the schema to judge.
+    """
+    if not isinstance(schema, Mapping):
+        return instance
+    if isinstance(instance, dict):
+        props = schema.get("properties", {})
+        extra = schema.get("additionalProperties")
+        return {k: coerce_numbers(v, props.get(k, extra if isinstance(extra, Mapping) else {}))
+                for k, v in instance.items()}
+    if isinstance(instance, list) and isinstance(schema.get("items"), Mapping):
+        return [coerce_numbers(v, schema["items"]) for v in instance]
+    types = schema.get("type")
+    types = [types] if isinstance(types, str) else list(types or [])
+    if isinstance(instance, str) and "string" not in types:
+        text = instance.strip()
+        if "integer" in types:
+            try:
+                return int(text)
+            except ValueError:
+                pass
+        if "number" in types:
+            try:
+                return float(text)
+            except ValueError:
+                pass
+    return instance

@@ -45,7 +45,7 @@ from shpb.contract import CURVE_COLUMNS as _SIM_CURVE_COLUMNS, EXIT_BAD_INPUT, E
 from shpb.lab.sheet import is_sheet
 from .contracts import (PARAM_NAMES, ConfigError, atomic_write_csv, atomic_write_json,  # noqa: F401
                         atomic_write_text, experiment_records, known_parameters, read_json, record_name)
-from .config_files import config_sources, error_origin, load_config_file  # noqa: F401
+from .config_files import coerce_numbers, config_sources, error_origin, load_config_file  # noqa: F401
 
 __all__ = [
     "PARAM_NAMES", "CURVE_COLUMNS", "ConfigError", "SimulatorCrash", "load_yaml", "load_config_file",
@@ -333,6 +333,7 @@ def validate_config(config: Mapping, schema: Mapping | str | Path, *, base_dir: 
         raise ConfigError(f"{source}: the config must be a mapping, got {type(config).__name__}")
     try:
         cfg = coerce_yaml_floats(json.loads(json.dumps(config)))  # plain dicts and lists
+        cfg = coerce_numbers(cfg, schema)
     except TypeError as exc:
         raise ConfigError(f"{source}: a value is not plain YAML data (numbers, strings, lists, maps): {exc}") from exc
     errors = _schema_errors(cfg, schema)

@@ -189,6 +189,17 @@ def test_a_bad_config_key_or_value_fails_with_a_message_naming_it(mutate, expect
     assert expected in str(err.value), str(err.value)
 
 
+def test_a_nested_number_given_on_the_command_line_is_read_as_a_number():
+    from snakemake.cli import parse_config  # what `snakemake --config` does with its arguments
+    cfg = twin_config()
+    cfg.update(parse_config(['member_time_limit_s={"paper": 14400}']))
+    assert cfg["member_time_limit_s"] == {"paper": "14400"}  # Snakemake hands it over as a string
+    assert validate_config(cfg, SCHEMA)["member_time_limit_s"]["paper"] == 14400
+    cfg.update(parse_config(['member_time_limit_s={"paper": "lots"}']))
+    with pytest.raises(ConfigError, match="member_time_limit_s.paper: 'lots' is not of type 'integer'"):
+        validate_config(cfg, SCHEMA)
+
+
 def test_yaml_scientific_notation_strings_are_read_as_numbers_and_defaults_are_filled():
     cfg = twin_config()
     cfg["experiments"]["twin"]["parameters"]["sigma_t"] = ["4.0e6", "60e6"]  # what PyYAML returns for 4.0e6
