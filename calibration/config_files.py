@@ -2,7 +2,7 @@
 
 Snakemake deep-merges ``config/config.yaml`` (the Snakefile's ``configfile:``), then each
 ``--configfile`` in order, then ``--config`` overrides, and the workflow validates the merged dict
-(:func:`calibration.workflow_io.validate_config`). Given :func:`config_sources`, a schema error names
+(:func:`calibration.config_check.validate_config`). Given :func:`config_sources`, a schema error names
 the files and, after each problem, the file that set the key; a YAML syntax error in a file read here
 names the file, line and column (Snakemake's own message names neither).
 """

@@ -4,7 +4,7 @@ The cycle of the paper (section 4: initialization, simulation, assimilation, cyc
 steps the Snakemake checkpoint loop runs as separate jobs, each a pure function of files:
 
 1. :func:`initial_ensemble` -- Latin hypercube sample of the prior box (``iter_0/params.csv``).
-2. (the simulations, one job per member and record; :func:`calibration.workflow_io.run_member`)
+2. (the simulations, one job per member and record; :func:`calibration.runner.run_member`)
 3. :func:`analysis_step` -- for iteration ``k``: misfit of the ensemble and of its mean, failed members
    and their reasons, spreads, the stop decision (:func:`decide`), and the analysis ensemble for
    iteration ``k + 1`` (ES-MDA step ``alpha_k`` or the paper's EnKF, :mod:`enkf.analysis`). Written

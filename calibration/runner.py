@@ -1,0 +1,226 @@
+"""The member runner: one ``python -m shpb simulate`` run of an ensemble member, its files written atomically.
+
+:func:`run_member` runs the simulator with the exit-code contract of :mod:`shpb.contract` (0 = ok,
+3 = numerical failure, ``run.json`` says why, 2 = bad arguments or a missing input) and leaves the
+member's ``curve.csv`` and ``run.json`` behind whatever happened, except for a configuration error
+(exit code 2: :class:`SimulatorRejected`) and a genuine crash before the last attempt
+(:class:`SimulatorCrash`), which raise so that Snakemake fails or retries the job. A simulation
+running past ``time_limit_s`` is stopped and recorded as a failed member.
+
+The curve columns and exit codes are the simulator's own definitions (:mod:`shpb.contract`), so that a
+failed member's header cannot drift from a successful member's. Nothing here imports Snakemake.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shlex
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from shpb.contract import CURVE_COLUMNS as _SIM_CURVE_COLUMNS, EXIT_BAD_INPUT, EXIT_NUMERICAL, EXIT_OK
+from .contracts import atomic_write_json, atomic_write_text, read_json
+
+__all__ = ["CURVE_COLUMNS", "DEFAULT_SIMULATOR", "SimulatorCrash", "SimulatorRejected", "run_member",
+           "simulator_command", "simulate_argv", "failed_curve_text", "failure_card"]
+
+#: Columns of a simulated curve: the simulator's own definition (``python -m shpb simulate`` contract),
+#: so that a failed member's header cannot drift from a successful member's.
+CURVE_COLUMNS = tuple(_SIM_CURVE_COLUMNS)
+
+#: Default simulator command: the package's command-line entry.
+DEFAULT_SIMULATOR = "python -m shpb simulate"
+
+
+class SimulatorCrash(RuntimeError):
+    """The simulator ended without the exit-code contract (crash, kill, missing outputs)."""
+
+
+class SimulatorRejected(RuntimeError):
+    """The simulator refused its arguments or could not find its input (exit code 2): a configuration
+    error, not a property of the member's parameters. The job fails with the simulator's message and
+    leaves no output, so a re-run after the fix runs it again."""
+
+
+def simulator_command(spec: str | Sequence[str] | None = None) -> list[str]:
+    """The simulator command as an argv prefix (default ``python -m shpb simulate`` with this Python)."""
+    if spec is None or spec == DEFAULT_SIMULATOR:
+        return [sys.executable, "-m", "shpb", "simulate"]
+    return shlex.split(spec) if isinstance(spec, str) else [str(s) for s in spec]
+
+
+def simulate_argv(command: Sequence[str], *, geometry: str, preset: str, params: Mapping[str, float],
+                  out_dir: str | Path, record: str | None = None, t_end: float | None = None,
+                  sample_dt: float | None = None, snapshots: int | None = None) -> list[str]:
+    """The argv of one simulation (the ``python -m shpb simulate`` contract)."""
+    argv = list(command) + ["--geometry", geometry, "--preset", preset]
+    if record:
+        argv += ["--record", str(record)]
+    for name, value in params.items():
+        argv += ["--param", f"{name}={float(value)!r}"]
+    if t_end is not None:
+        argv += ["--t-end", repr(float(t_end))]
+    if sample_dt is not None:
+        argv += ["--sample-dt", repr(float(sample_dt))]
+    if snapshots is not None:
+        argv += ["--snapshots", str(int(snapshots))]
+    return argv + ["--out", str(out_dir)]
+
+
+def failure_card(path, text: str):
+    """A picture saying why a run has no fracture snapshots (:func:`shpb.snapshots.failure_card`; imported
+    here on call, so that member jobs do not load matplotlib)."""
+    from shpb.snapshots import failure_card as card
+
+    return card(path, text)
+
+
+def failed_curve_text() -> str:
+    """The curve file of a failed member: the contract's header and no rows (all values missing)."""
+    return ",".join(CURVE_COLUMNS) + "\n"
+
+
+def _tail(text: str, n: int = 1500) -> str:
+    text = (text or "").strip()
+    return text if len(text) <= n else "..." + text[-n:]
+
+
+def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Mapping[str, float],
+               curve_path: str | Path, run_path: str | Path, record: str | None = None,
+               t_end: float | None = None, sample_dt: float | None = None, attempt: int = 1,
+               max_attempts: int = 1, log_path: str | Path | None = None, extra_run: Mapping | None = None,
+               time_limit_s: float | None = None, snapshots: int | None = None) -> dict:
+    """Run one simulation and leave ``curve_path`` and ``run_path`` behind, atomically.
+
+    Exit code 0: the simulator's ``curve.csv``/``run.json`` are moved into place. Exit code 3 (numerical
+    failure, e.g. an unstable run): the member is failed -- the simulation is deterministic, so running
+    it again cannot help -- and a ``run.json`` with ``status: "failed"`` and the reason plus an empty
+    curve are written; the analysis drops it. Exit code 2 (arguments rejected, an input file missing):
+    a configuration error, raised as :class:`SimulatorRejected` with the simulator's message and no
+    output written, so the Snakemake job fails and a re-run after the fix runs the member again (a
+    stored failed member would make the analysis refuse on every re-run). Any other outcome (crash,
+    signal, missing outputs) is a :class:`SimulatorCrash`: raised while ``attempt < max_attempts`` so
+    that Snakemake's ``retries`` re-run the job, recorded as a failed member on the last attempt.
+
+    ``time_limit_s``: the simulator is killed after this wall time and the member is failed at once
+    (``reason`` starts with ``time limit``). The limit sits below the job's scheduler wall time, so a
+    member that runs too long is dropped under the failed-member policy instead of being killed by
+    Slurm on every attempt, which would stop the whole run.
+
+    ``snapshots``: a count of fracture snapshots (``--snapshots``); their folder is moved next to the
+    curve, replacing an older one, before the curve and run.json.
+
+    Returns the ``run.json`` dict written.
+    """
+    curve_path, run_path = Path(curve_path), Path(run_path)
+    out = curve_path.parent
+    out.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=".sim-", dir=out))
+    argv = simulate_argv(command, geometry=geometry, preset=preset, params=params, out_dir=tmp, record=record,
+                         t_end=t_end, sample_dt=sample_dt, snapshots=snapshots)
+    t0 = time.perf_counter()
+    try:
+        try:
+            proc = _run_with_limit(argv, time_limit_s)
+        except subprocess.TimeoutExpired as exc:
+            return _timed_out(exc, argv=argv, wall=time.perf_counter() - t0, geometry=geometry, preset=preset,
+                              params=params, curve_path=curve_path, run_path=run_path, log_path=log_path,
+                              extra=dict(extra_run or {}, attempt=attempt, exit_code=None))
+        wall = time.perf_counter() - t0
+        if log_path is not None:
+            atomic_write_text(log_path, f"$ {shlex.join(argv)}\n# exit code {proc.returncode}, "
+                                        f"attempt {attempt}/{max_attempts}, {wall:.1f} s\n"
+                                        f"--- stdout\n{proc.stdout}\n--- stderr\n{proc.stderr}\n")
+        run_json, curve_csv = tmp / "run.json", tmp / "curve.csv"
+        extra = dict(extra_run or {}, attempt=attempt, exit_code=proc.returncode)
+        if proc.returncode == EXIT_OK and run_json.is_file() and curve_csv.is_file():
+            run = read_json(run_json)
+            run.update(extra)
+            if (tmp / "snapshots").is_dir():
+                shutil.rmtree(out / "snapshots", ignore_errors=True)
+                os.replace(tmp / "snapshots", out / "snapshots")
+            os.replace(curve_csv, curve_path)
+            atomic_write_json(run_path, _jsonable(run))
+            return run
+        if proc.returncode == EXIT_BAD_INPUT:
+            raise SimulatorRejected(f"the simulator rejected its arguments or input (exit code 2): "
+                                    f"{_tail(proc.stderr, 600) or 'no message'}\n  command: {shlex.join(argv)}")
+        if proc.returncode == EXIT_NUMERICAL:
+            run = read_json(run_json) if run_json.is_file() else {}
+            reason = run.get("reason") or _tail(proc.stderr) or f"exit code {proc.returncode}"
+            run.update({"status": "failed", "reason": f"numerical failure: {reason}", "geometry": geometry,
+                        "preset": preset, "params": dict(params)}, **extra)
+            run.setdefault("wall_s", wall)
+            atomic_write_text(curve_path, failed_curve_text())
+            atomic_write_json(run_path, _jsonable(run))
+            return run
+        what = (f"simulator exited with code {proc.returncode}" if proc.returncode >= 0
+                else f"simulator killed by signal {-proc.returncode}")
+        if proc.returncode == 0:
+            what = "simulator exited 0 but did not write curve.csv and run.json"
+        message = f"{what} (attempt {attempt} of {max_attempts}): {_tail(proc.stderr, 600)}"
+        if attempt < max_attempts:
+            raise SimulatorCrash(message)
+        run = {"status": "failed", "reason": f"crashed on every attempt: {message}", "geometry": geometry,
+               "preset": preset, "params": dict(params), "wall_s": wall, **extra}
+        atomic_write_text(curve_path, failed_curve_text())
+        atomic_write_json(run_path, _jsonable(run))
+        return run
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _run_with_limit(argv, time_limit_s):
+    """subprocess.run(argv, capture_output=True, text=True) that kills the simulator at the time limit
+    and does not then wait for processes it may have started that still hold its pipes."""
+    with subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc:
+        try:
+            out, err = proc.communicate(timeout=time_limit_s)
+        except subprocess.TimeoutExpired as exc:
+            proc.kill()
+            try:
+                exc.stdout, exc.stderr = proc.communicate(timeout=10.0)
+            except subprocess.TimeoutExpired:
+                pass
+            raise
+        except BaseException:
+            proc.kill()
+            raise
+    return subprocess.CompletedProcess(argv, proc.returncode, out, err)
+
+
+def _timed_out(exc: subprocess.TimeoutExpired, *, argv, wall, geometry, preset, params, curve_path, run_path,
+               log_path, extra) -> dict:
+    """The failed member of a simulation stopped by ``time_limit_s`` (subprocess.run killed it)."""
+    def text(b):
+        return b.decode(errors="replace") if isinstance(b, bytes) else (b or "")
+    if log_path is not None:
+        atomic_write_text(log_path, f"$ {shlex.join(argv)}\n# killed after the time limit of {exc.timeout:g} s\n"
+                                    f"--- stdout\n{text(exc.stdout)}\n--- stderr\n{text(exc.stderr)}\n")
+    run = {"status": "failed", "geometry": geometry, "preset": preset, "params": dict(params), "wall_s": wall,
+           "reason": f"time limit: the simulation ran longer than {exc.timeout:g} s (member_time_limit_s) "
+                     f"and was stopped", **extra}
+    atomic_write_text(curve_path, failed_curve_text())
+    atomic_write_json(run_path, _jsonable(run))
+    return run
+
+
+def _jsonable(obj):
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        v = float(obj)
+        return v if math.isfinite(v) else None
+    return obj
