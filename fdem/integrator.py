@@ -12,7 +12,8 @@ import numpy as np
 from numba import njit
 
 from .contact import refresh_pairs, surface_nodes
-from .kernels import contact_forces, joint_forces, triangle_cauchy, triangle_forces
+from .kernels import (contact_forces, joint_forces, soa_dminv, triangle_cauchy, triangle_forces_into,
+                      triangle_forces_scalar)
 from .softening import z
 
 # Columns of the energy record.
@@ -157,7 +158,20 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
     if nh > 0:
         _hist_eval(hist_ptr, hist_t, hist_v, cursor, 0.0, hv)
         E[7] += _apply_velocity_bc(v, mass, vel_nodes, vel_dir, vel_hist, hv)
-    Us, Pd = triangle_forces(x, v, tri, dminv, vol0, lam, mu, eta, f)
+    # triangles without viscous stress go through the vectorised kernel, on buffers allocated once
+    viscous = False
+    for e in range(eta.shape[0]):
+        if eta[e] > 0.0:
+            viscous = True
+    M_soa = soa_dminv(dminv)
+    D_tri = np.empty((4, tri.shape[0]))
+    H_tri = np.empty((4, tri.shape[0]))
+    W_tri = np.empty(tri.shape[0])
+    if viscous:
+        Us, Pd = triangle_forces_scalar(x, v, tri, dminv, vol0, lam, mu, eta, f)
+    else:
+        Us = triangle_forces_into(x, tri, M_soa, lam, mu, vol0, f, True, D_tri, H_tri, W_tri)
+        Pd = 0.0
     Psi, dis, nnew, ndam = joint_forces(x, v, jn, jarea, kn, kt, ft, fs, dn, dtm, tanphi, sa, sb,
                                         sc, Dmax, broken, f, newly, newly_dam, jrate, jdif, slip_p,
                                         kappa, zeta_j)
@@ -231,7 +245,10 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
             bforce[:, :] = 0.0
             # the stored energies are booked at the output samples only
             sampled = step % sample_every == 0
-            Us, Pd = triangle_forces(x, v, tri, dminv, vol0, lam, mu, eta, f, sampled)
+            if viscous:
+                Us, Pd = triangle_forces_scalar(x, v, tri, dminv, vol0, lam, mu, eta, f, sampled)
+            else:
+                Us = triangle_forces_into(x, tri, M_soa, lam, mu, vol0, f, sampled, D_tri, H_tri, W_tri)
             Psi, dis, nnew, ndam = joint_forces(x, v, jn, jarea, kn, kt, ft, fs, dn, dtm, tanphi, sa,
                                                 sb, sc, Dmax, broken, f, newly, newly_dam, jrate, jdif,
                                                 slip_p, kappa, zeta_j, sampled)
