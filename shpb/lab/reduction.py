@@ -227,6 +227,41 @@ class ReducedRecord:
 # --------------------------------------------------------------------------------------------------
 # The reduction
 # --------------------------------------------------------------------------------------------------
+def _specimen(raw: "RawRecord", bar: BarSetup | None, L: float | None, D: float | None
+              ) -> tuple[BarSetup, float, float]:
+    """The bar set-up and the specimen's length and diameter [m]: the arguments, else the record's."""
+    bar = bar if bar is not None else raw.bar
+    if bar is None:
+        raise ValueError(f"{raw.name}: no BarSetup given and the record carries none")
+    L_s = L if L is not None else raw.specimen_length
+    D_s = D if D is not None else raw.specimen_diameter
+    if L_s is None or D_s is None or not (L_s > 0 and D_s > 0):
+        raise ValueError(f"{raw.name}: specimen length and diameter [m] are required, got {L_s}, {D_s}")
+    return bar, L_s, D_s
+
+
+@dataclass
+class _Channels:
+    """Every gauge channel of a record, incident bar first (steps 1-2)."""
+
+    names_i: tuple[str, ...]
+    names_t: tuple[str, ...]
+    volts: np.ndarray    # the recorded values
+    eps: np.ndarray      # compression-positive strain, despiked
+    eps0: np.ndarray     # eps less the provisional baseline
+    sig0: np.ndarray     # provisional noise (robust, first n0 samples)
+    n0: int
+    spikes: dict[str, int]
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self.names_i + self.names_t
+
+    @property
+    def n_i(self) -> int:
+        return len(self.names_i)
+
+
 def _to_strain(raw: "RawRecord", bar: BarSetup) -> tuple[np.ndarray, np.ndarray]:
     """Compression-positive strain of every gauge channel (step 1)."""
     if raw.unit == "strain":
@@ -235,6 +270,204 @@ def _to_strain(raw: "RawRecord", bar: BarSetup) -> tuple[np.ndarray, np.ndarray]
         fi, ft = bar.strain_per_volt_incident, bar.strain_per_volt_transmitted
     s = bar.compression_sign
     return s * fi * raw.incident, s * ft * raw.transmitted
+
+
+def _channels(raw: "RawRecord", bar: BarSetup, despike_signals: bool) -> _Channels:
+    """Steps 1-2: strain, provisional noise and baseline from the first samples, spikes removed."""
+    n = raw.n_samples
+    names_i, names_t = tuple(raw.incident_channels), tuple(raw.transmitted_channels)
+    eps_i_raw, eps_t_raw = _to_strain(raw, bar)
+    volts = np.vstack([raw.incident, raw.transmitted])
+    eps = np.vstack([eps_i_raw, eps_t_raw])
+    names = names_i + names_t
+    n0 = int(min(max(50, n // 10), 200, n))
+    sig0 = np.array([robust_std(e[:n0]) for e in eps])
+    sig0 = np.where(sig0 > 0, sig0, 1e-12)
+    spikes: dict[str, int] = {}
+    if despike_signals:
+        for k in range(eps.shape[0]):
+            eps[k], spikes[names[k]] = despike(eps[k], sig0[k])
+    else:
+        spikes = {nm: 0 for nm in names}
+    # mean, not median, after despiking: the median of coarsely quantized noise is biased by up to
+    # half a quantum, which would hold a smoothed baseline-free signal above the foot level
+    base0 = eps[:, :n0].mean(axis=1)
+    eps0 = eps - base0[:, None]
+    return _Channels(names_i, names_t, volts, eps, eps0, sig0, n0, spikes)
+
+
+def _first_arrival(name: str, ch: _Channels, dt: float, exclude_channels: tuple[str, ...], k_sigma: float,
+                   threshold_fraction: float) -> int:
+    """Step 3: the arrival at the incident gauge, the earliest of its channels' (garbage from a failing
+    gauge starts after the pulse, never before the pulse foot)."""
+    arrivals = []
+    for k in range(ch.n_i):
+        if ch.names[k] in exclude_channels:
+            continue
+        try:
+            arrivals.append(detect_arrival(ch.eps0[k], ch.sig0[k], dt, k_sigma, threshold_fraction))
+        except ValueError:
+            continue
+    if not arrivals:
+        raise ValueError(f"{name}: no incident pulse found on {ch.names_i}")
+    return min(arrivals)
+
+
+@dataclass(frozen=True)
+class _Timing:
+    """Where the waves are on the gauge signals: the reflected wave ``t_refl`` and the transmitted wave
+    ``t_tran`` after the incident wave [s] (step 6), and the common window's length."""
+
+    name: str
+    n: int
+    dt: float
+    x_i: float
+    c0: float
+    t_refl: float
+    t_tran: float
+    window_s: float | None
+
+    def window_samples(self, i_arr: int) -> int:
+        """Samples on the common axis: the requested length, cut at the end of the record."""
+        T = 2.0 * self.x_i / self.c0 if self.window_s is None else float(self.window_s)
+        avail = (self.n - 1 - i_arr) * self.dt
+        T = min(T, avail - self.t_refl, avail - self.t_tran)
+        if T <= 10 * self.dt:
+            raise ValueError(f"{self.name}: record too short after the incident arrival for the reflected/"
+                             f"transmitted waves (window {T:.3g} s)")
+        return int(math.floor(T / self.dt + 1e-9)) + 1
+
+
+def _timing(raw: "RawRecord", bar: BarSetup, window_s: float | None, shift_reflected_s: float,
+            shift_transmitted_s: float, notes: list[str]) -> _Timing:
+    """The nominal shifts :math:`2x_I/c_0` and :math:`(x_I+x_T)/c_0` plus the user's."""
+    c0 = bar.c0
+    x_i, x_t = bar.gauge_distance_incident, bar.gauge_distance_transmitted
+    t_refl = 2.0 * x_i / c0 + shift_reflected_s
+    t_tran = (x_i + x_t) / c0 + shift_transmitted_s
+    if window_s is not None and window_s > 2.0 * x_i / c0:
+        notes.append("window longer than 2 x_I / c0: eps_incident overlaps the reflected wave at its end")
+    return _Timing(raw.name, raw.n_samples, raw.dt, x_i, c0, t_refl, t_tran, window_s)
+
+
+def _average_gauges(ch: _Channels, i_a: int, tm: _Timing, n_w: int, exclude_channels: tuple[str, ...]
+                    ) -> tuple[np.ndarray, np.ndarray, list[int], list[int], list[str]]:
+    """Step 4: each bar's mean of its usable gauges over the spans the bar contributes to the window.
+    Returns (incident-bar strain, transmission-bar strain, gauges kept on each, notes)."""
+    n, dt, n_i, n0 = tm.n, tm.dt, ch.n_i, ch.n0
+    T_w = (n_w - 1) * dt
+    span_i = slice(i_a, min(n, i_a + int(math.ceil((tm.t_refl + T_w) / dt)) + 2))
+    span_t = slice(min(n - 1, i_a + int(math.floor(tm.t_tran / dt))),
+                   min(n, i_a + int(math.ceil((tm.t_tran + T_w) / dt)) + 2))
+    volts = ch.volts
+    base_v = np.median(volts[:, :n0], axis=1)
+    sig_v = np.array([robust_std(v[:n0]) for v in volts])
+    keep_i, notes_i = select_gauges(ch.eps0[:n_i], ch.names_i, base_v[:n_i], sig_v[:n_i], span_i,
+                                    exclude_channels, raw=volts[:n_i])
+    keep_t, notes_t = select_gauges(ch.eps0[n_i:], ch.names_t, base_v[n_i:], sig_v[n_i:], span_t,
+                                    exclude_channels, raw=volts[n_i:])
+    inc = ch.eps[:n_i][keep_i].mean(axis=0)
+    tra = ch.eps[n_i:][keep_t].mean(axis=0)
+    return inc, tra, keep_i, keep_t, notes_i + notes_t
+
+
+def _refined_arrival(inc: np.ndarray, n0: int, i_a: int, T_w: float, dt: float, k_sigma: float,
+                     threshold_fraction: float) -> int:
+    """The arrival detected again on the averaged incident signal (cleaner than any single gauge),
+    kept when it is within a quarter window of the first."""
+    inc_b0 = inc - inc[:n0].mean()
+    try:
+        i_a2 = detect_arrival(inc_b0, max(robust_std(inc[:n0]), 1e-12), dt, k_sigma, threshold_fraction)
+        if abs(i_a2 - i_a) * dt < 0.25 * T_w:
+            i_a = i_a2
+    except ValueError:
+        pass
+    return i_a
+
+
+@dataclass
+class _Baselined:
+    """Step 5: the signals less their pre-trigger mean; the pre-trigger part and its noise."""
+
+    inc: np.ndarray
+    tra: np.ndarray
+    chan: np.ndarray     # every gauge channel
+    pre: slice
+    sd_inc: float
+    sd_tra: float
+
+
+def _baseline(name: str, inc: np.ndarray, tra: np.ndarray, eps: np.ndarray, i_a: int, dt: float,
+              guard_s: float) -> _Baselined:
+    i_pre = i_a - max(1, int(round(guard_s / dt)))
+    if i_pre < 20:
+        raise ValueError(f"{name}: only {max(i_pre, 0)} pre-trigger samples before the incident "
+                         f"arrival; need at least 20 for the baseline")
+    pre = slice(0, i_pre)
+    inc = inc - inc[pre].mean()
+    tra = tra - tra[pre].mean()
+    chan = eps - eps[:, pre].mean(axis=1, keepdims=True)
+    return _Baselined(inc, tra, chan, pre, float(np.std(inc[pre], ddof=1)), float(np.std(tra[pre], ddof=1)))
+
+
+def _incident_span(inc: np.ndarray, i_a: int, tm: _Timing, sd_inc: float, k_sigma: float,
+                   threshold_fraction: float) -> tuple[int, bool]:
+    """Samples of the incident wave alone at its gauge (:math:`2x_I/c_0`, or to the end of the record),
+    and whether the pulse is still on when the reflected wave arrives (it must have ended)."""
+    n_g = min(int(math.floor(2.0 * tm.x_i / tm.c0 / tm.dt + 1e-9)) + 1, tm.n - i_a)
+    seg = inc[i_a:i_a + n_g]
+    j_pk = int(np.argmax(seg))
+    h_end = max(k_sigma * sd_inc, threshold_fraction * float(seg[j_pk]))
+    below = np.flatnonzero(seg[j_pk:] < h_end)
+    return n_g, bool(below.size == 0 and i_a + n_g < tm.n)
+
+
+def _shift_to_faces(time: np.ndarray, inc: np.ndarray, tra: np.ndarray, i_a: int, n_w: int, tm: _Timing
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Step 6: (tau, eps_I, eps_R, eps_T) on the common axis at the faces."""
+    t_a = time[i_a]
+    tau = tm.dt * np.arange(n_w)
+    eps_I = inc[i_a:i_a + n_w].copy()
+    eps_R = np.interp(t_a + tm.t_refl + tau, time, inc)
+    eps_T = np.interp(t_a + tm.t_tran + tau, time, tra)
+    return tau, eps_I, eps_R, eps_T
+
+
+def _forces(bar: BarSetup, L_s: float, D_s: float, tau: np.ndarray, eps_I: np.ndarray, eps_R: np.ndarray,
+            eps_T: np.ndarray) -> dict[str, np.ndarray]:
+    """Step 7: bar forces, face stresses, strain rate, strain and force balance."""
+    A_b = bar.area
+    A_s = math.pi * D_s ** 2 / 4.0
+    F1 = bar.E * A_b * (eps_I + eps_R)
+    F2 = bar.E * A_b * eps_T
+    s1, s2 = F1 / A_s, F2 / A_s
+    rate = bar.c0 / L_s * (eps_I - eps_R - eps_T)
+    strain = cumulative_trapezoid(rate, tau, initial=0.0)
+    Fsum = F1 + F2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        R = 2.0 * np.abs(F1 - F2) / Fsum
+    R[~(Fsum > 0.1 * np.nanmax(Fsum))] = np.nan
+    return {"force_front": F1, "force_back": F2, "stress_front": s1, "stress_back": s2,
+            "stress_mean": 0.5 * (s1 + s2), "strain_rate": rate, "strain": strain, "force_balance": R}
+
+
+def _noise(bar: BarSetup, L_s: float, D_s: float, names: tuple[str, ...], b: _Baselined
+           ) -> tuple[dict[str, float], dict[str, float], float]:
+    """The noise levels of :class:`ReducedRecord` (strain, Pa, strain rate) from the pre-trigger part."""
+    sd_inc, sd_tra = b.sd_inc, b.sd_tra
+    k_pa = bar.E * bar.area / (math.pi * D_s ** 2 / 4.0)
+    noise_strain = {"incident": sd_inc, "reflected": sd_inc, "transmitted": sd_tra}
+    noise_pa = {
+        "stress": k_pa * sd_tra,
+        "stress_back": k_pa * sd_tra,
+        "stress_front": k_pa * math.sqrt(2.0) * sd_inc,
+        "stress_mean": 0.5 * k_pa * math.sqrt(2.0 * sd_inc ** 2 + sd_tra ** 2),
+    }
+    for k, nm in enumerate(names):
+        sd = float(np.std(b.chan[k, b.pre], ddof=1))
+        noise_strain[nm] = sd
+        noise_pa[nm] = k_pa * sd
+    return noise_strain, noise_pa, bar.c0 / L_s * math.sqrt(2.0 * sd_inc ** 2 + sd_tra ** 2)
 
 
 def reduce_record(raw: "RawRecord", bar: BarSetup | None = None, specimen_length_m: float | None = None,
@@ -269,183 +502,34 @@ def reduce_record(raw: "RawRecord", bar: BarSetup | None = None, specimen_length
     ValueError
         If the bar or specimen is undefined, the pre-trigger part is too short, or no incident pulse is found.
     """
-    bar = bar if bar is not None else raw.bar
-    if bar is None:
-        raise ValueError(f"{raw.name}: no BarSetup given and the record carries none")
-    L_s = specimen_length_m if specimen_length_m is not None else raw.specimen_length
-    D_s = specimen_diameter_m if specimen_diameter_m is not None else raw.specimen_diameter
-    if L_s is None or D_s is None or not (L_s > 0 and D_s > 0):
-        raise ValueError(f"{raw.name}: specimen length and diameter [m] are required, got {L_s}, {D_s}")
-
+    bar, L_s, D_s = _specimen(raw, bar, specimen_length_m, specimen_diameter_m)
     dt = raw.dt
-    n = raw.n_samples
-    names_i, names_t = tuple(raw.incident_channels), tuple(raw.transmitted_channels)
-    eps_i_raw, eps_t_raw = _to_strain(raw, bar)
-    volts = np.vstack([raw.incident, raw.transmitted])
-    eps = np.vstack([eps_i_raw, eps_t_raw])
-    names = names_i + names_t
-    n_i = len(names_i)
     notes: list[str] = []
-
-    # step 2: provisional baseline / noise from the first samples (robust), despiking
-    n0 = int(min(max(50, n // 10), 200, n))
-    sig0 = np.array([robust_std(e[:n0]) for e in eps])
-    sig0 = np.where(sig0 > 0, sig0, 1e-12)
-    spikes: dict[str, int] = {}
-    if despike_signals:
-        for k in range(eps.shape[0]):
-            eps[k], spikes[names[k]] = despike(eps[k], sig0[k])
-    else:
-        spikes = {nm: 0 for nm in names}
-    # mean, not median, after despiking: the median of coarsely quantized noise is biased by up to
-    # half a quantum, which would hold a smoothed baseline-free signal above the foot level
-    base0 = eps[:, :n0].mean(axis=1)
-    eps0 = eps - base0[:, None]
-
-    # step 3: arrival at the incident gauge: the earliest channel arrival (garbage from a failing gauge
-    # starts after the pulse, never before the pulse foot)
-    arrivals = []
-    for k in range(n_i):
-        if names[k] in exclude_channels:
-            continue
-        try:
-            arrivals.append(detect_arrival(eps0[k], sig0[k], dt, k_sigma, threshold_fraction))
-        except ValueError:
-            continue
-    if not arrivals:
-        raise ValueError(f"{raw.name}: no incident pulse found on {names_i}")
-    i_a = min(arrivals)
-
-    c0 = bar.c0
-    x_i, x_t = bar.gauge_distance_incident, bar.gauge_distance_transmitted
-    t_refl = 2.0 * x_i / c0 + shift_reflected_s
-    t_tran = (x_i + x_t) / c0 + shift_transmitted_s
-    if window_s is not None and window_s > 2.0 * x_i / c0:
-        notes.append("window longer than 2 x_I / c0: eps_incident overlaps the reflected wave at its end")
-
-    def window_samples(i_arr: int, t_r: float, t_t: float) -> int:
-        """Samples on the common axis: the requested length, cut at the end of the record."""
-        T = 2.0 * x_i / c0 if window_s is None else float(window_s)
-        avail = (n - 1 - i_arr) * dt
-        T = min(T, avail - t_r, avail - t_t)
-        if T <= 10 * dt:
-            raise ValueError(f"{raw.name}: record too short after the incident arrival for the reflected/"
-                             f"transmitted waves (window {T:.3g} s)")
-        return int(math.floor(T / dt + 1e-9)) + 1
-
-    n_w = window_samples(i_a, t_refl, t_tran)
-    T_w = (n_w - 1) * dt
-
-    # step 4: gauge selection over the spans each bar contributes
-    span_i = slice(i_a, min(n, i_a + int(math.ceil((t_refl + T_w) / dt)) + 2))
-    span_t = slice(min(n - 1, i_a + int(math.floor(t_tran / dt))), min(n, i_a + int(math.ceil((t_tran + T_w) / dt)) + 2))
-    base_v = np.median(volts[:, :n0], axis=1)
-    sig_v = np.array([robust_std(v[:n0]) for v in volts])
-    keep_i, notes_i = select_gauges(eps0[:n_i], names_i, base_v[:n_i], sig_v[:n_i], span_i,
-                                    exclude_channels, raw=volts[:n_i])
-    keep_t, notes_t = select_gauges(eps0[n_i:], names_t, base_v[n_i:], sig_v[n_i:], span_t,
-                                    exclude_channels, raw=volts[n_i:])
-    notes += notes_i + notes_t
-    inc = eps[:n_i][keep_i].mean(axis=0)
-    tra = eps[n_i:][keep_t].mean(axis=0)
-
-    # re-detect the arrival on the averaged incident signal (cleaner than any single gauge)
-    inc_b0 = inc - inc[:n0].mean()
-    try:
-        i_a2 = detect_arrival(inc_b0, max(robust_std(inc[:n0]), 1e-12), dt, k_sigma, threshold_fraction)
-        if abs(i_a2 - i_a) * dt < 0.25 * T_w:
-            i_a = i_a2
-    except ValueError:
-        pass
-
-    # step 5: baseline and noise from the pre-trigger part
-    i_pre = i_a - max(1, int(round(guard_s / dt)))
-    if i_pre < 20:
-        raise ValueError(f"{raw.name}: only {max(i_pre, 0)} pre-trigger samples before the incident "
-                         f"arrival; need at least 20 for the baseline")
-    pre = slice(0, i_pre)
-    inc = inc - inc[pre].mean()
-    tra = tra - tra[pre].mean()
-    chan = eps - eps[:, pre].mean(axis=1, keepdims=True)
-    sd_inc = float(np.std(inc[pre], ddof=1))
-    sd_tra = float(np.std(tra[pre], ddof=1))
-
-    # the incident pulse must end before the reflected wave reaches the gauge (2 x_I / c0 later)
-    n_g = min(int(math.floor(2.0 * x_i / c0 / dt + 1e-9)) + 1, n - i_a)
-    seg = inc[i_a:i_a + n_g]
-    j_pk = int(np.argmax(seg))
-    h_end = max(k_sigma * sd_inc, threshold_fraction * float(seg[j_pk]))
-    below = np.flatnonzero(seg[j_pk:] < h_end)
-    overlap = below.size == 0 and i_a + n_g < n
+    ch = _channels(raw, bar, despike_signals)                                                # steps 1-2
+    i_a = _first_arrival(raw.name, ch, dt, exclude_channels, k_sigma, threshold_fraction)    # step 3
+    tm = _timing(raw, bar, window_s, shift_reflected_s, shift_transmitted_s, notes)
+    n_w = tm.window_samples(i_a)
+    inc, tra, keep_i, keep_t, gauge_notes = _average_gauges(ch, i_a, tm, n_w, exclude_channels)  # step 4
+    notes += gauge_notes
+    i_a = _refined_arrival(inc, ch.n0, i_a, (n_w - 1) * dt, dt, k_sigma, threshold_fraction)
+    b = _baseline(raw.name, inc, tra, ch.eps, i_a, dt, guard_s)                             # step 5
+    n_g, overlap = _incident_span(b.inc, i_a, tm, b.sd_inc, k_sigma, threshold_fraction)
     if overlap:
         notes.append("incident pulse longer than 2 x_I / c0: it overlaps the reflected wave at the "
                      "incident gauge, so eps_reflected (front force, strain rate) is contaminated")
-
-    n_w = window_samples(i_a, t_refl, t_tran)
-
-    # step 6: time shifts to the faces on the common axis
-    t_a = raw.time[i_a]
-    tau = dt * np.arange(n_w)
-    eps_I = inc[i_a:i_a + n_w].copy()
-    eps_R = np.interp(t_a + t_refl + tau, raw.time, inc)
-    eps_T = np.interp(t_a + t_tran + tau, raw.time, tra)
-    gauge_time = dt * np.arange(n_g)
-    gauge_strain = inc[i_a:i_a + n_g].copy()
-
-    # step 7: forces, stresses, rates
-    A_b = bar.area
-    A_s = math.pi * D_s ** 2 / 4.0
-    F1 = bar.E * A_b * (eps_I + eps_R)
-    F2 = bar.E * A_b * eps_T
-    s1, s2 = F1 / A_s, F2 / A_s
-    rate = c0 / L_s * (eps_I - eps_R - eps_T)
-    strain = cumulative_trapezoid(rate, tau, initial=0.0)
-    Fsum = F1 + F2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        R = 2.0 * np.abs(F1 - F2) / Fsum
-    R[~(Fsum > 0.1 * np.nanmax(Fsum))] = np.nan
-
-    k_pa = bar.E * A_b / A_s
-    noise_strain = {"incident": sd_inc, "reflected": sd_inc, "transmitted": sd_tra}
-    noise_pa = {
-        "stress": k_pa * sd_tra,
-        "stress_back": k_pa * sd_tra,
-        "stress_front": k_pa * math.sqrt(2.0) * sd_inc,
-        "stress_mean": 0.5 * k_pa * math.sqrt(2.0 * sd_inc ** 2 + sd_tra ** 2),
-    }
-    for k, nm in enumerate(names):
-        sd = float(np.std(chan[k, pre], ddof=1))
-        noise_strain[nm] = sd
-        noise_pa[nm] = k_pa * sd
+    n_w = tm.window_samples(i_a)
+    tau, eps_I, eps_R, eps_T = _shift_to_faces(raw.time, b.inc, b.tra, i_a, n_w, tm)          # step 6
+    curves = _forces(bar, L_s, D_s, tau, eps_I, eps_R, eps_T)                                 # step 7
+    noise_strain, noise_pa, noise_rate = _noise(bar, L_s, D_s, ch.names, b)
     return ReducedRecord(
-        name=raw.name,
-        time=tau,
-        eps_incident=eps_I,
-        eps_reflected=eps_R,
-        eps_transmitted=eps_T,
-        force_front=F1,
-        force_back=F2,
-        stress_front=s1,
-        stress_back=s2,
-        stress_mean=0.5 * (s1 + s2),
-        strain_rate=rate,
-        strain=strain,
-        force_balance=R,
-        incident_gauge_time=gauge_time,
-        incident_gauge_strain=gauge_strain,
-        noise_std_strain=noise_strain,
-        noise_std_Pa=noise_pa,
-        noise_std_strain_rate=c0 / L_s * math.sqrt(2.0 * sd_inc ** 2 + sd_tra ** 2),
-        bar=bar,
-        specimen_length=float(L_s),
-        specimen_diameter=float(D_s),
-        arrival_time_gauge=float(t_a),
-        shift_reflected=t_refl,
-        shift_transmitted=t_tran,
-        channels_used={"incident": tuple(names_i[k] for k in keep_i),
-                       "transmitted": tuple(names_t[k] for k in keep_t)},
-        spikes_removed=spikes,
-        notes=notes,
+        name=raw.name, time=tau, eps_incident=eps_I, eps_reflected=eps_R, eps_transmitted=eps_T, **curves,
+        incident_gauge_time=dt * np.arange(n_g), incident_gauge_strain=b.inc[i_a:i_a + n_g].copy(),
+        noise_std_strain=noise_strain, noise_std_Pa=noise_pa, noise_std_strain_rate=noise_rate,
+        bar=bar, specimen_length=float(L_s), specimen_diameter=float(D_s),
+        arrival_time_gauge=float(raw.time[i_a]), shift_reflected=tm.t_refl, shift_transmitted=tm.t_tran,
+        channels_used={"incident": tuple(ch.names_i[k] for k in keep_i),
+                       "transmitted": tuple(ch.names_t[k] for k in keep_t)},
+        spikes_removed=ch.spikes, notes=notes,
     )
 
 
