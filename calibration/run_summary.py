@@ -1,9 +1,11 @@
-"""The lines the workflow prints when a run ends (the Snakefile's ``onsuccess``): for each experiment of
-the run its verdict, stop reason, the posterior mean with the 90 % interval per parameter, and the path
-of its ``results/<exp>/summary.json``.
+"""The lines the workflow prints to its log: one per analysis as the loop runs (:func:`analysis_line`,
+printed by ``scripts/analysis.py``), and when a run ends (the Snakefile's ``onsuccess``) for each
+experiment of the run its verdict, stop reason, the posterior mean with the 90 % interval per
+parameter, and the path of its ``results/<exp>/summary.json``.
 
-Read from the ``summary.json`` files that exist. Never raises: a missing, unreadable or unexpected
-file gives a line that says so (the run has succeeded; its report must not turn it into an error).
+The end-of-run lines are read from the ``summary.json`` files that exist. Neither ever raises: a
+missing, unreadable or unexpected value or file gives a line that says so (a log line must not turn
+a run into an error).
 """
 from __future__ import annotations
 
@@ -12,7 +14,7 @@ import math
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
-__all__ = ["experiment_lines", "run_summary", "experiments_of_run"]
+__all__ = ["analysis_line", "experiment_lines", "run_summary", "experiments_of_run"]
 
 #: SI units of the calibrated parameters (other names are printed without a unit).
 UNITS = {"sigma_n": "Pa", "sigma_t": "Pa", "E_n": "J/m^2", "E_t": "J/m^2", "E": "Pa", "rho": "kg/m^3"}
@@ -24,6 +26,36 @@ def _num(x) -> str:
     except (TypeError, ValueError):
         return "?"
     return f"{x:.4g}" if math.isfinite(x) else str(x)
+
+
+def analysis_line(analysis: Mapping) -> str:
+    """The log line of one analysis (an ``iter_<k>/analysis.json`` dict), e.g.
+    ``twin_ref iteration 2: median member chi2/obs 1.55 (stop at 1.22; 260 against the noise alone),
+    25/25 members ok -> continue``.
+
+    The first number is the stop test's statistic (the median member's chi^2 per observation against
+    the noise plus the estimated model discrepancy), with the target the stop rule compares it with;
+    the second the same member's against the noise alone; then the members that ran, and the decision
+    this analysis took (the final rules re-take it with the current stopping rule).
+    """
+    try:
+        decision = analysis.get("decision") or {}
+        values = decision.get("values") or {}
+        misfit = analysis.get("misfit") or {}
+        stat = values.get("chi2_per_obs", misfit.get("stop_chi2_per_obs", misfit.get("chi2_per_obs")))
+        noise = misfit.get("median_chi2_per_obs", misfit.get("chi2_per_obs"))
+        failed = analysis.get("failed_members") or []
+        what = (f"stop: {decision.get('reason') or '?'}" if decision.get("stop")
+                else (decision.get("reason") or "?"))
+        line = (f"{analysis.get('experiment', '?')} iteration {analysis.get('iteration', '?')}: "
+                f"median member chi2/obs {_num(stat)} (stop at {_num(values.get('chi2_target'))}; "
+                f"{_num(noise)} against the noise alone), "
+                f"{analysis.get('n_alive', '?')}/{analysis.get('n_members', '?')} members ok")
+        if failed:
+            line += f" ({len(failed)} failed: see failed_members in analysis.json)"
+        return line + f" -> {what}"
+    except Exception as exc:  # noqa: BLE001 - a log line must never fail the analysis
+        return f"(no misfit line: {type(exc).__name__}: {exc})"
 
 
 def experiment_lines(name: str, summary: Mapping, path: str | Path) -> list[str]:

@@ -3,6 +3,7 @@ import pandas as pd
 
 from calibration.experiment import ExperimentSpec, analysis_step
 from calibration.observations import read_observations
+from calibration.run_summary import analysis_line
 from calibration.workflow_io import atomic_write_json, read_responses
 
 exp = snakemake.wildcards.exp
@@ -14,3 +15,4 @@ history = [(pd.read_csv(p), read_responses(r)[1])
 result = analysis_step(spec, int(snakemake.wildcards.it), pd.read_csv(snakemake.input.params), Y, status, obs,
                        pd.read_csv(snakemake.input.prior), history)
 atomic_write_json(snakemake.output.analysis, result)
+print(analysis_line(result), flush=True)  # the misfit of this iteration in the run's log

@@ -207,3 +207,29 @@ def test_the_rank_cap_keeps_exactly_that_many_singular_values():
         assert res.rank == cap
     assert capped_truncation(Y, alive, err, 0.99, None) == 0.99
     assert capped_truncation(Y, alive, err, 0.5, 19) == 0.5  # the cap never keeps more than base would
+
+
+def test_each_analysis_prints_its_misfit_line_for_the_log():
+    """scripts/analysis.py prints calibration.run_summary.analysis_line of every analysis: the stop test's
+    statistic and target, the median member against the noise alone, the members that ran, the decision."""
+    from calibration.run_summary import analysis_line
+
+    spec, obs, model, _ = _linear_setup(10)
+    params = initial_ensemble(spec)
+    Y = model(params[list(spec.names)].to_numpy())
+    Y[3] = np.nan
+    status = pd.DataFrame({"member": params["member"], "status": "ok", "reason": ""})
+    status.loc[3, ["status", "reason"]] = ["failed", "numerical failure: energy balance diverged"]
+    a = analysis_step(spec, 0, params, Y, status, obs, params)
+    line = analysis_line(a)
+    stat, target = a["decision"]["values"]["chi2_per_obs"], a["decision"]["values"]["chi2_target"]
+    assert line.startswith("twin iteration 0: median member chi2/obs "), line
+    assert f"chi2/obs {stat:.4g} (stop at {target:.4g}; {a['misfit']['median_chi2_per_obs']:.4g} against the noise " \
+           f"alone), 9/10 members ok (1 failed" in line, line
+    assert line.endswith("-> continue") and "\n" not in line
+    # a stop is said with its reason; an odd dict gives a line, never an error
+    stopped = {**a, "failed_members": [], "n_alive": 10, "decision": {**a["decision"], "stop": True,
+                                                                     "reason": "max_iterations"}}
+    assert analysis_line(stopped).endswith("10/10 members ok -> stop: max_iterations")
+    assert analysis_line({"experiment": "x"}).startswith("x iteration ?: median member chi2/obs ? (stop at ?")
+    assert analysis_line(None).startswith("(no misfit line")
