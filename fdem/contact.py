@@ -27,8 +27,13 @@ def surface_nodes(edges, edge_active, n_nodes):
 @njit(cache=True)
 def node_normals(x, edges, edge_active):
     """Outward unit normal of every surface node (mean of its active edges' normals; zero elsewhere)."""
+    return _normals(x, edges, np.nonzero(edge_active)[0])
+
+
+@njit(cache=True)
+def _normals(x, edges, act):
+    """Unit mean of the outward normals of the edges act at each of their nodes (zero elsewhere)."""
     node_normal = np.zeros((x.shape[0], 2))
-    act = np.nonzero(edge_active)[0]
     for k in range(act.shape[0]):
         e = act[k]
         p = edges[e, 0]
@@ -241,7 +246,7 @@ def filter_pairs(x, cand_node, cand_edge, edges, edge_active, surface, buffer):
 
 @njit(cache=True)
 def refresh_pairs(x, edges, edge_active, edge_tri, node_vertex, node_body, node_tri, tri, body_fracturable,
-                  buffer, margin, cand_node, cand_edge, x_cand, all_edges, edge_nodes):
+                  buffer, margin, cand_node, cand_edge, x_cand, all_edges, edge_nodes, edge_rigid):
     """The contact list of build_pairs at x, through a candidate list of every pair (active or not)
     within buffer + margin at x_cand.
 
@@ -250,7 +255,9 @@ def refresh_pairs(x, edges, edge_active, edge_tri, node_vertex, node_body, node_
     filtered: crack faces that appear need no new search (they made the rebuilds of a fragmenting
     specimen, every few steps, the larger part of a run). Otherwise the candidates are searched
     afresh at x (x_cand is updated in place). all_edges: every edge index; edge_nodes: every node on
-    an edge (both ascending).
+    an edge (both ascending); edge_rigid: the edges of bodies that cannot fracture, the only ones
+    whose nodes' normals contact_forces reads (a fracturable body's node takes its direction from
+    its triangle), so the normals are summed over those alone.
     Returns (pair_node, pair_edge, node_normal, surface nodes, cand_node, cand_edge).
     """
     d2 = 0.0
@@ -272,4 +279,14 @@ def refresh_pairs(x, edges, edge_active, edge_tri, node_vertex, node_body, node_
     for k in range(snodes.shape[0]):
         surface[snodes[k]] = True
     pn, pe = filter_pairs(x, cand_node, cand_edge, edges, edge_active, surface, buffer)
-    return pn, pe, node_normals(x, edges, edge_active), snodes, cand_node, cand_edge
+    m = 0
+    for e in range(edges.shape[0]):
+        if edge_active[e] and edge_rigid[e]:
+            m += 1
+    act = np.empty(m, np.int64)
+    m = 0
+    for e in range(edges.shape[0]):
+        if edge_active[e] and edge_rigid[e]:
+            act[m] = e
+            m += 1
+    return pn, pe, _normals(x, edges, act), snodes, cand_node, cand_edge

@@ -136,13 +136,16 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
     margin = CANDIDATE_MARGIN * buffer
     all_edges = np.arange(edges.shape[0])
     edge_nodes = surface_nodes(edges, np.ones(edges.shape[0], np.bool_), n)
+    edge_rigid = np.zeros(edges.shape[0], np.bool_)
+    for e in range(edges.shape[0]):
+        edge_rigid[e] = not body_fracturable[node_body[edges[e, 0]]]
     x_cand = x.copy()
     cand_node = np.zeros(0, np.int64)
     cand_edge = np.zeros(0, np.int64)
     if use_contact:
         pair_node, pair_edge, node_normal, snodes, cand_node, cand_edge = refresh_pairs(
             x, edges, edge_active, edge_tri, node_vertex, node_body, node_tri, tri, body_fracturable,
-            buffer, margin, cand_node, cand_edge, x_cand, all_edges, edge_nodes)
+            buffer, margin, cand_node, cand_edge, x_cand, all_edges, edge_nodes, edge_rigid)
     else:
         pair_node = np.zeros(0, np.int64)
         pair_edge = np.zeros(0, np.int64)
@@ -198,19 +201,36 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
     for step in range(n_steps + 1):
         if step > 0:
             # half kick, with mass damping and external tractions booked at the half-step velocity
-            for i in range(n):
-                v[i, 0] += 0.5 * dt * f[i, 0] * inv_mass[i]
-                v[i, 1] += 0.5 * dt * f[i, 1] * inv_mass[i]
-            if nh > 0:
-                _hist_eval(hist_ptr, hist_t, hist_v, cursor, t + 0.5 * dt, hv)
-                E[7] += _apply_velocity_bc(v, mass, vel_nodes, vel_dir, vel_hist, hv)
             vmax2 = 0.0
-            for i in range(n):
-                x[i, 0] += dt * v[i, 0]
-                x[i, 1] += dt * v[i, 1]
-                vv = v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1]
-                if vv > vmax2:
-                    vmax2 = vv
+            if vel_nodes.shape[0] == 0:
+                # no prescribed velocity to impose between kick and drift: one pass over the nodes,
+                # which also clears the force buffer for this step's forces (same arithmetic)
+                for i in range(n):
+                    v[i, 0] += 0.5 * dt * f[i, 0] * inv_mass[i]
+                    v[i, 1] += 0.5 * dt * f[i, 1] * inv_mass[i]
+                    f[i, 0] = 0.0
+                    f[i, 1] = 0.0
+                    x[i, 0] += dt * v[i, 0]
+                    x[i, 1] += dt * v[i, 1]
+                    vv = v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1]
+                    if vv > vmax2:
+                        vmax2 = vv
+                if nh > 0:
+                    _hist_eval(hist_ptr, hist_t, hist_v, cursor, t + 0.5 * dt, hv)
+            else:
+                for i in range(n):
+                    v[i, 0] += 0.5 * dt * f[i, 0] * inv_mass[i]
+                    v[i, 1] += 0.5 * dt * f[i, 1] * inv_mass[i]
+                if nh > 0:
+                    _hist_eval(hist_ptr, hist_t, hist_v, cursor, t + 0.5 * dt, hv)
+                    E[7] += _apply_velocity_bc(v, mass, vel_nodes, vel_dir, vel_hist, hv)
+                for i in range(n):
+                    x[i, 0] += dt * v[i, 0]
+                    x[i, 1] += dt * v[i, 1]
+                    vv = v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1]
+                    if vv > vmax2:
+                        vmax2 = vv
+                f[:, :] = 0.0
             t += dt
             # A node that crosses the contact buffer in one step moves faster than any wave the stable
             # step resolves: the state is already garbage, and each contact rebuild over an exploding
@@ -233,7 +253,7 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
                     pair_node, pair_edge, node_normal, snodes, cand_node, cand_edge = refresh_pairs(
                         x, edges, edge_active, edge_tri, node_vertex, node_body, node_tri, tri,
                         body_fracturable, buffer, margin, cand_node, cand_edge, x_cand, all_edges,
-                        edge_nodes)
+                        edge_nodes, edge_rigid)
                     for i in range(n):
                         x_ref[i, 0] = x[i, 0]
                         x_ref[i, 1] = x[i, 1]
@@ -241,7 +261,6 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
                     pending_faces = False
                     steps_since = 0
             # forces at t (velocity-dependent terms use the half-step velocity)
-            f[:, :] = 0.0
             bforce[:, :] = 0.0
             # the stored energies are booked at the output samples only
             sampled = step % sample_every == 0
