@@ -1,155 +1,126 @@
-"""Where the FDEM step's time goes: each part of the step timed alone on a captured mid-run state.
+"""Where the FDEM step's time goes, measured inside the real step loop.
 
-The member is run to a point of interest (the disc: 70 % of its failure-peak time, where contact and
-joints are both busy; the same for the marble cylinder), its state taken, and each part of one step
-called many times on that state: triangle forces, joint forces, contact forces, the node update
-(two half kicks and the drift), the contact broad phase (one rebuild; its per-step share is rebuilds /
-steps from the full run) and sampling (one sample; its share is 1 / sample_every). The sum of the
-parts is compared with the measured solver time per step of the full run, so a part the profile
-misses shows up as a gap.
+A copy of `fdem.integrator.run_loop` is made from its source with a timer (Numba's objmode calling
+time.perf_counter) around one part of the step: the half kick and drift (node update), the contact
+list check and refresh, the triangle forces, the joint forces, the newly damaged joints' bookkeeping,
+the contact forces, and the rest (tractions, damping, second half kick). The member is run once per
+part with that copy (one timer pair per step, the same in every run), and once with a copy timing an
+empty section to measure the timer's own cost, which is subtracted. Timing each part in isolation on
+a frozen state misses what only the dynamics do (joints whose damage grows, crack faces appearing),
+which in a fragmenting disc is most of the post-peak cost.
 
-Prints one JSON object (one core, warm JIT cache).
-Usage: python benchmarks/profile_engine.py [--cases disc_paper,marble_fast] [--calls 200]
+Prints one JSON object (one core). Usage:
+  python benchmarks/profile_engine.py [--cases disc_paper,marble_fast]
 """
 from __future__ import annotations
 
 import argparse
+import importlib.util
+import inspect
 import json
 import os
 import sys
-import time
+import tempfile
+from pathlib import Path
 
-import numpy as np
+# Each part as (first line of the part, first line after it) in fdem/integrator.py's run_loop.
+PARTS = {
+    "node_update": ("            # half kick, with mass damping", "            # contact neighbour list\n"),
+    "contact_refresh": ("            # contact neighbour list\n", "            bforce[:, :] = 0.0\n"),
+    "triangles": ("            bforce[:, :] = 0.0\n", "            Psi, dis, nnew, ndam = joint_forces("),
+    "joints": ("            Psi, dis, nnew, ndam = joint_forces(", "            E[4] += dis\n"),
+    "damage_bookkeeping": ("            E[4] += dis\n", "            Uc, Pf, pen = contact_forces("),
+    "contact_forces": ("            Uc, Pf, pen = contact_forces(", "            if pen > max_pen:\n"),
+    "rest_of_step": ("            if pen > max_pen:\n", "        while isnap"),
+}
+START = "            with objmode(t_a='float64'):\n                t_a = time.perf_counter()\n"
+STOP = ("            with objmode(t_b='float64'):\n                t_b = time.perf_counter()\n"
+        "            timer_s[0] += t_b - t_a\n")
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # benchmarks._step_parts
+
+def timed_source(part: str | None) -> str:
+    """run_loop's module source with a timer around `part` (None: an empty timed section)."""
+    import fdem.integrator as integ
+    src = inspect.getsource(integ)
+    src = src.replace("from .", "from fdem.").replace("from numba import njit", "from numba import njit, objmode\nimport time")
+    src = src.replace("@njit(cache=True)\ndef run_loop(", "@njit(cache=False)\ndef run_loop(")
+    src = src.replace("    E = np.zeros(8)\n", "    E = np.zeros(8)\n    timer_s = np.zeros(1)\n    t_a = 0.0\n", 1)
+    src = src.replace("    return status, ns, step, E, rebuilds",
+                      "    t_total = timer_s[0]\n    with objmode(rec_ok='int64'):\n        rec_ok = _record(t_total)\n    status += rec_ok\n"
+                      "    return status, ns, step, E, rebuilds")
+    src = src.replace("STATUS_OK = 0\n", "STATUS_OK = 0\nTIMES = []\n\n\ndef _record(t):\n    TIMES.append(t)\n    return 0\n\n\n", 1)
+    first, after = PARTS[part] if part else PARTS["contact_refresh"][:1] * 2
+    for anchor in (first, after):
+        if src.count(anchor) != 1:
+            raise RuntimeError(f"benchmarks/profile_engine.py: anchor {anchor.strip()!r} is not unique in "
+                               "fdem/integrator.py any more; update PARTS")
+    i = src.index(first)
+    if part is None:
+        return src[:i] + START + STOP + src[i:]
+    src = src[:i] + START + src[i:]
+    j = src.index(after, i + len(START))
+    return src[:j] + STOP + src[j:]
 
 
-def _case(name):
-    from shpb.simulate import build
+def _load(part, folder: Path):
+    path = folder / f"timed_{part or 'empty'}.py"
+    path.write_text(timed_source(part))
+    spec = importlib.util.spec_from_file_location(path.stem, path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[path.stem] = mod  # Numba's objmode finds the module's globals by its name
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _member(case: str):
+    """(geometry, preset, params, record) of a case name: disc_<preset> (Table 2 reference point) or
+    marble_<preset> (CaMa_SHPB_004 driven by its measured incident wave)."""
     from shpb.fracture import CHECK_POINTS
-    if name.startswith("disc_"):
-        sigma_t, E_t = CHECK_POINTS["reference"]
-        return build("brazilian_disc", name.split("_", 1)[1], {"sigma_t": sigma_t, "E_t": E_t})
-    if name.startswith("marble_"):
-        from pathlib import Path
-        rec = next(Path("data/freiburg-rae-rock-shpb").rglob("CaMa_SHPB_004*"))
-        return build("cylinder", name.split("_", 1)[1], {"sigma_t": 35e6, "E_t": 2.75e4}, record=rec)
-    raise ValueError(f"unknown case {name!r}: expected disc_<preset> or marble_<preset>")
+    kind, preset = case.split("_", 1)
+    if kind == "disc":
+        return "brazilian_disc", preset, dict(zip(("sigma_t", "E_t"), CHECK_POINTS["reference"])), None
+    if kind == "marble":
+        root = Path(__file__).resolve().parents[1] / "data" / "freiburg-rae-rock-shpb"
+        return "cylinder", preset, {"sigma_t": 35e6, "E_t": 2.75e4}, next(root.rglob("CaMa_SHPB_004*"))
+    raise ValueError(f"unknown case {case!r}: expected disc_<preset> or marble_<preset>")
 
 
-def _best_of(fn, calls):
-    """Median time of one call [s] over `calls` calls (after one warm call)."""
-    fn()
-    ts = []
-    for _ in range(calls):
-        t0 = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t0)
-    return float(np.median(ts))
-
-
-def _state(m, s, t_end):
-    """Run to t_end [s]; the state, the active edges as the integrator would have them, the run."""
-    from fdem.solver import run
-    r = run(m, t_end, sample_dt=0.5e-6, traction_bcs=s["traction_bcs"], stress_probes=s["stress_probes"])
-    edge_active = m.edge_active0.copy()
-    for j in np.nonzero(r.Dmax[:, 0] > 0)[0]:
-        for side in range(2):
-            edge_active[m.tri_edges[m.edge_tri[m.jedges[j, side]]]] = True
-    return r, edge_active
-
-
-def _parts(m, s, r, edge_active, calls):
-    """Time of each part of one step [s] at the run's final state (see the module docstring)."""
-    from fdem.kernels import triangle_forces, joint_forces, contact_forces
-    from fdem.contact import build_pairs, surface_nodes
-    from benchmarks._step_parts import node_update, sample_stress
-    x, v, Dm, br = r.x, r.v, r.Dmax.copy(), r.joint_broken.copy()
-    n, nj, dt = m.n_nodes, m.n_joints, r.dt
-    f = np.zeros((n, 2))
-    c = m.contact
-    p_c, mu_tab = c.table(m.body_names), c.friction_table(m.body_names)
-    buffer = c.buffer if c.buffer is not None else 0.3 * float(np.min(m.edge_dlim[m.edge_active0]) * 2.0)
-    snodes = surface_nodes(m.edges, edge_active, n)
-    args_bp = (x, m.edges, edge_active, m.edge_tri, snodes, m.node_vertex, m.node_body, m.node_tri, m.tri,
-               m.body_fracturable, buffer)
-    pn, pe, nrm = build_pairs(*args_bp)
-    sa, sb, sc = m.softening
-    newly, newly_dam = np.empty(nj, np.int64), np.empty(nj, np.int64)
-    jdif, slip, kappa = np.ones((nj, 2)), np.zeros((nj, 2)), np.zeros((nj, 2))
-    zeta = np.ones(nj)
-    ce, cd, se, su = -np.ones(n, np.int64), np.zeros(n), -np.ones(n, np.int64), np.zeros((n, 2))
-    bforce = np.zeros((len(m.body_names), 2))
-    eg = [m.element_sets[k] for k in s["stress_probes"]]
-    eg_ptr = np.concatenate([[0], np.cumsum([len(g) for g in eg])]).astype(np.int64)
-    eg_el = np.concatenate(eg).astype(np.int64)
-    xc, vc, inv_m, g = x.copy(), v.copy(), 1.0 / m.mass, np.zeros_like(f)
-    t = {
-        "triangles": _best_of(lambda: triangle_forces(x, v, m.tri, m.dminv, m.vol0, m.lam, m.mu, m.eta, f), calls),
-        "joints": _best_of(lambda: joint_forces(
-            x, v, m.jn, m.jarea, m.kn, m.kt, m.ft, m.fs, m.dn, m.dt, m.tanphi, sa, sb, sc, Dm, br, f,
-            newly, newly_dam, m.jrate, jdif, slip, kappa, zeta), calls),
-        "contact_forces": _best_of(lambda: contact_forces(
-            x, v, pn, pe, pn.shape[0], nrm, m.edges, m.edge_tri, m.edge_joint, br, Dm, m.edge_dlim,
-            m.edge_thick, m.node_thick, m.node_body, m.node_tri, m.tri, m.node_vertex, m.body_fracturable,
-            p_c, mu_tab, dt, f, bforce, ce, cd, se, su), calls),
-        "node_update": _best_of(lambda: node_update(xc, vc, f, inv_m, dt, snodes, x, g), calls),
-        "one_contact_rebuild": _best_of(lambda: build_pairs(*args_bp), max(5, calls // 10)),
-        "one_sample": _best_of(lambda: sample_stress(x, m.tri, m.dminv, m.lam, m.mu, m.vol0, eg_ptr, eg_el),
-                               calls),
-    }
-    counts = {"contact_pairs": int(pn.shape[0]), "surface_nodes": int(snodes.shape[0]),
-              "damaged_joints": int(np.sum(r.Dmax[:, 0] > 0)), "broken_joints": int(np.sum(r.joint_broken))}
-    return t, counts
-
-
-def _phase(t_parts, rebuilds, steps, sample_every, measured_step):
-    """Per-step cost of each part over one phase of the run, and how much of the measured step
-    time the parts account for."""
-    per = {k: t_parts[k] for k in ("triangles", "joints", "contact_forces", "node_update")}
-    per["contact_rebuild"] = t_parts["one_contact_rebuild"] * rebuilds / max(steps, 1)
-    per["sampling"] = t_parts["one_sample"] / sample_every
-    total = sum(per.values())
-    return {"measured_step_us": round(1e6 * measured_step, 2), "steps": int(steps), "contact_rebuilds": int(rebuilds),
-            "parts_us": {k: round(1e6 * v, 2) for k, v in per.items()},
-            "share_of_parts": {k: round(v / total, 3) for k, v in per.items()},
-            "parts_over_measured": round(total / measured_step, 3)}
-
-
-def profile(name: str, calls: int) -> dict:
-    """Pre-peak (up to 70 % of the transmitted-force peak) and post-peak (the rest of the window)
-    phases of one member: measured step time of each and the parts at each phase's final state."""
-    s = _case(name)
-    m = s["model"]
-    t_total = s["arrival_s"] + s["window_s"]
-    full, act_end = _state(m, s, t_total)
-    F = full.body_force_of(s["geometry"].transmission_bar)[:, 0]
-    t_pre = 0.7 * float(full.time[int(np.argmax(F))])
-    pre, act_pre = _state(m, s, t_pre)
-    sample_every = max(1, int(round(0.5e-6 / full.dt)))
-    parts_pre, counts_pre = _parts(m, s, pre, act_pre, calls)
-    parts_end, counts_end = _parts(m, s, full, act_end, calls)
-    post_steps = full.steps - pre.steps
-    return {
-        "case": name, "n_nodes": int(m.n_nodes), "triangles": int(m.n_triangles), "joints": int(m.n_joints),
-        "steps": int(full.steps), "dt_s": float(full.dt), "solver_wall_s": round(full.wall_s, 3),
-        "element_updates_per_s": round(full.updates_per_s), "pre_peak_end_s": t_pre,
-        "pre_peak": dict(_phase(parts_pre, pre.contact_rebuilds, pre.steps, sample_every, pre.wall_s / pre.steps),
-                         state=counts_pre, wall_s=round(pre.wall_s, 3)),
-        "post_peak": dict(_phase(parts_end, full.contact_rebuilds - pre.contact_rebuilds, post_steps, sample_every,
-                                 (full.wall_s - pre.wall_s) / post_steps),
-                          state=counts_end, wall_s=round(full.wall_s - pre.wall_s, 3)),
-    }
+def profile(case: str, folder: Path) -> dict:
+    import fdem.solver as solver
+    from shpb.simulate import simulate
+    geometry, preset, params, record = _member(case)
+    plain = solver.run_loop
+    out, info = {}, {}
+    try:
+        for part in [None, *PARTS]:
+            mod = _load(part, folder)
+            solver.run_loop = mod.run_loop
+            simulate(geometry, preset, params=params, record=record, t_end=2e-6)  # compile this copy
+            r = simulate(geometry, preset, params=params, record=record).run
+            out[part or "timer_overhead"] = float(mod.TIMES[-1])
+        solver.run_loop = plain
+        r = simulate(geometry, preset, params=params, record=record).run
+    finally:
+        solver.run_loop = plain
+    overhead = out.pop("timer_overhead")
+    parts = {k: max(v - overhead, 0.0) for k, v in out.items()}
+    total = sum(parts.values())
+    info = {"case": case, "steps": r["steps"], "triangles": r["n_triangles"], "joints": r["n_joints"],
+            "solver_wall_s": round(r["solver_wall_s"], 3), "element_updates_per_s": round(r["element_updates_per_s"]),
+            "contact_rebuilds": r["contact_rebuilds"], "timer_overhead_s": round(overhead, 3),
+            "parts_s": {k: round(v, 3) for k, v in parts.items()},
+            "parts_share": {k: round(v / total, 3) for k, v in parts.items()},
+            "parts_sum_over_solver": round(total / r["solver_wall_s"], 3)}
+    return info
 
 
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--cases", default="disc_paper,marble_fast")
-    ap.add_argument("--calls", type=int, default=200)
     a = ap.parse_args()
-    from shpb.simulate import simulate
-    simulate("brazilian_disc", "fast", t_end=5e-6)  # warm the JIT cache
-    rows = [profile(c, a.calls) for c in a.cases.split(",")]
+    with tempfile.TemporaryDirectory() as tmp:
+        sys.path.insert(0, tmp)
+        rows = [profile(c, Path(tmp)) for c in a.cases.split(",")]
     print(json.dumps({"benchmark": "profile_engine", "cores_on_machine": os.cpu_count(), "threads_used": 1,
                       "cases": rows}, indent=1))
 
