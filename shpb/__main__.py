@@ -132,6 +132,8 @@ def _reduce(args) -> int:
           f"  pulse alignment: best shift of F2 {al['best_shift_back_s'] * 1e6:+.2f} us "
           f"(limit +-{al['limit_s'] * 1e6:.2f} us) {word[al['ok']]}\n"
           f"  noise: {nz['noise_over_peak']:.2%} of the peak (limit {nz['limit']:.0%}) {word[nz['ok']]}")
+    if sheet.reduction.get("dispersion_correction", False):
+        print(f"  dispersion: bar signals corrected to the faces (Pochhammer-Chree, first mode, nu {sheet.bar_nu:g})")
     return contract.EXIT_OK
 
 

@@ -60,13 +60,17 @@ def brazilian(red: ReducedRecord, diameter: float, thickness: float) -> ReducedR
 
 def reduce_sheet(sheet, raw=None, **overrides) -> ReducedRecord:
     """Reduce a sheet's record (``raw``: its :func:`~shpb.lab.sheet_readers.read_sheet_record`, read if None)
-    with the sheet's bars, specimen and ``reduction`` settings (``overrides`` win)."""
+    with the sheet's bars, specimen and ``reduction`` settings (``overrides`` win); with
+    ``dispersion_correction: true`` the bar signals are corrected for Pochhammer-Chree dispersion with the
+    bars' Poisson ratio (:mod:`shpb.lab.dispersion`)."""
     if raw is None:
         from .sheet_readers import read_sheet_record
 
         raw = read_sheet_record(sheet)
     opts = {"window_s": sheet.reduction.get("window_s"),
-            "exclude_channels": tuple(sheet.reduction.get("exclude_channels", ())), **overrides}
+            "exclude_channels": tuple(sheet.reduction.get("exclude_channels", ())),
+            "dispersion_nu": sheet.bar_nu if sheet.reduction.get("dispersion_correction", False) else None,
+            **overrides}
     D = sheet.specimen_diameter
     if sheet.geometry == "cylinder":
         return reduce_record(raw, raw.bar, sheet.specimen_length, D, **opts)

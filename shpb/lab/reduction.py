@@ -47,9 +47,15 @@ Steps (each one a function below, with its equation):
    :math:`R` is reported only where :math:`F_1 + F_2` exceeds 10 % of its maximum (NaN elsewhere,
    where the ratio of two small numbers means nothing).
 
+Optional, off by default (``dispersion_nu``): between steps 5 and 6 the bar signals are corrected for
+Pochhammer-Chree dispersion over the gauge distances (:mod:`shpb.lab.dispersion`): the incident wave
+forward over :math:`x_I`, the reflected wave back over :math:`x_I`, the transmitted wave back over
+:math:`x_T`; the 1D shifts of step 6 stay as they are. The noise levels and the incident wave at its
+gauge are those of the uncorrected signals.
+
 The specimen stress used for calibration is the back-face (transmitted, "1-wave") stress
 :math:`\sigma = F_2/A_s`; it does not contain the incident-reflected superposition and is the less noisy
-of the two. No dispersion correction is applied.
+of the two.
 """
 
 from __future__ import annotations
@@ -64,6 +70,7 @@ import pandas as pd
 from scipy.integrate import cumulative_trapezoid
 
 from .bars import FREIBURG_BAR, BarSetup, bridge_strain_per_volt, freiburg_bar
+from .dispersion import correct_bar_signals
 from .signals import despike, detect_arrival, robust_std, saturation_onset, select_gauges, stuck_runs
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -422,13 +429,14 @@ def _incident_span(inc: np.ndarray, i_a: int, tm: _Timing, sd_inc: float, k_sigm
     return n_g, bool(below.size == 0 and i_a + n_g < tm.n)
 
 
-def _shift_to_faces(time: np.ndarray, inc: np.ndarray, tra: np.ndarray, i_a: int, n_w: int, tm: _Timing
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Step 6: (tau, eps_I, eps_R, eps_T) on the common axis at the faces."""
+def _shift_to_faces(time: np.ndarray, inc_I: np.ndarray, inc_R: np.ndarray, tra: np.ndarray, i_a: int, n_w: int,
+                    tm: _Timing) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Step 6: (tau, eps_I, eps_R, eps_T) on the common axis at the faces, the incident and reflected waves
+    from the incident-bar signals ``inc_I`` and ``inc_R`` (the same signal unless corrected for dispersion)."""
     t_a = time[i_a]
     tau = tm.dt * np.arange(n_w)
-    eps_I = inc[i_a:i_a + n_w].copy()
-    eps_R = np.interp(t_a + tm.t_refl + tau, time, inc)
+    eps_I = inc_I[i_a:i_a + n_w].copy()
+    eps_R = np.interp(t_a + tm.t_refl + tau, time, inc_R)
     eps_T = np.interp(t_a + tm.t_tran + tau, time, tra)
     return tau, eps_I, eps_R, eps_T
 
@@ -474,7 +482,8 @@ def reduce_record(raw: "RawRecord", bar: BarSetup | None = None, specimen_length
                   specimen_diameter_m: float | None = None, *, window_s: float | None = None,
                   k_sigma: float = 6.0, threshold_fraction: float = 0.02, despike_signals: bool = True,
                   exclude_channels: tuple[str, ...] = (), shift_reflected_s: float = 0.0,
-                  shift_transmitted_s: float = 0.0, guard_s: float = 10.0e-6) -> ReducedRecord:
+                  shift_transmitted_s: float = 0.0, guard_s: float = 10.0e-6,
+                  dispersion_nu: float | None = None) -> ReducedRecord:
     r"""Reduce one raw SHPB record (module docstring, steps 1-7).
 
     Parameters
@@ -492,6 +501,8 @@ def reduce_record(raw: "RawRecord", bar: BarSetup | None = None, specimen_length
     shift_reflected_s, shift_transmitted_s : extra time shifts [s] added to the nominal
         :math:`2x_I/c_0` and :math:`(x_I+x_T)/c_0` (fine alignment; 0 by default).
     guard_s : the pre-trigger part ends this long before the detected arrival [s].
+    dispersion_nu : the bars' Poisson ratio: when given, the bar signals are corrected for
+        Pochhammer-Chree dispersion (:mod:`shpb.lab.dispersion`); None (default): no correction.
 
     Returns
     -------
@@ -518,7 +529,12 @@ def reduce_record(raw: "RawRecord", bar: BarSetup | None = None, specimen_length
         notes.append("incident pulse longer than 2 x_I / c0: it overlaps the reflected wave at the "
                      "incident gauge, so eps_reflected (front force, strain rate) is contaminated")
     n_w = tm.window_samples(i_a)
-    tau, eps_I, eps_R, eps_T = _shift_to_faces(raw.time, b.inc, b.tra, i_a, n_w, tm)          # step 6
+    inc_I, inc_R, tra = b.inc, b.inc, b.tra
+    if dispersion_nu is not None:
+        inc_I, inc_R, tra = correct_bar_signals(b.inc, b.tra, dt, bar, dispersion_nu)
+        notes.append(f"Pochhammer-Chree dispersion correction of the bar signals (first mode, phase only, "
+                     f"bar Poisson ratio {dispersion_nu:g})")
+    tau, eps_I, eps_R, eps_T = _shift_to_faces(raw.time, inc_I, inc_R, tra, i_a, n_w, tm)    # step 6
     curves = _forces(bar, L_s, D_s, tau, eps_I, eps_R, eps_T)                                 # step 7
     noise_strain, noise_pa, noise_rate = _noise(bar, L_s, D_s, ch.names, b)
     return ReducedRecord(
