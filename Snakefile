@@ -69,6 +69,7 @@ include: "rules/sensitivity.smk"
 rule all:
     input:
         expand("results/{exp}/summary.json", exp=RUN),
+        expand("results/{exp}/summary.html", exp=RUN),
         expand("results/{exp}/plots/{plot}.png", exp=RUN, plot=PLOTS),
         expand("results/{exp}/diagnosis/report.json", exp=diagnosed_experiments()),
         expand("results/{exp}/diagnosis/check.json", exp=diagnosed_experiments()),

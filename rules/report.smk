@@ -1,4 +1,7 @@
-# Plots (Figs. 4-7 of the paper and diagnostics), posterior table and summary.json.
+# Plots (Figs. 4-7 of the paper and diagnostics), posterior table and summary.json, and the summary the
+# HTML report opens on (summary.html: verdict, intervals, misfit per iteration, diagnosis errors).
+
+localrules: report_summary
 
 
 def final_inputs(wc):
@@ -49,3 +52,20 @@ rule summary:
         records=lambda wc: records(wc.exp),
     script:
         "../scripts/summary.py"
+
+
+def report_summary_inputs(wc):
+    files = {"summary": f"results/{wc.exp}/summary.json"}
+    if diagnosis_cfg(wc.exp):  # the diagnosis's FDEM check: errors before and after, held-out records too
+        files["check"] = f"results/{wc.exp}/diagnosis/check.json"
+    return files
+
+
+rule report_summary:
+    input:
+        unpack(report_summary_inputs),
+    output:
+        html=report("results/{exp}/summary.html", category="0 Summary", caption="../report/summary.rst",
+                    labels={"experiment": "{exp}"}),
+    script:
+        "../scripts/report_summary.py"

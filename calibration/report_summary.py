@@ -1,0 +1,165 @@
+"""The summary an experiment's HTML report opens on (``results/<exp>/summary.html``, the report's
+"0 Summary" category, shown on the report's first page): the verdict, the parameters with their 90 %
+intervals, the misfit per iteration, each record's error before and after the calibration, and where
+the diagnosis ran its FDEM check the calibration and held-out errors before and after the loop.
+
+Read from ``summary.json`` (:func:`calibration.experiment.summary`) and, for an experiment with a
+``diagnosis`` block, ``diagnosis/check.json``. The HTML is a fragment with inline styles and ASCII
+text only, so that the report can show it both as a result of its own and inside the workflow
+description (``report/workflow.rst``). A value missing from the files is shown as ``?``; the page
+never fails the run that writes it.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from html import escape
+
+__all__ = ["summary_html"]
+
+#: Display units of the calibrated parameters (SI value x factor); other names are shown in SI.
+DISPLAY = {"Pa": (1e-6, "MPa"), "J/m^2": (1.0, "J/m^2"), "m": (1e6, "um"), "s": (1e6, "us")}
+#: SI units of parameter names (the last part of a dotted effect parameter, e.g. ``face_gap.gap_m``).
+UNITS = {"sigma_n": "Pa", "sigma_t": "Pa", "E_n": "J/m^2", "E_t": "J/m^2", "E": "Pa"}
+
+_TABLE = 'style="border-collapse:collapse;font-size:0.85em;margin:0.3em 0 0.8em 0"'
+_CELL = 'style="border:1px solid #ccc;padding:2px 6px;text-align:{align}"'
+
+
+def _num(x, scale: float = 1.0, fmt: str = ".4g") -> str:
+    try:
+        x = float(x) * scale
+    except (TypeError, ValueError):
+        return "?"
+    return format(x, fmt) if math.isfinite(x) else str(x)
+
+
+def _unit(name: str) -> tuple[float, str]:
+    """(factor, display unit) of a parameter name."""
+    last = str(name).split(".")[-1]
+    si = UNITS.get(last)
+    if si is None:
+        for suffix, unit in (("_Pa", "Pa"), ("_m", "m"), ("_s", "s")):
+            if last.endswith(suffix):
+                si = unit
+    return DISPLAY.get(si, (1.0, si or ""))
+
+
+def _table(header: list[str], rows: list[list[str]]) -> str:
+    """A small HTML table (cells already escaped); the first column left-aligned, the others right."""
+    def cells(tag, values):
+        return "".join(f"<{tag} {_CELL.format(align='left' if j == 0 else 'right')}>{v}</{tag}>"
+                       for j, v in enumerate(values))
+    body = "".join(f"<tr>{cells('td', r)}</tr>" for r in rows)
+    return f"<table {_TABLE}><tr>{cells('th', header)}</tr>{body}</table>"
+
+
+def _get(d, *keys):
+    for k in keys:
+        d = d.get(k) if isinstance(d, Mapping) else None
+    return d
+
+
+def _headline(name: str, s: Mapping) -> list[str]:
+    v = s.get("verdict") if isinstance(s.get("verdict"), Mapping) else {"verdict": s.get("verdict")}
+    flags = ", ".join(str(f) for f in v.get("flags") or []) or "none"
+    what = ", ".join(escape(str(s[k])) for k in ("kind", "geometry", "preset", "method") if s.get(k))
+    n = f", N = {escape(str(s['ensemble_size']))}" if s.get("ensemble_size") else ""
+    stop = (f"{escape(str(s.get('stop_reason') or '?'))} after {escape(str(s.get('iterations', '?')))} analyses"
+            f" ({'converged' if s.get('converged') else 'not converged'}), "
+            f"{escape(str(s.get('n_simulations', '?')))} simulations")
+    out = [f'<h3 style="margin:0.8em 0 0.2em 0">{escape(name)}</h3>',
+           f"<p style=\"margin:0.2em 0\">{what}{n}; stop: {stop}.</p>",
+           f"<p style=\"margin:0.2em 0\"><b>Verdict: {escape(str(v.get('verdict') or '?'))}</b> "
+           f"(flags: {escape(flags)})</p>"]
+    if v.get("next_step"):
+        out.append(f"<p style=\"margin:0.2em 0\">Next step: {escape(str(v['next_step']))}</p>")
+    return out
+
+
+def _parameters(s: Mapping) -> list[str]:
+    post = s.get("posterior")
+    if not isinstance(post, Mapping) or not post:
+        return ["<p>No posterior in summary.json.</p>"]
+    truth = s.get("truth") if isinstance(s.get("truth"), Mapping) else {}
+    which = (f"{s['posterior_method']} sample" if s.get("posterior_method") not in (None, "ensemble")
+             else f"ensemble of iteration {escape(str(s.get('posterior_iteration', '?')))}")
+    header = ["parameter", "posterior mean", "90 % interval", "unit"] + (["truth"] if truth else [])
+    rows = []
+    for p, q in post.items():
+        q = q if isinstance(q, Mapping) else {}
+        f, unit = _unit(p)
+        row = [escape(str(p)), _num(q.get("mean"), f), f"[{_num(q.get('q05'), f)}, {_num(q.get('q95'), f)}]",
+               escape(unit)]
+        if truth:
+            t = truth.get(p)
+            inside = (t is not None and _num(q.get("q05")) != "?" and _num(q.get("q95")) != "?"
+                      and float(q["q05"]) <= float(t) <= float(q["q95"]))
+            row.append("-" if t is None else f"{_num(t, f)} ({'inside' if inside else 'outside'})")
+        rows.append(row)
+    return [f"<p style=\"margin:0.4em 0 0 0\">Parameters (posterior: {which}):</p>", _table(header, rows)]
+
+
+def _misfit(s: Mapping) -> list[str]:
+    misfit = s.get("misfit") or []
+    if not misfit:
+        return []
+    reported = s.get("posterior_iteration")
+    target = _get(s, "verdict", "chi2_per_obs", "stop_target")
+    rows = []
+    for m in misfit:
+        m = m if isinstance(m, Mapping) else {}
+        it = m.get("iteration", "?")
+        rows.append([escape(str(it)) + (" (reported)" if it == reported else ""), escape(str(m.get("n_alive", "?"))),
+                     _num(m.get("median_chi2_per_obs", m.get("chi2_per_obs"))),
+                     _num(m.get("stop_chi2_per_obs")), _num(m.get("rmse_Pa"), 1e-6)])
+    header = ["iteration", "members ok", "median member chi2/obs (noise)",
+              "same, noise + discrepancy (stop test)", "RMSE of the mean curve [MPa]"]
+    return [f"<p style=\"margin:0.4em 0 0 0\">Misfit per iteration (0 = prior; the stop test's target "
+            f"{_num(target)}):</p>", _table(header, rows)]
+
+
+def _records(s: Mapping) -> list[str]:
+    per = s.get("misfit_per_record")
+    if not isinstance(per, Mapping) or not per:
+        return []
+    rows = [[escape(str(rec)), _num(_get(v, "before", "rmse_Pa"), 1e-6), _num(_get(v, "after", "rmse_Pa"), 1e-6)]
+            for rec, v in per.items()]
+    return ["<p style=\"margin:0.4em 0 0 0\">RMSE per record [MPa]: before = prior ensemble mean, after = "
+            "the forecast run at the posterior mean:</p>", _table(["record", "before", "after"], rows)]
+
+
+def _diagnosis(check: Mapping) -> list[str]:
+    added = ", ".join(str(a) for a in check.get("added") or []) or "none"
+    conf = _get(check, "fdem_confirmation", "text")
+    out = [f"<p style=\"margin:0.4em 0 0 0\"><b>Diagnosis</b>: verdict {escape(str(check.get('verdict') or '?'))}, "
+           f"effects kept: {escape(added)}." + (f" {escape(str(conf))}." if conf else "") + "</p>"]
+    per = check.get("errors_per_record")
+    if isinstance(per, Mapping) and per:
+        rows = []
+        for rec, e in sorted(per.items(), key=lambda kv: (_get(kv[1], "data") == "heldout", kv[0])):
+            rows.append([escape(str(rec)), escape(str(_get(e, "data") or "?")).replace("heldout", "held out"),
+                         _num(_get(e, "before", "rmse"), 1e-6), _num(_get(e, "after", "rmse"), 1e-6),
+                         _num(_get(e, "before", "peak_rel_error"), 100.0, "+.1f"),
+                         _num(_get(e, "after", "peak_rel_error"), 100.0, "+.1f")])
+        out += ["<p style=\"margin:0.2em 0 0 0\">Errors of real FDEM runs at the posterior means before and "
+                "after the loop (diagnosis/check.json):</p>",
+                _table(["record", "used for", "RMSE before [MPa]", "RMSE after [MPa]", "peak error before [%]",
+                        "peak error after [%]"], rows)]
+    return out
+
+
+def summary_html(name: str, summary: Mapping, check: Mapping | None = None) -> str:
+    """The summary of experiment ``name`` as an HTML fragment (ASCII, inline styles)."""
+    try:
+        parts = ['<meta charset="utf-8">', '<div class="experiment-summary" style="font-family:sans-serif">']
+        parts += _headline(name, summary) + _parameters(summary) + _misfit(summary) + _records(summary)
+        if isinstance(check, Mapping):
+            parts += _diagnosis(check)
+        parts.append(f"<p style=\"margin:0.2em 0;font-size:0.85em\">From results/{escape(name)}/summary.json"
+                     + (f" and results/{escape(name)}/diagnosis/check.json" if isinstance(check, Mapping) else "")
+                     + "; the plots are under the experiment's own category.</p>")
+    except Exception as exc:  # noqa: BLE001 - a page of the report must never fail the run
+        parts = ['<meta charset="utf-8">', f"<div><p>{escape(name)}: summary not readable "
+                                           f"({escape(type(exc).__name__)}: {escape(str(exc))})</p>"]
+    return "\n".join(parts + ["</div>"]) + "\n"

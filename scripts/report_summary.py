@@ -1,0 +1,7 @@
+"""results/<exp>/summary.html: the summary the HTML report opens on (calibration.report_summary)."""
+from calibration.report_summary import summary_html
+from calibration.workflow_io import atomic_write_text, read_json
+
+inp = snakemake.input
+check = read_json(inp.check) if "check" in inp.keys() else None
+atomic_write_text(snakemake.output.html, summary_html(snakemake.wildcards.exp, read_json(inp.summary), check))

@@ -1,0 +1,116 @@
+"""The summary the HTML report opens on (issue 34, item 4): ``results/<exp>/summary.html`` from
+``summary.json`` (and the diagnosis's ``check.json``), shown first on the report's page through
+``report/workflow.rst``. Fixtures: the committed default-run summaries of 2026-11-25."""
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+from calibration.report_summary import summary_html
+
+REPO = Path(__file__).resolve().parents[1]
+RUN = REPO / "benchmarks" / "results" / "default_run_2026-11-25"
+
+
+def _cells(html: str) -> list[list[str]]:
+    """The rows of every table as lists of cell texts."""
+    return [re.findall(r"<t[dh][^>]*>(.*?)</t[dh]>", row) for row in re.findall(r"<tr>(.*?)</tr>", html)]
+
+
+def test_the_summary_gives_verdict_intervals_misfit_per_iteration_and_the_heldout_errors():
+    summary = json.loads((RUN / "marble_loop" / "summary.json").read_text())
+    check = json.loads((RUN / "marble_loop" / "diagnosis_check.json").read_text())
+    html = summary_html("marble_loop", summary, check)
+    assert html.isascii()
+    assert "<b>Verdict: not_converged</b> (flags: not_converged, misfit_unexplained)" in html
+    rows = _cells(html)
+    # parameters: posterior mean and 90 % interval, stresses in MPa
+    assert ["sigma_t", "42.42", "[39.14, 45.12]", "MPa"] in rows
+    assert ["E_t", "2.683e+04", "[2.19e+04, 3.493e+04]", "J/m^2"] in rows
+    # misfit per iteration: members ok, median member chi2/obs against the noise, the stop statistic, RMSE
+    assert ["0", "8", "5048", "2.31", "40.73"] in rows
+    assert ["2 (reported)", "8", "890.4", "1.489", "22.73"] in rows
+    assert "target 1.149" in html
+    # the diagnosis: effects kept and the FDEM errors before/after, the held-out record last
+    assert "effects kept: face_gap, trigger_shift" in html
+    assert rows[-1] == ["CaMa_SHPB_005", "held out", "18.64", "11.59", "-1.3", "+10.4"]
+    assert ["CaMa_SHPB_004", "calibration", "17.25", "13.59", "+2.1", "+11.9"] in rows
+
+
+def test_a_twin_shows_its_truth_against_the_interval_and_no_diagnosis():
+    html = summary_html("twin_ref", json.loads((RUN / "twin_ref" / "summary.json").read_text()))
+    rows = _cells(html)
+    assert ["sigma_t", "43.27", "[39.7, 46.28]", "MPa", "45 (inside)"] in rows
+    assert ["E_t", "561.2", "[347.3, 807.6]", "J/m^2", "500 (inside)"] in rows
+    assert "Diagnosis" not in html and "Verdict: not_converged" in html
+
+
+def test_odd_or_missing_values_give_question_marks_never_an_error():
+    html = summary_html("x", {"verdict": "ok", "posterior": {"a": None}, "misfit": [{"iteration": 0}]})
+    assert "Verdict: ok" in html and ["a", "?", "[?, ?]", ""] in _cells(html)
+    assert "summary not readable" in summary_html("y", None)
+
+
+def test_the_report_page_opens_on_the_summaries_in_run_order(tmp_path):
+    """report/workflow.rst rendered as Snakemake renders it (Jinja2, then docutils to HTML) with two
+    summary files in the "0 Summary" category: both tables appear, in the config's run order."""
+    from docutils.core import publish_parts
+    from jinja2 import Environment
+
+    class Cat:
+        def __init__(self, name):
+            self.name = name
+
+    class Res:
+        def __init__(self, path):
+            self.path = path
+
+    results = []
+    for exp in ("marble_loop", "twin_ref"):
+        (tmp_path / exp).mkdir()
+        (tmp_path / exp / "summary.html").write_text(summary_html(exp, json.loads((RUN / exp / "summary.json").read_text())))
+        results.append(Res(tmp_path / exp / "summary.html"))
+
+    class Snakemake:
+        config = {"run": ["twin_ref", "marble_loop"], "experiments": {}}
+
+    text = Environment(trim_blocks=True, lstrip_blocks=True).from_string(
+        (REPO / "report" / "workflow.rst").read_text()).render(
+        snakemake=Snakemake, categories={Cat("0 Summary"): {Cat("Other"): results}, Cat("twin_ref"): {}}, files=[])
+    html = publish_parts(text, writer_name="html")["html_body"]
+    assert re.findall(r"<h3[^>]*>(\w+)</h3>", html) == ["twin_ref", "marble_loop"]
+    assert "[39.14, 45.12]" in html and "[39.7, 46.28]" in html and "System Message" not in html
+    assert html.index("Verdict") < html.index("Each experiment's files")
+
+
+def test_a_tiny_run_logs_each_iteration_and_its_report_opens_on_the_summary(tmp_path):
+    """Three members of the analytic stand-in simulator, one ES-MDA analysis, on one core (about 20 s):
+    the run's output has one misfit line per analysis, the run writes summary.html, and
+    `snakemake --report` puts the summary into the report's first page and its "0 Summary" category."""
+    from test_workflow import snakemake, twin_config, write_config, write_stand_in
+
+    cfg = twin_config(ensemble_size=3, esmda={"steps": 1})
+    cfg["simulator"] = write_stand_in(tmp_path)
+    write_config(tmp_path, cfg)
+    run = snakemake(tmp_path, "--cores", "1")
+    assert run.returncode == 0, run.stderr[-3000:]
+    lines = [ln for ln in run.stdout.splitlines() if ln.startswith("twin iteration ")]
+    assert [ln.split(":")[0] for ln in lines] == ["twin iteration 0", "twin iteration 1"], run.stdout[-2000:]
+    analysis = json.loads((tmp_path / "results" / "twin" / "iter_1" / "analysis.json").read_text())
+    assert f"median member chi2/obs {analysis['decision']['values']['chi2_per_obs']:.4g} " in lines[1]
+    assert "3/3 members ok" in lines[1] and "-> stop: " in lines[1]
+    summary = json.loads((tmp_path / "results" / "twin" / "summary.json").read_text())
+    page = (tmp_path / "results" / "twin" / "summary.html").read_text()
+    assert page == summary_html("twin", summary)
+
+    rep = snakemake(tmp_path, "--cores", "1", "--report", str(tmp_path / "report.html"))
+    assert rep.returncode == 0, rep.stderr[-3000:]
+    html = (tmp_path / "report.html").read_text()
+    desc = html[html.index("workflow_desc = "):]
+    desc = desc[:desc.index("\n")]
+    verdict = summary["verdict"]["verdict"]
+    assert f"Verdict: {verdict}" in desc and "Misfit per iteration" in desc
+    q = summary["posterior"]["sigma_t"]
+    assert f"[{q['q05'] * 1e-6:.4g}, {q['q95'] * 1e-6:.4g}]" in desc
+    assert "0 Summary" in html
