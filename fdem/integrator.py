@@ -12,9 +12,9 @@ import numpy as np
 from numba import njit
 
 from .contact import refresh_pairs, surface_nodes
-from .kernels import (contact_forces, joint_forces, soa_dminv, triangle_cauchy, triangle_forces_into,
-                      triangle_forces_scalar)
+from .kernels import contact_forces, joint_forces
 from .softening import z
+from .triangles import soa_dminv, triangle_cauchy, triangle_forces_into, triangle_forces_scalar
 
 # Columns of the energy record.
 ENERGY_NAMES = ("kinetic", "strain", "joint_elastic", "contact", "joint_dissipated",

@@ -21,3 +21,14 @@ def test_the_readme_coverage_table_is_generated_from_the_committed_benchmark_jso
     assert (ROOT / source).is_file(), source
     start, end = text.index(tool.START), text.index(tool.END) + len(tool.END)
     assert text[start:end] == tool.block(source)
+
+
+def test_the_engine_speed_tables_are_generated_from_the_committed_benchmark_json():
+    spec = importlib.util.spec_from_file_location("engine_table", ROOT / "tools" / "engine_table.py")
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    text = (ROOT / "docs" / "engine.md").read_text()
+    bench, prof = tool.doc_block_sources(text)
+    assert (ROOT / bench).is_file() and (ROOT / prof).is_file(), (bench, prof)
+    start, end = text.index(tool.START), text.index(tool.END) + len(tool.END)
+    assert text[start:end] == tool.block(bench, prof)

@@ -4,7 +4,8 @@ import pytest
 
 from fdem import Body, JointParams, Material, VelocityBC, build_model, run, stable_time_step
 from fdem import meshing
-from fdem.kernels import joint_forces, triangle_cauchy, triangle_forces
+from fdem.kernels import joint_forces
+from fdem.triangles import triangle_cauchy, triangle_forces
 
 GRANITE = Material(35e9, 0.16, 2550.0)
 STEEL = Material(200e9, 0.29, 7850.0)
@@ -117,10 +118,10 @@ def test_samples_cover_the_requested_window(t_end):
 
 
 def test_the_vectorised_triangle_kernel_is_bit_identical_to_the_scalar_one():
-    """fdem.kernels.triangle_forces (gather, SIMD stress loop, scatter) against triangle_forces_scalar,
+    """fdem.triangles.triangle_forces (gather, SIMD stress loop, scatter) against triangle_forces_scalar,
     on a disc mesh under a large random deformation: the same forces and strain energy to the bit
     (same IEEE operations in the same order; the integrator relies on it for identical runs)."""
-    from fdem.kernels import triangle_forces_scalar
+    from fdem.triangles import triangle_forces_scalar
     from shpb.simulate import build
     m = build("brazilian_disc", "fast")["model"]
     rng = np.random.default_rng(3)
