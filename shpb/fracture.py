@@ -113,40 +113,41 @@ def overlap_depth(model, x: np.ndarray, body: str) -> tuple[float, int]:
     h = float(np.sqrt(np.median(np.abs(0.5 * ((P[:, 1, 0] - P[:, 0, 0]) * (P[:, 2, 1] - P[:, 0, 1])
                                              - (P[:, 1, 1] - P[:, 0, 1]) * (P[:, 2, 0] - P[:, 0, 0]))))))
     origin = lo.min(axis=0)
-    cells = {}
-    i0 = np.floor((lo - origin) / h).astype(int)
-    i1 = np.floor((hi - origin) / h).astype(int)
-    for t in range(tris.shape[0]):
-        for cx in range(i0[t, 0], i1[t, 0] + 1):
-            for cy in range(i0[t, 1], i1[t, 1] + 1):
-                cells.setdefault((cx, cy), []).append(t)
+    i0 = np.floor((lo - origin) / h).astype(np.int64)
+    i1 = np.floor((hi - origin) / h).astype(np.int64)
+    # (triangle, cell) entries: every cell a triangle's bounding box touches, sorted by cell key
+    nx, ny = i1[:, 0] - i0[:, 0] + 1, i1[:, 1] - i0[:, 1] + 1
+    t_of = np.repeat(np.arange(tris.shape[0]), nx * ny)
+    k = np.arange(t_of.size) - np.repeat(np.cumsum(nx * ny) - nx * ny, nx * ny)
+    cx = i0[t_of, 0] + k % nx[t_of]
+    cy = i0[t_of, 1] + k // nx[t_of]
+    span = int(max(i1[:, 1].max(), 0)) + 2
+    key = cx * span + cy
+    order = np.argsort(key, kind="stable")
+    key, t_of = key[order], t_of[order]
+    # (node, candidate triangle) pairs: the triangles of the node's own cell
+    cell_of = np.floor((x[nodes] - origin) / h).astype(np.int64)
+    nkey = cell_of[:, 0] * span + cell_of[:, 1]
+    first, last = np.searchsorted(key, nkey, "left"), np.searchsorted(key, nkey, "right")
+    cnt = last - first
+    node_k = np.repeat(np.arange(nodes.size), cnt)
+    cand = t_of[np.repeat(first, cnt) + np.arange(node_k.size) - np.repeat(np.cumsum(cnt) - cnt, cnt)]
     vert = model.node_vertex
-    tri_verts = vert[tris]
-    deepest, count = 0.0, 0
-    cell_of = np.floor((x[nodes] - origin) / h).astype(int)
-    for k, n in enumerate(nodes):
-        cand = cells.get((cell_of[k, 0], cell_of[k, 1]))
-        if not cand:
-            continue
-        cand = np.asarray(cand)
-        cand = cand[~np.any(tri_verts[cand] == vert[n], axis=1)]
-        if cand.size == 0:
-            continue
-        a, bb, c = P[cand, 0], P[cand, 1], P[cand, 2]
-        p = x[n]
-        depth = np.full(cand.size, np.inf)
-        inside = np.ones(cand.size, bool)
-        for u, w in ((a, bb), (bb, c), (c, a)):
-            e = w - u
-            L = np.hypot(e[:, 0], e[:, 1])
-            # signed distance to the edge line, positive on the triangle's (counter-clockwise) inside
-            dist = (e[:, 0] * (p[1] - u[:, 1]) - e[:, 1] * (p[0] - u[:, 0])) / L
-            inside &= dist > 0.0
-            depth = np.minimum(depth, dist)
-        if np.any(inside):
-            count += 1
-            deepest = max(deepest, float(depth[inside].max()))
-    return deepest, count
+    keep = ~np.any(vert[tris[cand]] == vert[nodes[node_k]][:, None], axis=1)
+    node_k, cand = node_k[keep], cand[keep]
+    p = x[nodes[node_k]]
+    depth = np.full(cand.size, np.inf)
+    inside = np.ones(cand.size, bool)
+    for u, w in ((P[cand, 0], P[cand, 1]), (P[cand, 1], P[cand, 2]), (P[cand, 2], P[cand, 0])):
+        e = w - u
+        L = np.hypot(e[:, 0], e[:, 1])
+        # signed distance to the edge line, positive on the triangle's (counter-clockwise) inside
+        dist = (e[:, 0] * (p[:, 1] - u[:, 1]) - e[:, 1] * (p[:, 0] - u[:, 0])) / L
+        inside &= dist > 0.0
+        depth = np.minimum(depth, dist)
+    if not np.any(inside):
+        return 0.0, 0
+    return float(depth[inside].max()), int(np.unique(node_k[inside]).size)
 
 
 def joint_midpoints(model, specimen: str, radius_m: float) -> tuple[np.ndarray, np.ndarray]:
