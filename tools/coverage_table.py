@@ -55,7 +55,24 @@ def table(bench: dict, source: str) -> str:
             f"| {both(lambda q: _pct(q['bar']['fraction_met']))} |")
     head = (f"From `{source}` ({bench['method']}, N = {bench['ensemble_size']}, window "
             f"{bench['window_s'][0] * 1e6:.0f}-{bench['window_s'][1] * 1e6:.0f} us; brackets: binomial 95 % intervals):")
-    return "\n".join([head, "", *rows])
+    return "\n".join([head, "", *rows, "", _reference_line(bench)])
+
+
+def _reference_line(bench: dict) -> str:
+    """What a calibrated posterior would give with these members, and how far each coverage is from it."""
+    ws = bench["well_specified"]["summary"]["params"]
+    parts = []
+    for name in ("well_specified", "misspecified"):
+        if name not in bench or not bench[name]["twins"]:
+            continue
+        p = bench[name]["summary"]["params"]
+        parts.append(f"{name.replace('_', '-')} 90 %: " + " / ".join(f"{p[q]['coverage_90']['p_vs_reference']:.2g}" for q in NAMES)
+                     + ", 50 %: " + " / ".join(f"{p[q]['coverage_50']['p_vs_reference']:.2g}" for q in NAMES))
+    return (f"A calibrated posterior sampled by the reported members covers their 5-95 % sample interval "
+            f"{_pct(ws['sigma_t']['coverage_90']['reference_for_members'])} of the time and their 25-75 % interval "
+            f"{_pct(ws['sigma_t']['coverage_50']['reference_for_members'])} (the n + 1 draws argument; "
+            f"`reference_coverage` in `benchmarks/bench_coverage.py`); binomial p of each coverage against that "
+            f"(`sigma_t` / `E_t`): " + "; ".join(parts) + ".")
 
 
 def block(path: str) -> str:
