@@ -30,13 +30,18 @@ def create_temp(directory: str | Path, prefix: str = "", suffix: str = "") -> tu
 
 
 def atomic_write_text(path: str | Path, text: str) -> Path:
-    """Write text to path atomically; creates the parent folder."""
+    """Write text (UTF-8, newlines as given) to path atomically; creates the parent folder."""
+    return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
+    """Write bytes to path atomically; creates the parent folder."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = create_temp(path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
-        with os.fdopen(fd, "w", newline="", encoding="utf-8") as fh:
-            fh.write(text)
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)

@@ -1,17 +1,9 @@
 """tools/compare_runs.py tells identical results trees from ones that differ in a number, and leaves
 timings and keys one side alone has out of "differ" (it is how same-seed runs are compared)."""
-import importlib.util
 import json
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def _tool():
-    spec = importlib.util.spec_from_file_location("compare_runs", ROOT / "tools" / "compare_runs.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+from tools import compare_runs
 
 
 def _tree(root: Path, stress: float, wall: float, extra: bool):
@@ -25,7 +17,7 @@ def _tree(root: Path, stress: float, wall: float, extra: bool):
 
 
 def test_same_numbers_with_other_timings_are_identical_and_a_changed_number_is_not(tmp_path):
-    tool = _tool()
+    tool = compare_runs
     _tree(tmp_path / "a", 3.0e7, 1.0, False)
     _tree(tmp_path / "b", 3.0e7, 9.0, True)
     rep = tool.compare(tmp_path / "a", tmp_path / "b")

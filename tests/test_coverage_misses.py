@@ -1,18 +1,8 @@
 """tools/coverage_misses.py counts the misses, their side and their place in the box right, and its
 direction test tells misses that all lie on one side from misses on both."""
-import importlib.util
-from pathlib import Path
-
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def _tool():
-    spec = importlib.util.spec_from_file_location("coverage_misses", ROOT / "tools" / "coverage_misses.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+from tools import coverage_misses
 
 
 def _record(i: int, e_truth: float, e_interval: tuple, converged: bool = False) -> dict:
@@ -31,7 +21,7 @@ def _record(i: int, e_truth: float, e_interval: tuple, converged: bool = False) 
 
 
 def test_misses_all_above_the_interval_give_a_small_direction_p_and_the_right_counts():
-    tool = _tool()
+    tool = coverage_misses
     covers = [_record(i, 300.0 + 50 * i, (250.0 + 50 * i, 400.0 + 50 * i), converged=True) for i in range(10)]
     # ten truths in the top fifth of the box [200, 2400], each above an interval 300-500 J/m^2 below it
     misses = [_record(10 + i, 2000.0 + 30 * i, (1500.0 + 30 * i, 1700.0 + 30 * i)) for i in range(10)]
@@ -57,7 +47,7 @@ def test_misses_all_above_the_interval_give_a_small_direction_p_and_the_right_co
 
 
 def test_misses_on_both_sides_give_no_direction_and_the_interval_ends_count_as_covered():
-    tool = _tool()
+    tool = coverage_misses
     above = [_record(i, 1500.0, (1000.0, 1400.0)) for i in range(3)]
     below = [_record(3 + i, 1000.0, (1100.0, 1400.0)) for i in range(3)]
     ends = [_record(6, 1000.0, (1000.0, 1400.0)), _record(7, 1400.0, (1000.0, 1400.0))]

@@ -1,21 +1,15 @@
 """Numbers quoted in the README come from one generated source: the coverage table between its markers
 is exactly what tools/coverage_table.py makes from the benchmark JSON it names."""
 
-import importlib.util
 from pathlib import Path
+
+from tools import coverage_table, engine_table
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _tool():
-    spec = importlib.util.spec_from_file_location("coverage_table", ROOT / "tools" / "coverage_table.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
 def test_the_readme_coverage_table_is_generated_from_the_committed_benchmark_json():
-    tool = _tool()
+    tool = coverage_table
     text = (ROOT / "README.md").read_text()
     source = tool.readme_block_source(text)
     assert (ROOT / source).is_file(), source
@@ -24,9 +18,7 @@ def test_the_readme_coverage_table_is_generated_from_the_committed_benchmark_jso
 
 
 def test_the_engine_speed_tables_are_generated_from_the_committed_benchmark_json():
-    spec = importlib.util.spec_from_file_location("engine_table", ROOT / "tools" / "engine_table.py")
-    tool = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(tool)
+    tool = engine_table
     text = (ROOT / "docs" / "engine.md").read_text()
     bench, prof = tool.doc_block_sources(text)
     assert (ROOT / bench).is_file() and (ROOT / prof).is_file(), (bench, prof)

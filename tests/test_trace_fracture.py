@@ -1,16 +1,10 @@
 """tools/trace_fracture.py's mode split: a joint's separation resolved into opening and slip in the
 joint's own frame, with the engine's sign convention (fdem.kernels: the normal n = (t_y, -t_x) of the
 face direction t, opening > 0 in tension)."""
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-spec = importlib.util.spec_from_file_location(
-    "trace_fracture", Path(__file__).resolve().parents[1] / "tools" / "trace_fracture.py")
-trace_fracture = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(trace_fracture)
+from tools import trace_fracture
 
 
 @pytest.mark.parametrize("angle_deg", [0.0, 30.0, 90.0, 137.0])

@@ -23,7 +23,23 @@ from scipy import stats
 
 ROOT = Path(__file__).resolve().parents[1]
 CACHE = ROOT / "benchmarks" / "cache" / "coverage"
-BOUNDS = {"sigma_t": (4.0e6, 6.0e7), "E_t": (200.0, 2400.0)}  # config/config.yaml, twin_ref (Table 2 box)
+
+def _benchmark():
+    """benchmarks/bench_coverage.py, whose twins these are (imported from the checkout)."""
+    import sys
+    sys.path.insert(0, str(ROOT))
+    from benchmarks import bench_coverage
+    return bench_coverage
+
+
+def _box() -> dict:
+    """The twins' prior box: the twin_ref experiment of config/config.yaml, as the benchmark reads it."""
+    from calibration.experiment import ExperimentSpec
+    bc = _benchmark()
+    spec = ExperimentSpec.from_config(bc.EXPERIMENT, bc.twin_experiment())
+    return {p: (float(lo), float(hi)) for p, lo, hi in zip(spec.names, spec.lower, spec.upper)}
+
+
 NUMERIC = ("truth_box_fraction", "distance_to_bound", "other_truth_box_fraction", "sigma_t_truth", "E_t_truth",
            "half_width_rel", "width_over_box", "reported_iteration", "stop_chi2_per_obs", "median_chi2_per_obs",
            "disc_sigma_over_noise", "disc_sigma_pre_over_noise", "disc_sigma_post_over_noise", "disc_corr_time_us")
@@ -44,7 +60,7 @@ def _discrepancy(rec: dict) -> dict:
             "disc_sigma_post_over_noise": d["sigma_post"] / noise, "disc_corr_time_us": d["corr_time_s"] * 1e6}
 
 
-def twin_table(records: list, p: str, bounds: dict = BOUNDS) -> pd.DataFrame:
+def twin_table(records: list, p: str, bounds: dict) -> pd.DataFrame:
     """One row per twin: parameter ``p``'s interval against its truth, and the twin's run features."""
     lo, hi = bounds[p]
     other = next(q for q in bounds if q != p)
@@ -90,7 +106,7 @@ def compare(df: pd.DataFrame) -> dict:
     m, c = df[df["miss"]], df[~df["miss"]]
     n, k, n_mem = len(df), int(df["miss"].sum()), int(df["n_members"].median())
     above, below = int((df["side"] == "above").sum()), int((df["side"] == "below").sum())
-    expected = 0.9 * (n_mem - 1) / (n_mem + 1)
+    expected = _benchmark().reference_coverage(df["n_members"], 0.05, 0.95)
     out = {"n": n, "misses": k, "covers": n - k, "coverage_90": (n - k) / n,
            "coverage_vs_nominal_0.90_p": _f(stats.binomtest(n - k, n, 0.9).pvalue),
            "expected_coverage_of_sample_quantiles": {"n_members": n_mem, "expected": expected,
@@ -148,7 +164,9 @@ def coverage_by_fifth(df: pd.DataFrame) -> dict:
     return {f"{k / 5:.1f}-{(k + 1) / 5:.1f}": {"n": int(n), "covers": int(n - g.sum()[k])} for k, n in g.size().items()}
 
 
-def analyse(records: list, bounds: dict = BOUNDS) -> dict:
+def analyse(records: list, bounds: dict | None = None) -> dict:
+    """The analysis of each parameter; bounds default to the twins' prior box (_box)."""
+    bounds = _box() if bounds is None else bounds
     out = {"n_twins": len(records), "bounds": {p: list(b) for p, b in bounds.items()}, "params": {}}
     for p in bounds:
         df = twin_table(records, p, bounds)

@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..atomic import atomic_write_text, create_temp
+from ..atomic import atomic_write_bytes, atomic_write_text
 from .reduction import ReducedRecord, reduce_record
 
 __all__ = ["reduce_sheet", "brazilian", "lab_checks", "write_reduction", "REDUCED_COLUMNS",
@@ -153,22 +153,6 @@ def _figure_png(red: ReducedRecord, checks: dict, title: str) -> bytes:
     return buf.getvalue()
 
 
-def _write_bytes(path: Path, data: bytes) -> None:
-    import os
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = create_temp(path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-
-
 def reduced_frame(red: ReducedRecord) -> pd.DataFrame:
     return pd.DataFrame({
         "time_s": red.time, "stress_Pa": red.stress_back, "stress_front_Pa": red.stress_front,
@@ -183,7 +167,7 @@ def write_reduction(red: ReducedRecord, checks: dict, out_dir: str | Path, title
     out = Path(out_dir)
     paths = {"curves": out / "curves.csv", "figure": out / "force_balance.png", "checks": out / "checks.json"}
     atomic_write_text(paths["curves"], reduced_frame(red).to_csv(index=False, float_format="%.9g"))
-    _write_bytes(paths["figure"], _figure_png(red, checks, title or red.name))
+    atomic_write_bytes(paths["figure"], _figure_png(red, checks, title or red.name))
     clean = json.loads(json.dumps(checks, default=float).replace("NaN", "null"))
     atomic_write_text(paths["checks"], json.dumps(clean, indent=2) + "\n")
     return paths
