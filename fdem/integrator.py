@@ -14,7 +14,7 @@ from numba import njit
 from .contact import refresh_pairs, surface_nodes
 from .kernels import contact_forces, joint_forces
 from .softening import z
-from .triangles import soa_dminv, triangle_cauchy, triangle_forces_into, triangle_forces_scalar
+from .triangles import soa_dminv, triangle_cauchy, triangle_forces_into, triangle_forces_scalar, viscous
 
 # Columns of the energy record.
 ENERGY_NAMES = ("kinetic", "strain", "joint_elastic", "contact", "joint_dissipated",
@@ -162,15 +162,12 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
         _hist_eval(hist_ptr, hist_t, hist_v, cursor, 0.0, hv)
         E[7] += _apply_velocity_bc(v, mass, vel_nodes, vel_dir, vel_hist, hv)
     # triangles without viscous stress go through the vectorised kernel, on buffers allocated once
-    viscous = False
-    for e in range(eta.shape[0]):
-        if eta[e] > 0.0:
-            viscous = True
+    is_viscous = viscous(eta)
     M_soa = soa_dminv(dminv)
     D_tri = np.empty((4, tri.shape[0]))
     H_tri = np.empty((4, tri.shape[0]))
     W_tri = np.empty(tri.shape[0])
-    if viscous:
+    if is_viscous:
         Us, Pd = triangle_forces_scalar(x, v, tri, dminv, vol0, lam, mu, eta, f)
     else:
         Us = triangle_forces_into(x, tri, M_soa, lam, mu, vol0, f, True, D_tri, H_tri, W_tri)
@@ -264,7 +261,7 @@ def run_loop(x, v, mass, inv_mass, tri, dminv, vol0, lam, mu, eta,
             bforce[:, :] = 0.0
             # the stored energies are booked at the output samples only
             sampled = step % sample_every == 0
-            if viscous:
+            if is_viscous:
                 Us, Pd = triangle_forces_scalar(x, v, tri, dminv, vol0, lam, mu, eta, f, sampled)
             else:
                 Us = triangle_forces_into(x, tri, M_soa, lam, mu, vol0, f, sampled, D_tri, H_tri, W_tri)

@@ -13,25 +13,28 @@ from numba import njit
 
 
 @njit(cache=True, inline="always")
-def _corotational(x, tri, dminv, lam, mu, e):
-    """Deformation gradient F of triangle e and its co-rotational stress.
+def _edges(x, tri, e):
+    """Edge vectors of triangle e: (x_j - x_i, x_k - x_i) as (d11, d21, d12, d22)."""
+    i = tri[e, 0]
+    j = tri[e, 1]
+    k = tri[e, 2]
+    return x[j, 0] - x[i, 0], x[j, 1] - x[i, 1], x[k, 0] - x[i, 0], x[k, 1] - x[i, 1]
+
+
+@njit(cache=True, inline="always")
+def _stress(d11, d21, d12, d22, m11, m12, m21, m22, lam_e, mu_e):
+    """Deformation gradient F of a triangle from its edge vectors and Dm^-1, and its co-rotational
+    stress.
 
     Polar decomposition F = R U in closed form (2D: R rotates by atan2(F21 - F12, F11 + F22)), Biot
     strain b = U - I with U = R^T F (symmetric by construction of R), Biot stress
     B = lam tr(b) I + 2 mu b, first Piola-Kirchhoff stress P = R B.
     Returns (F11, F12, F21, F22, P11, P12, P21, P22, strain energy density b : B / 2).
     """
-    i = tri[e, 0]
-    j = tri[e, 1]
-    k = tri[e, 2]
-    d11 = x[j, 0] - x[i, 0]
-    d21 = x[j, 1] - x[i, 1]
-    d12 = x[k, 0] - x[i, 0]
-    d22 = x[k, 1] - x[i, 1]
-    F11 = d11 * dminv[e, 0, 0] + d12 * dminv[e, 1, 0]
-    F12 = d11 * dminv[e, 0, 1] + d12 * dminv[e, 1, 1]
-    F21 = d21 * dminv[e, 0, 0] + d22 * dminv[e, 1, 0]
-    F22 = d21 * dminv[e, 0, 1] + d22 * dminv[e, 1, 1]
+    F11 = d11 * m11 + d12 * m21
+    F12 = d11 * m12 + d12 * m22
+    F21 = d21 * m11 + d22 * m21
+    F22 = d21 * m12 + d22 * m22
     rr = math.sqrt((F11 + F22) ** 2 + (F21 - F12) ** 2)
     cR = (F11 + F22) / rr
     sR = (F21 - F12) / rr
@@ -39,12 +42,41 @@ def _corotational(x, tri, dminv, lam, mu, e):
     b22 = -sR * F12 + cR * F22 - 1.0
     b12 = 0.5 * ((cR * F12 + sR * F22) + (-sR * F11 + cR * F21))
     tr = b11 + b22
-    B11 = lam[e] * tr + 2.0 * mu[e] * b11
-    B22 = lam[e] * tr + 2.0 * mu[e] * b22
-    B12 = 2.0 * mu[e] * b12
+    B11 = lam_e * tr + 2.0 * mu_e * b11
+    B22 = lam_e * tr + 2.0 * mu_e * b22
+    B12 = 2.0 * mu_e * b12
     w = 0.5 * (B11 * b11 + B22 * b22 + 2.0 * B12 * b12)
     return (F11, F12, F21, F22, cR * B11 - sR * B12, cR * B12 - sR * B22, sR * B11 + cR * B12,
             sR * B12 + cR * B22, w)
+
+
+@njit(cache=True, inline="always")
+def _corotational(x, tri, dminv, lam, mu, e):
+    """_stress of triangle e at coordinates x."""
+    d11, d21, d12, d22 = _edges(x, tri, e)
+    return _stress(d11, d21, d12, d22, dminv[e, 0, 0], dminv[e, 0, 1], dminv[e, 1, 0], dminv[e, 1, 1],
+                   lam[e], mu[e])
+
+
+@njit(cache=True, inline="always")
+def _nodal(P11, P12, P21, P22, m11, m12, m21, m22, V):
+    """Force terms (H11, H12, H21, H22) on nodes j and k of a triangle of volume V (node i takes
+    minus their sum)."""
+    return (-V * (P11 * m11 + P12 * m12), -V * (P11 * m21 + P12 * m22), -V * (P21 * m11 + P22 * m12),
+            -V * (P21 * m21 + P22 * m22))
+
+
+@njit(cache=True, inline="always")
+def _scatter(f, tri, e, H11, H12, H21, H22):
+    i = tri[e, 0]
+    j = tri[e, 1]
+    k = tri[e, 2]
+    f[j, 0] += H11
+    f[j, 1] += H21
+    f[k, 0] += H12
+    f[k, 1] += H22
+    f[i, 0] -= H11 + H12
+    f[i, 1] -= H21 + H22
 
 
 @njit(cache=True)
@@ -97,16 +129,8 @@ def triangle_forces_scalar(x, v, tri, dminv, vol0, lam, mu, eta, f, energy=True)
             P12 += F11 * Sv12 + F12 * Sv22
             P21 += F21 * Sv11 + F22 * Sv12
             P22 += F21 * Sv12 + F22 * Sv22
-        H11 = -V * (P11 * m11 + P12 * m12)
-        H12 = -V * (P11 * m21 + P12 * m22)
-        H21 = -V * (P21 * m11 + P22 * m12)
-        H22 = -V * (P21 * m21 + P22 * m22)
-        f[j, 0] += H11
-        f[j, 1] += H21
-        f[k, 0] += H12
-        f[k, 1] += H22
-        f[i, 0] -= H11 + H12
-        f[i, 1] -= H21 + H22
+        H11, H12, H21, H22 = _nodal(P11, P12, P21, P22, m11, m12, m21, m22, V)
+        _scatter(f, tri, e, H11, H12, H21, H22)
     return U, P_damp
 
 
@@ -118,53 +142,24 @@ def triangle_forces_scalar(x, v, tri, dminv, vol0, lam, mu, eta, f, energy=True)
 def _triangle_gather(x, tri, D):
     """Edge vectors of every triangle, D[:, e] = (x_j - x_i, x_k - x_i) as (d11, d21, d12, d22)."""
     for e in range(tri.shape[0]):
-        i = tri[e, 0]
-        j = tri[e, 1]
-        k = tri[e, 2]
-        D[0, e] = x[j, 0] - x[i, 0]
-        D[1, e] = x[j, 1] - x[i, 1]
-        D[2, e] = x[k, 0] - x[i, 0]
-        D[3, e] = x[k, 1] - x[i, 1]
+        D[0, e], D[1, e], D[2, e], D[3, e] = _edges(x, tri, e)
 
 
 @njit(cache=True, error_model="numpy")
 def _triangle_stress(D, M, lam, mu, vol0, H, W):
     """Nodal force terms H[:, e] = (H11, H12, H21, H22) and strain energy W[e] of every triangle from
-    its edge vectors; the arithmetic of _corotational and triangle_forces_scalar, one loop without
-    branches or gathers, so that LLVM vectorises it."""
+    its edge vectors (_stress, _nodal: the scalar kernel's arithmetic), one loop without branches or
+    gathers, so that LLVM vectorises it."""
     for e in range(D.shape[1]):
-        d11 = D[0, e]
-        d21 = D[1, e]
-        d12 = D[2, e]
-        d22 = D[3, e]
         m11 = M[0, e]
         m12 = M[1, e]
         m21 = M[2, e]
         m22 = M[3, e]
-        F11 = d11 * m11 + d12 * m21
-        F12 = d11 * m12 + d12 * m22
-        F21 = d21 * m11 + d22 * m21
-        F22 = d21 * m12 + d22 * m22
-        rr = math.sqrt((F11 + F22) ** 2 + (F21 - F12) ** 2)
-        cR = (F11 + F22) / rr
-        sR = (F21 - F12) / rr
-        b11 = cR * F11 + sR * F21 - 1.0
-        b22 = -sR * F12 + cR * F22 - 1.0
-        b12 = 0.5 * ((cR * F12 + sR * F22) + (-sR * F11 + cR * F21))
-        tr = b11 + b22
-        B11 = lam[e] * tr + 2.0 * mu[e] * b11
-        B22 = lam[e] * tr + 2.0 * mu[e] * b22
-        B12 = 2.0 * mu[e] * b12
-        P11 = cR * B11 - sR * B12
-        P12 = cR * B12 - sR * B22
-        P21 = sR * B11 + cR * B12
-        P22 = sR * B12 + cR * B22
+        _, _, _, _, P11, P12, P21, P22, w = _stress(D[0, e], D[1, e], D[2, e], D[3, e], m11, m12, m21, m22,
+                                                     lam[e], mu[e])
         V = vol0[e]
-        W[e] = V * (0.5 * (B11 * b11 + B22 * b22 + 2.0 * B12 * b12))
-        H[0, e] = -V * (P11 * m11 + P12 * m12)
-        H[1, e] = -V * (P11 * m21 + P12 * m22)
-        H[2, e] = -V * (P21 * m11 + P22 * m12)
-        H[3, e] = -V * (P21 * m21 + P22 * m22)
+        W[e] = V * w
+        H[0, e], H[1, e], H[2, e], H[3, e] = _nodal(P11, P12, P21, P22, m11, m12, m21, m22, V)
 
 
 @njit(cache=True)
@@ -176,19 +171,7 @@ def triangle_forces_into(x, tri, M, lam, mu, vol0, f, energy, D, H, W):
     _triangle_stress(D, M, lam, mu, vol0, H, W)
     U = 0.0
     for e in range(tri.shape[0]):
-        i = tri[e, 0]
-        j = tri[e, 1]
-        k = tri[e, 2]
-        H11 = H[0, e]
-        H12 = H[1, e]
-        H21 = H[2, e]
-        H22 = H[3, e]
-        f[j, 0] += H11
-        f[j, 1] += H21
-        f[k, 0] += H12
-        f[k, 1] += H22
-        f[i, 0] -= H11 + H12
-        f[i, 1] -= H21 + H22
+        _scatter(f, tri, e, H[0, e], H[1, e], H[2, e], H[3, e])
         if energy:
             U += W[e]
     return U
@@ -207,12 +190,20 @@ def soa_dminv(dminv):
 
 
 @njit(cache=True)
+def viscous(eta) -> bool:
+    """Whether any triangle has viscous stress (then the scalar kernel is used)."""
+    for e in range(eta.shape[0]):
+        if eta[e] > 0.0:
+            return True
+    return False
+
+
+@njit(cache=True)
 def triangle_forces(x, v, tri, dminv, vol0, lam, mu, eta, f, energy=True):
     """Internal forces of the triangles (triangle_forces_scalar), through the vectorised path when
     no triangle has viscous stress. Returns (strain energy [J], damping power [W])."""
-    for e in range(eta.shape[0]):
-        if eta[e] > 0.0:
-            return triangle_forces_scalar(x, v, tri, dminv, vol0, lam, mu, eta, f, energy)
+    if viscous(eta):
+        return triangle_forces_scalar(x, v, tri, dminv, vol0, lam, mu, eta, f, energy)
     nt = tri.shape[0]
     U = triangle_forces_into(x, tri, soa_dminv(dminv), lam, mu, vol0, f, energy, np.empty((4, nt)),
                              np.empty((4, nt)), np.empty(nt))
