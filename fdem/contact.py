@@ -56,7 +56,8 @@ def _normals(x, edges, act):
 @njit(cache=True)
 def build_pairs(x, edges, edge_active, edge_tri, snodes, node_vertex, node_body, node_tri, tri,
                 body_fracturable, buffer):
-    """All (node, edge) pairs with node-to-segment distance <= buffer, excluding a node against an
+    """A fresh search, the definition refresh_pairs (what the integrator uses) is tested against:
+    all (node, edge) pairs with node-to-segment distance <= buffer, excluding a node against an
     edge of its own triangle, an edge of a triangle that has a copy of the node's mesh vertex, and pairs
     inside a body that cannot fracture.
 

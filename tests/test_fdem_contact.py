@@ -109,3 +109,42 @@ def test_disc_model_gives_crack_faces_and_bar_faces_their_own_friction():
     d, i, t = (model.body_names.index(n) for n in (g.specimen, g.incident_bar, g.transmission_bar))
     assert table[d, d] == 0.7
     assert table[i, d] == table[d, i] == table[t, d] == 0.2
+
+
+def test_the_filtered_contact_list_equals_a_fresh_search_of_a_fragmented_disc():
+    """fdem.contact.refresh_pairs (candidates within two extra buffers, filtered) gives the pairs of a
+    fresh search (build_pairs) in the same order, on a fast disc after its failure (crack faces
+    active) whose nodes then moved: by less than half the margin (filtered from the old candidates)
+    and by more (searched again). Its node normals agree on every node of a body that cannot
+    fracture, the only ones the contact kernel reads."""
+    from fdem.contact import build_pairs, refresh_pairs, surface_nodes
+    from shpb.fracture import CHECK_POINTS
+    from shpb.simulate import simulate
+    out = simulate("brazilian_disc", "fast", params=dict(zip(("sigma_t", "E_t"), CHECK_POINTS["weak_brittle"])))
+    m, res = out.extra["setup"]["model"], out.extra["result"]
+    active = m.edge_active0.copy()
+    for j in np.flatnonzero(res.Dmax[:, 0] > 0):
+        for side in range(2):
+            active[m.tri_edges[m.edge_tri[m.jedges[j, side]]]] = True
+    buffer = 0.3 * float(np.min(m.edge_dlim[m.edge_active0]) * 2.0)
+    margin = 2.0 * buffer
+    all_edges = np.arange(m.edges.shape[0])
+    edge_nodes = surface_nodes(m.edges, np.ones(m.edges.shape[0], np.bool_), m.n_nodes)
+    rigid = ~m.body_fracturable[m.node_body[m.edges[:, 0]]]
+    x0 = res.x.copy()
+    x_cand = x0.copy()
+    cand = (np.zeros(0, np.int64), np.zeros(0, np.int64))
+    rng = np.random.default_rng(1)
+    for step in (0.0, 0.2, 0.9):  # node moves in units of the margin: none, filtered, searched again
+        x = x0 + step * margin * rng.uniform(-0.5, 0.5, x0.shape) / np.sqrt(2.0)
+        pn, pe, nrm, snodes, *cand = refresh_pairs(x, m.edges, active, m.edge_tri, m.node_vertex, m.node_body,
+                                                   m.node_tri, m.tri, m.body_fracturable, buffer, margin,
+                                                   cand[0], cand[1], x_cand, all_edges, edge_nodes, rigid)
+        ref_snodes = surface_nodes(m.edges, active, m.n_nodes)
+        rn, re_, rnrm = build_pairs(x, m.edges, active, m.edge_tri, ref_snodes, m.node_vertex, m.node_body,
+                                    m.node_tri, m.tri, m.body_fracturable, buffer)
+        assert np.array_equal(snodes, ref_snodes)
+        assert np.array_equal(pn, rn) and np.array_equal(pe, re_)
+        on_rigid = ~m.body_fracturable[m.node_body]
+        assert np.array_equal(nrm[on_rigid], rnrm[on_rigid])
+        assert pn.size > 0 and snodes.size > 1000  # a fragmented disc, with pairs to agree on
