@@ -61,6 +61,10 @@ formula with its sample ``rho_1`` (clipped at 0).
 
 from __future__ import annotations
 
+from .crossval import (CVResult, Fit, ForwardModel, ModelSpec, Prediction, RecordErrors, calibrate, compare_cv,
+                       cross_validate, fit_populations, holm, predict_record, squared_error_difference)
+from .population import Population, fit_population, record_name, split_name
+from .protocol import ModelStep, Selection, confirm_additions, heldout_evaluation, leave_one_record_out, select_effects
 from .acceptance import accept_effect, bic, curve_errors, effective_sample_size, pinned_at_bounds
 from .loop import VERDICTS, CalibrationResult, Candidate, diagnose_loop
 from .ranking import chi2_log10_sf, ensemble_sensitivity, finite_difference_sensitivity, rank_candidates, score_test
@@ -73,3 +77,8 @@ __all__ = ["VERDICTS", "CalibrationResult", "Candidate", "accept_effect", "autoc
            "effective_sample_size", "ensemble_sensitivity", "finite_difference_sensitivity", "ljung_box",
            "pinned_at_bounds", "rank_candidates", "report_to_json", "runs_test", "score_test", "spearman_exact",
            "structure_tests", "whitened_residual", "write_report"]
+# the frozen protocol (issue 32): population of per-record effects, cross-validated selection, confirmation
+__all__ += ["CVResult", "Fit", "ForwardModel", "ModelSpec", "ModelStep", "Population", "Prediction", "RecordErrors",
+            "Selection", "calibrate", "compare_cv", "confirm_additions", "cross_validate", "fit_population",
+            "fit_populations", "heldout_evaluation", "holm", "leave_one_record_out", "predict_record",
+            "record_name", "select_effects", "split_name", "squared_error_difference"]
