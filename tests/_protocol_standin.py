@@ -104,3 +104,66 @@ def observe(model: StandIn, truth_by_record, seed):
         clean = curves(OBS_T, model.K[r], **truth_by_record[r])[0]
         out[r] = clean + noise.sample(rng, 1)[0]
     return out
+
+
+def heldout_gap_coverage(seeds, mu=100e-6, tau=25e-6, n_members=80):
+    """The measurement quoted in test_protocol_population.py (not run by the tests, ~1.3 s a seed): per
+    seed every record's gap drawn from N(mu, tau^2), the protocol on five calibration records, and
+    whether the held-out record's true gap lies inside its predictive 90 % interval. Returns
+    ``(chosen, covered, rmse_ratios)``."""
+    from enkf.diagnosis import heldout_evaluation, select_effects
+    K = {"A": 0.6e12, "B": 0.8e12, "C": 1.0e12, "D": 1.2e12, "E": 1.4e12, "H": 0.9e12}
+    model, err = StandIn(K), record_errors(list(K))
+    chosen, covered, ratios = 0, 0, []
+    for seed in seeds:
+        rng = np.random.default_rng(100 + seed)
+        gaps = {r: float(np.clip(rng.normal(mu, tau), 0.0, 4e-4)) for r in K}
+        obs = observe(model, {r: dict(**TRUTH, gap=gaps[r]) for r in K}, seed=200 + seed)
+        sel = select_effects(model, base_names=BASE, candidates=[fx.get_effect("face_gap"), fx.get_effect("gauge_gain")],
+                             calib_records=list("ABCDE"), heldout_records=["H"], obs={r: obs[r] for r in "ABCDE"},
+                             errors=err, seed=seed, n_members=n_members, max_additions=1)
+        ev = heldout_evaluation(sel, obs, {r: OBS_T for r in K})["H"]
+        if sel.last.spec.effect_names == ["face_gap"]:
+            chosen += 1
+            lo, hi = ev["after"]["intervals"]["face_gap.gap_m@H"]
+            covered += lo <= gaps["H"] <= hi
+        ratios.append(ev["after"]["rmse"] / ev["before"]["rmse"])
+    return chosen, covered, ratios
+
+
+RATE_K = {"R14": 0.5e12, "R20": 0.7e12, "R29": 1.0e12, "R40": 1.4e12}  # strain rates K / E = 14-40 /s
+RATE_TRUTH = {"sigma_p": 30e6, "tau_d": 45e-6, "k": 0.3}
+
+
+def rate_series(seed, n_members=80, candidates=("rate_strength", "gauge_gain", "trigger_shift")):
+    """The planted shared effect of test_protocol_selection.py: strength x (1 + k log10(rate / 1 s^-1)),
+    k = 0.3, four records at four loading rates, the protocol once per record held out
+    (:func:`enkf.diagnosis.leave_one_record_out`)."""
+    from enkf.diagnosis import leave_one_record_out
+    model = StandIn(RATE_K)
+    obs = observe(model, {r: RATE_TRUTH for r in RATE_K}, seed=seed)
+    return leave_one_record_out(model, list(RATE_K), obs, {r: OBS_T for r in RATE_K}, record_errors(list(RATE_K)),
+                                base_names=BASE, candidates=[fx.get_effect(c) for c in candidates], seed=seed,
+                                n_members=n_members, esmda_steps=4, max_additions=2)
+
+
+def rate_series_reliability(seeds, n_members=80):
+    """The measurement quoted in test_protocol_selection.py (not run by the tests, ~3.5 s a seed): over
+    seeds and folds, how often rate_strength is kept, anything else is kept, the truth of k lies in the
+    final calibration's 90 % interval, the base calibration's sigma_p interval misses its truth, and the
+    held-out RMSE falls."""
+    n = named = extra = covered = base_miss = improved = 0
+    for seed in seeds:
+        out = rate_series(seed, n_members)
+        for h, sel in out["selections"].items():
+            row = out["table"].set_index("heldout").loc[h]
+            n += 1
+            named += "rate_strength" in row["effects"].split(",")
+            extra += row["n_effects"] > 1
+            if "rate_strength.k_q05" in row and np.isfinite(row["rate_strength.k_q05"]):
+                covered += row["rate_strength.k_q05"] <= RATE_TRUTH["k"] <= row["rate_strength.k_q95"]
+            b = sel.steps[0].final.posterior()["sigma_p"]
+            base_miss += not b["q05"] <= RATE_TRUTH["sigma_p"] <= b["q95"]
+            improved += row["rmse_change"] < 0
+    return {"folds": n, "named": named, "extra_effect": extra, "k_covered": covered, "base_sigma_p_missed": base_miss,
+            "heldout_improved": improved}
