@@ -164,7 +164,9 @@ def _round(model, state: dict, remaining: list, calib: list, obs: Mapping, error
     trials = []
     for c in tried:
         cv = cross_validate(model, spec.add(c, kw["scopes"]), calib, obs, errors, **_cv_kw(kw))
-        cmp = compare_cv(obs, {j: cur.curve(j) for j in calib}, {j: cv.curve(j) for j in calib}, errors)
+        spreads = ({"spread_current": {j: cur.spread(j) for j in calib},
+                    "spread_candidate": {j: cv.spread(j) for j in calib}} if kw["prediction_spread"] else {})
+        cmp = compare_cv(obs, {j: cur.curve(j) for j in calib}, {j: cv.curve(j) for j in calib}, errors, **spreads)
         trials.append({"candidate": c, "cv": cv, "cmp": cmp})
     accepted, levels = holm([t["cmp"]["p"] for t in trials] + [1.0] * (K - len(tried)), kw["alpha"])
     rows = []
@@ -191,7 +193,7 @@ def select_effects(model: ForwardModel, *, base_names: Sequence[str], candidates
                    max_additions: int = 2, alpha: float = 0.05, seed: int = 0, n_members: int = 80,
                    esmda_steps: int = 4, scales: Mapping[str, str] | None = None, band_level: float = 0.90,
                    population_kw: Mapping | None = None, max_trials: int | None = None,
-                   fd_fraction: float = 1e-3) -> Selection:
+                   fd_fraction: float = 1e-3, prediction_spread: bool = False) -> Selection:
     """Greedy forward selection of effects by cross-validation within the calibration records (module
     docstring, step 2).
 
@@ -207,6 +209,8 @@ def select_effects(model: ForwardModel, *, base_names: Sequence[str], candidates
     scales : per per-record parameter, ``"linear"`` or ``"log"`` (:func:`~.population.fit_population`);
     population_kw : further arguments of :func:`~.population.fit_population` (``method``,
         ``floor_fraction``, ``min_records``, ``predictive``).
+    prediction_spread : add each cross-validated prediction's own calibration spread to the uncertainty
+        of the difference (:mod:`.crossval`; more cautious, less power).
     """
     calib, heldout = list(calib_records), list(heldout_records)
     if set(calib) & set(heldout):
@@ -214,7 +218,7 @@ def select_effects(model: ForwardModel, *, base_names: Sequence[str], candidates
     cal_obs = {r: np.array(obs[r], dtype=float) for r in calib}  # the only read of the observations
     kw = {"seed": seed, "n_members": n_members, "esmda_steps": esmda_steps, "scales": scales,
           "band_level": band_level, "population_kw": population_kw, "max_trials": max_trials, "alpha": alpha,
-          "scopes": scopes, "fd_fraction": fd_fraction}
+          "scopes": scopes, "fd_fraction": fd_fraction, "prediction_spread": prediction_spread}
     spec = ModelSpec.of(base_names)
     cv = cross_validate(model, spec, calib, cal_obs, errors, **_cv_kw(kw))
     steps = [_final_step(model, spec, cv, 0, 0, calib, heldout, cal_obs, errors, kw)]
