@@ -234,3 +234,38 @@ def test_the_cautious_option_adds_each_predictions_own_spread(rate):
     for j in calib:
         s = cur.spread(j)
         assert s.shape == (OBS_T.size, OBS_T.size) and np.all(np.diag(s) >= 0)
+
+
+def test_the_score_test_orders_the_candidates_and_cross_validation_decides():
+    """Three records at 14, 20 and 40 /s with the rate law planted. The score test (linearised, in-sample)
+    ranks the per-record gain first (score 602, 3 dof), the trigger shift next (261) and the rate law last
+    (22, 1 dof): a gain per record fits each record's peak, but cannot predict a record it has not seen.
+    Cross-validation keeps the rate law only (z 24; the gain -2.2, the shift -0.9). With ``max_trials=1``
+    the shortcut tries the gain alone and adds nothing: the order is not a gate, and the default tries
+    every candidate."""
+    model = StandIn(RATE_K)
+    calib = ["R14", "R20", "R40"]
+    obs = observe(model, {r: RATE_TRUTH for r in RATE_K}, seed=0)
+    cands = [fx.get_effect(n) for n in ("rate_strength", "trigger_shift", "gauge_gain")]
+
+    def run(max_trials):
+        return select_effects(model, base_names=BASE, candidates=cands, calib_records=calib, heldout_records=["R29"],
+                              obs={r: obs[r] for r in calib}, errors=record_errors(list(RATE_K)), seed=0, n_members=60,
+                              max_additions=1, max_trials=max_trials)
+    sel = run(3)
+    rnd = sel.rounds[0]
+    assert rnd["ranked_by_score_test"] and rnd["tried"] == ["gauge_gain", "trigger_shift", "rate_strength"]
+    assert [t["accepted"] for t in rnd["trials"]] == [False, False, True]
+    z = {t["effect"]: t["z"] for t in rnd["trials"]}
+    assert z["rate_strength"] > 10 and z["gauge_gain"] < 0 and z["trigger_shift"] < 0
+    assert sel.last.spec.effect_names == ["rate_strength"] and sel.last.in_play == 3
+    short = run(1).rounds[0]
+    assert short["tried"] == ["gauge_gain"] and short["in_play"] == 3 and short["chosen"] is None
+    assert short["trials"][0]["level"] == pytest.approx(0.05 / 3)  # Holm's first step counts all three
+
+
+def test_a_diagonal_model_error_is_refused():
+    from enkf import DiagonalError
+    from enkf.diagnosis import RecordErrors
+    with pytest.raises(ValueError, match="model error of A is diagonal"):
+        RecordErrors({"A": AR1Error(1.0, OBS_T, 1e-6)}, {"A": DiagonalError(1.0, m=OBS_T.size)})

@@ -48,6 +48,13 @@ Steps (issue 8, "Diagnosis"), one module each: :mod:`.structure` (1-2), :mod:`.r
 5. :func:`report_to_json` and :func:`write_report` (tables, JSON and plots for
    ``results/<experiment>/diagnosis/``).
 
+The frozen protocol (issue 32), which replaces steps 3-4's gates where a held-out record must stay
+unread: :mod:`.population` (the population of a per-record effect, :func:`fit_population`),
+:mod:`.crossval` (leave-one-calibration-record-out cross-validation, :func:`cross_validate`, and the test
+of a difference of cross-validated errors, :func:`compare_cv`, :func:`squared_error_difference`),
+:mod:`.protocol` (:func:`select_effects`, :func:`confirm_additions`, :func:`heldout_evaluation`,
+:func:`leave_one_record_out`).
+
 BIC: ``BIC = chi2_min + k ln(n_eff)`` where ``chi2_min = |L^{-1}(obs - sim)|^2`` is ``-2 ln L`` up to a
 constant for Gaussian errors with covariance ``R``, ``k`` the number of calibrated parameters, and
 ``n_eff`` the effective number of independent observations, so that the penalty (``ln det`` of the

@@ -13,7 +13,10 @@ candidates; nothing about FDEM or SHPB):
    more than its own uncertainty (:func:`~.crossval.compare_cv`), one-sided, Holm-corrected over the K
    candidates in play that round (every remaining one, tried or not: when a score-test ranking picked
    which to try, it had looked at all of them). The score test (``max_trials``) only orders the
-   candidates; it is not a gate. The result is a nested sequence M0 < M1 < ... (:class:`ModelStep`),
+   candidates; it is not a gate, and by default every remaining candidate is tried: the score test is
+   linearised and in-sample, and on the stand-in it ranks a per-record gain (which fits every
+   calibration record's peak and predicts none it has not seen) above a rate law (which predicts
+   them); see tests/test_protocol_selection.py. The result is a nested sequence M0 < M1 < ... (:class:`ModelStep`),
    each with its cross-validation (per calibration record the parameter point its prediction was made
    at, for a real-simulator check there), its calibration on all calibration records, the populations
    of its per-record parameters, and the held-out records' prediction points and bands.
