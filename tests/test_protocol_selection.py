@@ -15,6 +15,7 @@ sampling), and the level holds because a null candidate's cross-validated error 
 not better.
 """
 
+import json
 import math
 
 import numpy as np
@@ -24,8 +25,8 @@ from scipy import stats
 from _protocol_standin import (BASE, OBS_T, RATE_K, RATE_TRUTH, TRUTH, StandIn, observe, rate_series,
                                record_errors)
 from enkf import AR1Error
-from enkf.diagnosis import (ModelSpec, ModelStep, Selection, compare_cv, confirm_additions, holm, select_effects,
-                            squared_error_difference)
+from enkf.diagnosis import (ModelSpec, ModelStep, RecordErrors, Selection, compare_cv, confirm_additions, holm,
+                            select_effects, squared_error_difference)
 from shpb import effects as fx
 
 # ----------------------------------------------------------------------------------------------
@@ -122,9 +123,8 @@ def walk_data(offsets):
         y[r] = clean[r] + noise.sample(rng, 1)[0]
     for step, off in enumerate(offsets):
         real[step] = {r: clean[r] + off * 1e6 * shape for r in WALK}
-    sim = AR1Error(0.05e6, OBS_T, 5e-6)
-    errors = record_errors(WALK, model_error=False)
-    errors.simulator = {r: sim for r in WALK}
+    sim = AR1Error(0.05e6, OBS_T, 5e-6)  # the real simulator's run-to-run variability
+    errors = RecordErrors({r: noise for r in WALK}, {}, {r: sim for r in WALK})
     return y, real, errors
 
 
@@ -212,6 +212,7 @@ def test_the_leave_one_record_out_driver_tabulates_folds_and_totals(rate):
     sel = rate["selections"]["R40"]
     assert sel.heldout_records == ["R40"] and "R40" not in sel.calib_records
     js = sel.to_dict()
+    json.dumps(js, allow_nan=False)
     assert js["steps"][1]["effects"] == ["rate_strength"] and js["rounds"][0]["trials"][0]["effect"]
     pts = sel.steps[1].check_points()
     assert set(pts["cv"]) == {"R14", "R20", "R29"} and set(pts["heldout"]) == {"R40"}
@@ -266,6 +267,5 @@ def test_the_score_test_orders_the_candidates_and_cross_validation_decides():
 
 def test_a_diagonal_model_error_is_refused():
     from enkf import DiagonalError
-    from enkf.diagnosis import RecordErrors
     with pytest.raises(ValueError, match="model error of A is diagonal"):
         RecordErrors({"A": AR1Error(1.0, OBS_T, 1e-6)}, {"A": DiagonalError(1.0, m=OBS_T.size)})

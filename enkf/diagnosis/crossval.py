@@ -11,7 +11,9 @@ business; its observed curve is not part of the model.
 
 **A model** is a :class:`ModelSpec`: base names and effects; an effect is ``shared`` (one value for every
 record) or ``per_record`` (one copy per record: estimated on every calibration record, predicted for an
-unseen one from the population of the others, :mod:`.population`).
+unseen one from the population of the others, :mod:`.population`; each parameter of a per-record effect
+with several, e.g. a baseline's offset and drift, has its own population, their correlation is not
+modelled).
 
 **Cross-validation** (:func:`cross_validate`): for each calibration record ``j``, ES-MDA of the model on
 the other calibration records (:func:`calibrate`), the populations of its per-record parameters from
@@ -147,7 +149,8 @@ class RecordErrors:
     """The error model per record: instrument ``noise``, ``model`` error (the emulator's, time-correlated)
     and ``simulator`` variability (run-to-run scatter of the real model at a point), each an
     :class:`~enkf.covariance.ObservationError` on the record's observation times (absent: zero).
-    ``model_correlation``: correlation of two predictions' model errors (module docstring)."""
+    ``model_correlation``: correlation of two predictions' model errors (module docstring). The dense
+    matrices are cached on first use: build a new one rather than change its parts."""
 
     noise: Mapping[str, ObservationError]
     model: Mapping[str, ObservationError] = field(default_factory=dict)
