@@ -48,6 +48,13 @@ Steps (issue 8, "Diagnosis"), one module each: :mod:`.structure` (1-2), :mod:`.r
 5. :func:`report_to_json` and :func:`write_report` (tables, JSON and plots for
    ``results/<experiment>/diagnosis/``).
 
+The frozen protocol (issue 32), which replaces steps 3-4's gates where a held-out record must stay
+unread: :mod:`.population` (the population of a per-record effect, :func:`fit_population`),
+:mod:`.crossval` (leave-one-calibration-record-out cross-validation, :func:`cross_validate`, and the test
+of a difference of cross-validated errors, :func:`compare_cv`, :func:`squared_error_difference`),
+:mod:`.protocol` (:func:`select_effects`, :func:`confirm_additions`, :func:`heldout_evaluation`,
+:func:`leave_one_record_out`).
+
 BIC: ``BIC = chi2_min + k ln(n_eff)`` where ``chi2_min = |L^{-1}(obs - sim)|^2`` is ``-2 ln L`` up to a
 constant for Gaussian errors with covariance ``R``, ``k`` the number of calibrated parameters, and
 ``n_eff`` the effective number of independent observations, so that the penalty (``ln det`` of the
@@ -61,6 +68,10 @@ formula with its sample ``rho_1`` (clipped at 0).
 
 from __future__ import annotations
 
+from .crossval import (CVResult, Fit, ForwardModel, ModelSpec, Prediction, RecordErrors, calibrate, compare_cv,
+                       cross_validate, fit_populations, holm, predict_record, squared_error_difference)
+from .population import Population, fit_population, record_name, split_name
+from .protocol import ModelStep, Selection, confirm_additions, heldout_evaluation, leave_one_record_out, select_effects
 from .acceptance import accept_effect, bic, curve_errors, effective_sample_size, pinned_at_bounds
 from .loop import VERDICTS, CalibrationResult, Candidate, diagnose_loop
 from .ranking import chi2_log10_sf, ensemble_sensitivity, finite_difference_sensitivity, rank_candidates, score_test
@@ -73,3 +84,8 @@ __all__ = ["VERDICTS", "CalibrationResult", "Candidate", "accept_effect", "autoc
            "effective_sample_size", "ensemble_sensitivity", "finite_difference_sensitivity", "ljung_box",
            "pinned_at_bounds", "rank_candidates", "report_to_json", "runs_test", "score_test", "spearman_exact",
            "structure_tests", "whitened_residual", "write_report"]
+# the frozen protocol (issue 32): population of per-record effects, cross-validated selection, confirmation
+__all__ += ["CVResult", "Fit", "ForwardModel", "ModelSpec", "ModelStep", "Population", "Prediction", "RecordErrors",
+            "Selection", "calibrate", "compare_cv", "confirm_additions", "cross_validate", "fit_population",
+            "fit_populations", "heldout_evaluation", "holm", "leave_one_record_out", "predict_record",
+            "record_name", "select_effects", "split_name", "squared_error_difference"]

@@ -1,0 +1,150 @@
+"""The frozen protocol of :mod:`enkf.diagnosis.protocol` on SHPB records (issue 32): effects chosen by
+cross-validation within the calibration records on the emulated FDEM curves
+(:class:`calibration.diagnose.EmulatedSHPB`), confirmed on real FDEM runs at the cross-validation points,
+and only then the held-out records' curves read.
+
+What differs from :func:`calibration.diagnose.diagnose` (which stays as it is):
+
+* **No record's own measurement of a per-record effect** is used. A record's face closure before load
+  (``closure_before_load_m``) is measured until the *transmitted* stress reaches 2 % of its peak, so it
+  reads the record's own answer: it neither centres a box nor gives a held-out value here
+  (:func:`protocol_model` drops the ``record_centres``). A record the calibration has not seen takes
+  its per-record values from the population of the calibration records' estimates
+  (:mod:`enkf.diagnosis.population`); each record's forward model must be given its own copy of every
+  per-record parameter (:class:`ProtocolModel` refuses a fallback).
+* **The emulator's error is time-correlated**: per-time rms of the leave-one-out residuals with an
+  AR(1) correlation (:func:`emulator_errors`, :func:`enkf.emulated.emulator_error_model`), where the
+  loop added a diagonal term.
+* The gates are the protocol's (cross-validated error against its own uncertainty, Holm-corrected; the
+  real-run confirmation walk), not BIC margins or a held-out error.
+
+Workflow (the lead's integration, in this order): build the emulators from the FDEM design
+(:func:`calibration.diagnose.emulators_from_design`) and ``EmulatedSHPB``; :func:`select` with the
+calibration records' observations only; :func:`check_runs` lists the FDEM runs (per step and calibration
+record the cross-validation point, per step and held-out record its prediction point); run them;
+:func:`real_curves` turns them into curves through the measurement chain; :func:`confirm` walks the steps;
+:func:`enkf.diagnosis.heldout_evaluation` (``final`` = the confirmed step, ``real`` = the held-out runs)
+reads the held-out records last.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from enkf.covariance import ObservationError
+from enkf.diagnosis import RecordErrors, Selection, confirm_additions, select_effects
+from enkf.emulated import emulator_error_model
+from shpb import effects as fx
+
+from .diagnose import EmulatedSHPB, interpolation_matrix, measured_curve, record_params
+
+__all__ = ["ProtocolModel", "check_runs", "confirm", "emulator_errors", "protocol_model", "real_curves",
+           "record_errors", "select"]
+
+
+@dataclass
+class ProtocolModel:
+    """An :class:`EmulatedSHPB` as the protocol's :class:`enkf.diagnosis.ForwardModel`: boxes are the
+    design's and the catalogue's (never centred on a record's measurement), and a record whose per-record
+    copy is missing from the names is an error, not a fallback to its own measurement."""
+
+    emulated: EmulatedSHPB
+
+    def box(self, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+        return self.emulated.box(list(names), centred=False)
+
+    def forward(self, names: Sequence[str], records: Sequence[str]):
+        names = list(names)
+        per = {fx.split_record(n)[0] for n in names if fx.split_record(n)[1] is not None}
+        for r in records:
+            missing = [p for p in sorted(per) if fx.record_param(p, r) not in names]
+            if missing:
+                raise ValueError(f"record {r} has no copy of {missing}: the protocol gives every record its own "
+                                 "(fitted, or drawn from the population), never its measured value")
+        return self.emulated.forward(names, records)
+
+
+def protocol_model(model: EmulatedSHPB) -> ProtocolModel:
+    """``model`` without its records' measured centres (they read the transmitted wave), wrapped."""
+    return ProtocolModel(replace(model, record_centres={}))
+
+
+def emulator_errors(model: EmulatedSHPB, records: Sequence[str]) -> dict[str, ObservationError]:
+    """Per record, the emulator's error at the record's observation times: the leave-one-out residuals of
+    its design (:meth:`enkf.emulator.CurveEmulator.loo_residuals`) interpolated to those times, as per-time
+    rms with AR(1) correlation (:func:`enkf.emulated.emulator_error_model`)."""
+    out = {}
+    for r in records:
+        W = interpolation_matrix(model.model_times, model.obs_times[r])
+        err, _ = emulator_error_model(np.asarray(model.emulators[r].loo_residuals()) @ W.T, model.obs_times[r])
+        if err is None:
+            raise ValueError(f"the emulator of {r} has no leave-one-out residuals")
+        out[r] = err
+    return out
+
+
+def record_errors(model: EmulatedSHPB, noise: Mapping[str, ObservationError], *,
+                  simulator: Mapping[str, ObservationError] | None = None,
+                  model_correlation: float = 0.0) -> RecordErrors:
+    """The protocol's error model per record: instrument ``noise`` (e.g. ``Observations.of_record(r).
+    error_model()``), the emulator's time-correlated error (:func:`emulator_errors`) and the FDEM runs'
+    variability ``simulator`` if known (e.g. the scatter of runs with different mesh seeds)."""
+    return RecordErrors(dict(noise), emulator_errors(model, list(noise)), dict(simulator or {}), model_correlation)
+
+
+def select(model: EmulatedSHPB, *, base_names: Sequence[str], candidates: Sequence, calib_records: Sequence[str],
+           obs: Mapping[str, np.ndarray], noise: Mapping[str, ObservationError], heldout_records: Sequence[str] = (),
+           simulator: Mapping[str, ObservationError] | None = None, model_correlation: float = 0.0,
+           scopes: Mapping[str, str] | None = None, **select_kw) -> Selection:
+    """:func:`enkf.diagnosis.select_effects` on the emulated records (module docstring). ``obs`` is read for
+    the calibration records only; ``noise`` must cover calibration and held-out records (the held-out
+    record's noise sets its predictive band, never its prediction). Physical candidates must be emulator
+    inputs (ValueError otherwise); per-record scopes come from the catalogue unless ``scopes`` says."""
+    pm = protocol_model(model)
+    for c in candidates:
+        pm.box(list(c.param_names))  # raises for a physical candidate the emulator does not cover
+    errors = record_errors(model, noise, simulator=simulator, model_correlation=model_correlation)
+    return select_effects(pm, base_names=base_names, candidates=candidates, calib_records=calib_records,
+                          heldout_records=heldout_records, obs=obs, errors=errors, scopes=scopes, **select_kw)
+
+
+def check_runs(selection: Selection) -> list[dict]:
+    """The real FDEM runs the confirmation and the held-out evaluation need: per step and calibration
+    record its cross-validation point (``role`` "cv"), per step and held-out record its prediction point
+    ("heldout"). ``simulator``: the parameters of the run (base and physical effects, the record's own
+    copies under their plain names); ``measurement``: the chain applied to the run's curve afterwards."""
+    rows = []
+    for step in selection.steps:
+        pts = step.check_points()
+        for role in ("cv", "heldout"):
+            for rec, point in pts[role].items():
+                plain = record_params(point, rec)
+                base, phys, meas = fx.split_params(plain)
+                rows.append({"step": step.index, "model": step.spec.label(), "role": role, "record": rec,
+                             "simulator": {**base, **phys}, "measurement": meas, "point": dict(point)})
+    return rows
+
+
+def real_curves(rows: Sequence[Mapping], runs: Sequence, model: EmulatedSHPB) -> dict[str, dict[int, dict]]:
+    """``{"cv": {step: {record: curve}}, "heldout": {...}}`` from the FDEM runs of :func:`check_runs`'s rows
+    (``runs[i]``: the run of ``rows[i]``, a DataFrame with ``time_s``, ``stress_Pa``, or None for a failed
+    run): each run on the model grid, through its row's measurement chain, at the record's observation
+    times (:func:`calibration.diagnose.measured_curve`); None for a failed run."""
+    out: dict[str, dict[int, dict]] = {"cv": {}, "heldout": {}}
+    for row, run in zip(rows, runs):
+        post = {n: {"mean": v} for n, v in row["point"].items()}
+        curve = measured_curve(run, model.model_times, post, model.obs_times[row["record"]], record=row["record"])
+        out[row["role"]].setdefault(row["step"], {})[row["record"]] = curve
+    return out
+
+
+def confirm(selection: Selection, real_cv: Mapping[int, Mapping[str, np.ndarray | None]],
+            obs: Mapping[str, np.ndarray], noise: Mapping[str, ObservationError], *,
+            simulator: Mapping[str, ObservationError] | None = None, alpha: float | None = None) -> dict:
+    """:func:`enkf.diagnosis.confirm_additions` on real FDEM curves at the cross-validation points
+    (:func:`real_curves`' ``"cv"``): uncertainty = instrument noise and the runs' variability."""
+    errors = RecordErrors(dict(noise), {}, dict(simulator or {}))
+    return confirm_additions(selection, real_cv, obs, errors, alpha=alpha)

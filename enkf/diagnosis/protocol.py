@@ -1,0 +1,389 @@
+"""The frozen protocol of closing the loop (issue 32): choose effects by cross-validation within the
+calibration records, confirm them on the real simulator, and only then read the held-out records.
+
+Order, fixed before anything is fitted (every step generic: a :class:`~.crossval.ForwardModel`, records,
+candidates; nothing about FDEM or SHPB):
+
+1. The records are split into calibration records and held-out records. :func:`select_effects` reads
+   the observations of the calibration records only (it copies them at the start and never indexes
+   the mapping again), so a held-out record's curve cannot reach a choice.
+2. Greedy forward selection (:func:`select_effects`): starting from the base model M0, each round
+   cross-validates (:func:`~.crossval.cross_validate`) the current model plus each remaining candidate
+   over the calibration records, and adds the candidate whose cross-validated squared error falls by
+   more than its own uncertainty (:func:`~.crossval.compare_cv`), one-sided, Holm-corrected over the K
+   candidates in play that round (every remaining one, tried or not: when a score-test ranking picked
+   which to try, it had looked at all of them). The score test (``max_trials``) only orders the
+   candidates; it is not a gate, and by default every remaining candidate is tried: the score test is
+   linearised and in-sample, and on the stand-in it ranks a per-record gain (which fits every
+   calibration record's peak and predicts none it has not seen) above a rate law (which predicts
+   them); see tests/test_protocol_selection.py. The result is a nested sequence M0 < M1 < ... (:class:`ModelStep`),
+   each with its cross-validation (per calibration record the parameter point its prediction was made
+   at, for a real-simulator check there), its calibration on all calibration records, the populations
+   of its per-record parameters, and the held-out records' prediction points and bands.
+3. :func:`confirm_additions`: given the real simulator's curves at those cross-validation points,
+   walk M1, M2, ...: confirm M_r over the last confirmed model when its real cross-validated squared
+   error is lower by more than the uncertainty (noise and the simulator's variability; one-sided,
+   level ``alpha / K`` with K of the round that chose it); the first refuted addition is dropped and the
+   walk stops there (what followed was chosen given it). The model shipped is never worse on real
+   cross-validation than the base model.
+4. :func:`heldout_evaluation`: the held-out records' observed curves, read here for the first time:
+   RMSE, peak and time-to-peak errors of the base and of the final model, and the coverage of the
+   predictive band (posterior members x population draws).
+
+:func:`leave_one_record_out` runs 1-4 once per record of a series (that record held out) and tabulates
+the folds.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from ..diagnostics import jsonable
+from ..predictive import predictive_band
+from .acceptance import curve_errors
+from .crossval import (CVResult, Fit, ForwardModel, ModelSpec, Prediction, RecordErrors, calibrate, compare_cv,
+                       cross_validate, fit_populations, holm, predict_record, scope_of)
+from .population import Population, record_name
+from .ranking import finite_difference_sensitivity, rank_candidates
+from .structure import structure_tests
+
+__all__ = ["ModelStep", "Selection", "confirm_additions", "heldout_evaluation", "leave_one_record_out",
+           "select_effects"]
+
+
+@dataclass
+class ModelStep:
+    """One model of the nested sequence: ``spec``, its cross-validation ``cv``, its calibration on all
+    calibration records ``final`` with the ``populations`` of its per-record parameters, the held-out
+    records' predictions ``heldout``, and ``in_play``: the number of candidates of the round that chose
+    it (0 for the base model)."""
+
+    index: int
+    spec: ModelSpec
+    cv: CVResult
+    final: Fit
+    populations: dict[str, Population]
+    heldout: dict[str, Prediction]
+    in_play: int = 0
+    structure: dict = field(default_factory=dict)
+
+    def check_points(self) -> dict:
+        """``{"cv": {record: point}, "heldout": {record: point}}``: where a real-simulator check runs
+        (names: shared ones and the record's own copies ``<param>@<record>``)."""
+        return {"cv": self.cv.points(), "heldout": {h: dict(p.point) for h, p in self.heldout.items()}}
+
+    def summary(self) -> dict:
+        return {"index": self.index, "model": self.spec.label(), "effects": self.spec.effect_names,
+                "in_play": self.in_play, "cv": self.cv.summary(), "posterior": self.final.posterior(),
+                "populations": {p: pop.to_dict() for p, pop in self.populations.items()},
+                "heldout": {h: p.summary() for h, p in self.heldout.items()},
+                "structure": {k: self.structure.get(k) for k in ("passed", "failed", "chi2")}}
+
+
+@dataclass
+class Selection:
+    """What :func:`select_effects` returns: the nested ``steps`` (M0 first), the ``rounds`` (per round the
+    candidates tried, their numbers and a sentence each), ``why`` the selection stopped, and the split."""
+
+    steps: list[ModelStep]
+    rounds: list[dict]
+    why: str
+    calib_records: list[str]
+    heldout_records: list[str]
+    settings: dict
+
+    @property
+    def last(self) -> ModelStep:
+        return self.steps[-1]
+
+    def to_dict(self) -> dict:
+        return jsonable({"calib_records": self.calib_records, "heldout_records": self.heldout_records,
+                         "steps": [s.summary() for s in self.steps], "rounds": self.rounds, "why": self.why,
+                         "settings": self.settings})
+
+
+def _final_step(model, spec: ModelSpec, cv: CVResult, index: int, in_play: int, calib: list, heldout: list,
+                obs: Mapping, errors: RecordErrors, kw: dict) -> ModelStep:
+    """Calibrate ``spec`` on all calibration records and predict the held-out records from it."""
+    fit = calibrate(model, spec.names(calib), calib, obs, errors, seed=kw["seed"], n_members=kw["n_members"],
+                    esmda_steps=kw["esmda_steps"])
+    pops = fit_populations(model, spec, fit, scales=kw["scales"], **(kw["population_kw"] or {}))
+    held = {h: predict_record(model, spec, fit, h, pops, seed=kw["seed"], band_level=kw["band_level"])
+            for h in heldout}
+    y = np.concatenate([obs[r] for r in calib])
+    mean = fit.mean()
+    sim = model.forward(fit.names, calib)(np.array([mean[n] for n in fit.names]))[0]
+    w = errors.calibration_error(calib).whiten(y - sim)
+    return ModelStep(index, spec, cv, fit, pops, held, in_play, structure_tests(w, n_params=len(fit.names)))
+
+
+def _ranked(model, spec: ModelSpec, step: ModelStep, remaining: list, calib: list, obs: Mapping,
+            errors: RecordErrors, scopes, fd_fraction: float) -> list:
+    """The remaining candidates ordered by the score test at the current calibration (an order, not a gate)."""
+    names = spec.names(calib)
+    mean = step.final.mean()
+    cols, x0_c, all_c = {}, [], []
+    for c in remaining:
+        per = scope_of(c, scopes) == "per_record"
+        pn = [record_name(p, r) for r in calib for p in c.param_names] if per else list(c.param_names)
+        nulls = list(c.nulls) * (len(calib) if per else 1)
+        cols[c.name] = (len(names) + len(all_c), len(pn))
+        all_c += pn
+        x0_c += nulls
+    all_names = names + all_c
+    x0 = np.array([mean[n] for n in names] + x0_c)
+    lo, hi = model.box(all_names)
+    f = model.forward(all_names, calib)
+    S = finite_difference_sensitivity(f, x0, fd_fraction * (np.asarray(hi) - np.asarray(lo)), lower=lo, upper=hi)
+    err = errors.calibration_error(calib)
+    Sw = err.whiten(S)
+    w = err.whiten(np.concatenate([obs[r] for r in calib]) - f(x0)[0])
+    table = rank_candidates(w, Sw[:, :len(names)], {k: Sw[:, a:a + n] for k, (a, n) in cols.items()},
+                            alpha=1.0, max_collinearity=1.0)
+    by_name = {c.name: c for c in remaining}
+    return [by_name[e] for e in table["effect"]]
+
+
+def _trial_text(name: str, cur: CVResult, new: CVResult, cmp: dict, level: float, K: int, ok: bool) -> str:
+    return (f"{name}: cross-validated RMSE {cur.rmse:.4g} -> {new.rmse:.4g}; the squared-error sum falls by "
+            f"{cmp['delta']:.4g} with sd {cmp['sd']:.4g} (z = {cmp['z']:.2f}, one-sided p = {cmp['p']:.3g}, "
+            f"Holm level {level:.3g} over {K} candidate(s)): " + ("accepted" if ok else "not accepted"))
+
+
+def _round(model, state: dict, remaining: list, calib: list, obs: Mapping, errors: RecordErrors, kw: dict) -> dict:
+    """One round of the greedy forward selection: cross-validate the candidates, test, pick the best."""
+    spec, cur = state["spec"], state["cv"]
+    if kw["max_trials"] is not None:
+        order = _ranked(model, spec, state["step"], remaining, calib, obs, errors, kw["scopes"], kw["fd_fraction"])
+        tried = order[:kw["max_trials"]]
+    else:
+        tried = list(remaining)
+    K = len(remaining)
+    trials = []
+    for c in tried:
+        cv = cross_validate(model, spec.add(c, kw["scopes"]), calib, obs, errors, **_cv_kw(kw))
+        spreads = ({"spread_current": {j: cur.spread(j) for j in calib},
+                    "spread_candidate": {j: cv.spread(j) for j in calib}} if kw["prediction_spread"] else {})
+        cmp = compare_cv(obs, {j: cur.curve(j) for j in calib}, {j: cv.curve(j) for j in calib}, errors, **spreads)
+        trials.append({"candidate": c, "cv": cv, "cmp": cmp})
+    accepted, levels = holm([t["cmp"]["p"] for t in trials] + [1.0] * (K - len(tried)), kw["alpha"])
+    rows = []
+    for t, ok, lev in zip(trials, accepted, levels):
+        t["accepted"] = ok
+        rows.append({"effect": t["candidate"].name, "cv_rmse": t["cv"].rmse, "cv_lpd": t["cv"].lpd,
+                     "delta_sq_error": t["cmp"]["delta"], "sd": t["cmp"]["sd"], "z": t["cmp"]["z"],
+                     "p": t["cmp"]["p"], "level": lev, "accepted": bool(ok),
+                     "text": _trial_text(t["candidate"].name, cur, t["cv"], t["cmp"], lev, K, ok)})
+    passing = [t for t in trials if t["accepted"]]
+    best = max(passing, key=lambda t: t["cmp"]["delta"]) if passing else None
+    return {"current": spec.label(), "current_cv_rmse": cur.rmse, "in_play": K,
+            "tried": [c.name for c in tried], "ranked_by_score_test": kw["max_trials"] is not None,
+            "trials": rows, "chosen": best["candidate"].name if best else None, "_best": best}
+
+
+def _cv_kw(kw: dict) -> dict:
+    return {k: kw[k] for k in ("seed", "n_members", "esmda_steps", "scales", "band_level", "population_kw")}
+
+
+def select_effects(model: ForwardModel, *, base_names: Sequence[str], candidates: Sequence,
+                   calib_records: Sequence[str], obs: Mapping[str, np.ndarray], errors: RecordErrors,
+                   heldout_records: Sequence[str] = (), scopes: Mapping[str, str] | None = None,
+                   max_additions: int = 2, alpha: float = 0.05, seed: int = 0, n_members: int = 80,
+                   esmda_steps: int = 4, scales: Mapping[str, str] | None = None, band_level: float = 0.90,
+                   population_kw: Mapping | None = None, max_trials: int | None = None,
+                   fd_fraction: float = 1e-3, prediction_spread: bool = False) -> Selection:
+    """Greedy forward selection of effects by cross-validation within the calibration records (module
+    docstring, step 2).
+
+    model : :class:`~.crossval.ForwardModel` covering every record (calibration and held-out).
+    candidates : effects offered (``name``, ``param_names``, ``nulls``; ``scope`` or ``scopes[name]``:
+        ``per_record`` or ``shared``, default shared).
+    obs : observations; only ``obs[r]`` for ``r`` in ``calib_records`` is read.
+    errors : :class:`~.crossval.RecordErrors` for every record (noise, time-correlated model error,
+        simulator variability).
+    alpha : family-wise one-sided level per round (Holm over the candidates in play).
+    max_trials : None tries every remaining candidate; a number tries that many, ordered by the score
+        test (:func:`~.ranking.rank_candidates`) at the current calibration.
+    scales : per per-record parameter, ``"linear"`` or ``"log"`` (:func:`~.population.fit_population`);
+    population_kw : further arguments of :func:`~.population.fit_population` (``method``,
+        ``floor_fraction``, ``min_records``, ``predictive``).
+    prediction_spread : add each cross-validated prediction's own calibration spread to the uncertainty
+        of the difference (:mod:`.crossval`; more cautious, less power).
+    """
+    calib, heldout = list(calib_records), list(heldout_records)
+    if set(calib) & set(heldout):
+        raise ValueError(f"records both calibration and held-out: {sorted(set(calib) & set(heldout))}")
+    cal_obs = {r: np.array(obs[r], dtype=float) for r in calib}  # the only read of the observations
+    kw = {"seed": seed, "n_members": n_members, "esmda_steps": esmda_steps, "scales": scales,
+          "band_level": band_level, "population_kw": population_kw, "max_trials": max_trials, "alpha": alpha,
+          "scopes": scopes, "fd_fraction": fd_fraction, "prediction_spread": prediction_spread}
+    spec = ModelSpec.of(base_names)
+    cv = cross_validate(model, spec, calib, cal_obs, errors, **_cv_kw(kw))
+    steps = [_final_step(model, spec, cv, 0, 0, calib, heldout, cal_obs, errors, kw)]
+    remaining, rounds = list(candidates), []
+    why = f"the maximum of {max_additions} addition(s) was reached"
+    for _ in range(max_additions):
+        if not remaining:
+            why = "no candidate is left"
+            break
+        state = {"spec": spec, "cv": cv, "step": steps[-1]}
+        rnd = _round(model, state, remaining, calib, cal_obs, errors, kw)
+        best = rnd.pop("_best")
+        rounds.append(rnd)
+        if best is None:
+            why = (f"no candidate lowers the cross-validated error of {spec.label()} by more than its "
+                   f"uncertainty (one-sided, family-wise {alpha:g} over {rnd['in_play']} candidate(s))")
+            rnd["text"] = why
+            break
+        c = best["candidate"]
+        spec, cv = spec.add(c, scopes), best["cv"]
+        remaining = [r for r in remaining if r.name != c.name]
+        steps.append(_final_step(model, spec, cv, len(steps), rnd["in_play"], calib, heldout, cal_obs, errors, kw))
+        rnd["text"] = next(t["text"] for t in rnd["trials"] if t["effect"] == c.name)
+    settings = {k: v for k, v in kw.items() if k not in ("scopes",)}
+    settings.update(max_additions=max_additions, scopes=dict(scopes or {}), model_correlation=errors.model_correlation)
+    return Selection(steps, rounds, why, calib, heldout, settings)
+
+
+def confirm_additions(selection: Selection, real: Mapping[int, Mapping[str, np.ndarray | None]],
+                      obs: Mapping[str, np.ndarray], errors: RecordErrors, *, alpha: float | None = None,
+                      use_model_error: bool = False) -> dict:
+    """The confirmation walk on the real simulator (module docstring, step 3).
+
+    real : ``real[r][j]``: the real simulator's curve (on record ``j``'s observation times, through the
+        same measurement chain) at step ``r``'s cross-validation point of calibration record ``j``
+        (:meth:`ModelStep.check_points`); None for a failed run.
+    obs : the calibration records' observations.
+    errors : noise and the simulator's variability at those points (``simulator``); the model error is
+        left out unless ``use_model_error`` (the curves are real runs, not the emulator).
+    alpha : one-sided level (default the selection's); step ``r`` is held to ``alpha / K_r``.
+
+    Returns ``confirmed`` (index of the last confirmed step), ``effects``, ``steps`` (per addition: the
+    numbers and a sentence), ``real_cv_rmse`` per step walked, and ``text``.
+    """
+    alpha = selection.settings["alpha"] if alpha is None else alpha
+    calib = selection.calib_records
+    y = {j: np.asarray(obs[j], dtype=float) for j in calib}
+
+    def rmse_of(r):
+        curves = real.get(r, {})
+        if any(curves.get(j) is None for j in calib):
+            return None
+        return math.sqrt(sum(float(np.sum((y[j] - curves[j]) ** 2)) for j in calib) / sum(y[j].size for j in calib))
+
+    confirmed, out = 0, []
+    base_rmse = rmse_of(0)
+    if base_rmse is None:
+        raise ValueError("the base model's real cross-validation curves are needed (real[0][record])")
+    rmses = {0: base_rmse}
+    for step in selection.steps[1:]:
+        r, prev = step.index, selection.steps[confirmed]
+        name = step.spec.effect_names[-1]
+        rmses[r] = rmse_of(r)
+        level = alpha / max(step.in_play, 1)
+        if rmses[r] is None:
+            out.append({"step": r, "effect": name, "confirmed": False,
+                        "text": f"{name}: refuted, a real run at its cross-validation points failed; the walk stops"})
+            break
+        cmp = compare_cv(y, real[confirmed], real[r], errors, use_model_error=use_model_error)
+        ok = cmp["p"] <= level
+        out.append({"step": r, "effect": name, "confirmed": bool(ok), "real_cv_rmse_before": rmses[confirmed],
+                    "real_cv_rmse_after": rmses[r], "delta_sq_error": cmp["delta"], "sd": cmp["sd"], "z": cmp["z"],
+                    "p": cmp["p"], "level": level,
+                    "text": (f"{name} over {prev.spec.label()}: real cross-validated RMSE {rmses[confirmed]:.4g} -> "
+                             f"{rmses[r]:.4g}; the squared-error sum falls by {cmp['delta']:.4g} with sd "
+                             f"{cmp['sd']:.4g} (z = {cmp['z']:.2f}, p = {cmp['p']:.3g}, level {level:.3g} = "
+                             f"{alpha:g} / {step.in_play}): " + ("confirmed" if ok else
+                                                                 "refuted, dropped; the walk stops (the additions "
+                                                                 "after it were chosen given it)"))})
+        if not ok:
+            break
+        confirmed = r
+    if rmses[confirmed] > base_rmse:  # pragma: no cover - a confirmed step lowers the error; kept as the rule
+        confirmed = 0
+    spec = selection.steps[confirmed].spec
+    return {"confirmed": confirmed, "model": spec.label(), "effects": spec.effect_names, "steps": out,
+            "real_cv_rmse": rmses,
+            "text": (f"shipped: {spec.label()} (real cross-validated RMSE {base_rmse:.4g} -> {rmses[confirmed]:.4g})")}
+
+
+def heldout_evaluation(selection: Selection, obs: Mapping[str, np.ndarray], times: Mapping[str, np.ndarray], *,
+                       final: int | None = None, errors: RecordErrors | None = None,
+                       real: Mapping[str, Mapping[str, np.ndarray]] | None = None, seed: int = 0) -> dict:
+    """The held-out records' errors, base model (``before``) and final model (``after``, step ``final``,
+    default the last; the confirmed one after :func:`confirm_additions`): ``curve_errors`` (RMSE, peak
+    error, time-to-peak error), the fraction of the observed curve inside the model band (posterior
+    members x population draws) and, with ``errors``, inside the predictive band (the band plus a draw of
+    the error model); per-record values predicted and their intervals. ``real={"before": {h: curve},
+    "after": {h: curve}}`` scores real-simulator runs at the held-out points instead of the model's."""
+    final = len(selection.steps) - 1 if final is None else int(final)
+    out = {}
+    for h in selection.heldout_records:
+        y, t = np.asarray(obs[h], dtype=float), np.asarray(times[h], dtype=float)
+        rec = {"final_model": selection.steps[final].spec.label()}
+        for when, step in (("before", selection.steps[0]), ("after", selection.steps[final])):
+            pred = step.heldout[h]
+            curve = pred.curve if real is None else np.asarray(real[when][h], dtype=float)
+            lo, hi = pred.band
+            e = curve_errors(t, curve, y)
+            e["band_coverage"] = float(np.mean((y >= lo) & (y <= hi)))
+            if errors is not None:
+                plo, phi = predictive_band(pred.draws, errors.total(h), seed, level=pred.band_level)
+                e["predictive_coverage"] = float(np.mean((y >= plo) & (y <= phi)))
+            e["point"] = dict(pred.point)
+            e["intervals"] = {k: list(v) for k, v in pred.intervals().items()}
+            rec[when] = e
+        rec["rmse_change"] = rec["after"]["rmse"] - rec["before"]["rmse"]
+        out[h] = rec
+    return out
+
+
+def leave_one_record_out(model: ForwardModel, records: Sequence[str], obs: Mapping[str, np.ndarray],
+                         times: Mapping[str, np.ndarray], errors: RecordErrors, *, base_names: Sequence[str],
+                         candidates: Sequence, confirm: Callable[[Selection], int] | None = None,
+                         **select_kw) -> dict:
+    """The protocol once per record of a series, that record held out (:func:`select_effects` on the
+    others, ``confirm(selection) -> final step index`` if given (e.g. :func:`confirm_additions` on real
+    runs), else the last step; then :func:`heldout_evaluation`).
+
+    Returns ``table`` (one row per fold: held-out record, effects kept, the final calibration's estimates
+    with their 90 % intervals, the held-out RMSE before and after and its change), ``totals`` (mean
+    change, its sd across folds and standard error, folds improved, how often each effect was kept) and
+    the ``selections``."""
+    records = list(records)
+    rows, selections = [], {}
+    for h in records:
+        calib = [r for r in records if r != h]
+        sel = select_effects(model, base_names=base_names, candidates=candidates, calib_records=calib,
+                             heldout_records=[h], obs={r: obs[r] for r in calib}, errors=errors, **select_kw)
+        final = confirm(sel) if confirm is not None else len(sel.steps) - 1
+        ev = heldout_evaluation(sel, {h: obs[h]}, times, final=final, errors=errors)[h]
+        step = sel.steps[final]
+        row = {"heldout": h, "effects": ",".join(step.spec.effect_names), "n_effects": len(step.spec.effects),
+               "rmse_before": ev["before"]["rmse"], "rmse_after": ev["after"]["rmse"], "rmse_change": ev["rmse_change"],
+               "peak_error_before": ev["before"]["peak_error"], "peak_error_after": ev["after"]["peak_error"],
+               "time_to_peak_error_before": ev["before"]["time_to_peak_error"],
+               "time_to_peak_error_after": ev["after"]["time_to_peak_error"],
+               "band_coverage_after": ev["after"]["band_coverage"]}
+        for n, p in step.final.posterior().items():
+            if n in step.spec.shared:
+                row.update({f"{n}_mean": p["mean"], f"{n}_q05": p["q05"], f"{n}_q95": p["q95"]})
+        for n, (a, b) in ev["after"]["intervals"].items():
+            row.update({f"{n}_pred": ev["after"]["point"][n], f"{n}_q05": a, f"{n}_q95": b})
+        rows.append(row)
+        selections[h] = sel
+    table = pd.DataFrame(rows)
+    ch = table["rmse_change"].to_numpy(float)
+    n = ch.size
+    kept = {c.name: float(np.mean([c.name in s.split(",") for s in table["effects"]])) for c in candidates}
+    totals = {"folds": n, "mean_rmse_change": float(ch.mean()),
+              "sd_rmse_change": float(ch.std(ddof=1)) if n > 1 else math.nan,
+              "se_mean_rmse_change": float(ch.std(ddof=1) / math.sqrt(n)) if n > 1 else math.nan,
+              "folds_improved": int(np.sum(ch < 0)), "kept_fraction": kept,
+              "mean_rmse_before": float(table["rmse_before"].mean()), "mean_rmse_after": float(table["rmse_after"].mean())}
+    return {"table": table, "totals": totals, "selections": selections}
