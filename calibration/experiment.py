@@ -34,27 +34,51 @@ import pandas as pd
 
 from enkf import (BoxTransform, DenseError, EnsembleFailure, StopCriteria, check_stop, emulated_esmda_update, enkf_update,
                   esmda_alphas, esmda_update, jsonable, latin_hypercube, localization_mask, mean_misfit, misfit_table,
-                  posterior_dict)
+                  posterior_dict, prediction_interval_dict)
 
 from enkf.ces import interval_summary
 
-from .model_error import analysis_error, discrepancy_kind, misfit_block, posterior_predictive, posterior_tempering
+from .model_error import (analysis_error, discrepancy_kind, mesh_mode, misfit_block, posterior_predictive,
+                          posterior_tempering, replicate_count)
 from .identifiability import linear_sensitivity
 from .observations import Observations
 from .sensitivity import AUTO, selected_parameters
 from .verdict import calibration_verdict, member_chi2, reported_iteration
 
-__all__ = ["PURPOSES", "rng_for", "ExperimentSpec", "initial_ensemble", "analysis_step", "decide", "capped_truncation",
+__all__ = ["PURPOSES", "MESH_STAGES", "rng_for", "mesh_seed", "run_mesh_seed", "ExperimentSpec", "initial_ensemble", "analysis_step", "decide", "capped_truncation",
            "all_runs",
            "diagnosis_settings", "final_iteration", "final_verdict", "reported_ensemble", "linear_sensitivity", "record_misfits", "summary"]
 
 #: Independent random streams of an experiment (the ``spawn_key`` of :func:`rng_for`).
-PURPOSES = {"lhs": 1, "noise": 2, "analysis": 3, "posterior": 4, "predictive": 5}
+PURPOSES = {"lhs": 1, "noise": 2, "analysis": 3, "posterior": 4, "predictive": 5, "mesh": 6}
+
+#: What a simulation's mesh realization is drawn for (:func:`mesh_seed`).
+MESH_STAGES = {"member": 1, "truth": 2, "replicate": 3, "design": 4, "check": 5}
 
 
 def rng_for(seed: int, purpose: str, k: int = 0) -> np.random.Generator:
     """The generator of one random stream: ``SeedSequence(seed, spawn_key=(PURPOSES[purpose], k))``."""
     return np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(PURPOSES[purpose], int(k))))
+
+
+def mesh_seed(seed: int, stage: str, k: int = 0, index: int = 0, record: int = 0) -> int:
+    """The specimen-mesh realization (``python -m shpb simulate --mesh-seed``) of one simulation: a
+    31-bit integer from ``SeedSequence(seed, spawn_key=(mesh, stage, k, index, record))``, so that every
+    run of an experiment (iteration ``k``, member or replicate ``index``, record position ``record``)
+    has its own realization and a re-run has the same one."""
+    ss = np.random.SeedSequence(int(seed), spawn_key=(PURPOSES["mesh"], MESH_STAGES[stage], int(k), int(index),
+                                                      int(record)))
+    return int(ss.generate_state(1, np.uint32)[0] & 0x7FFFFFFF)
+
+
+def run_mesh_seed(exp: Mapping, stage: str, k: int = 0, index: int = 0, record: int = 0) -> int | None:
+    """:func:`mesh_seed` of a simulation of experiment ``exp`` (its config block), or None (the
+    unperturbed mesh) for the members, design and check runs of ``simulation.mesh_realizations:
+    shared``. A twin's reference run and the replicates always get a realization of their own: the data
+    of a real test never come from the model's mesh, and replicates measure what the mesh changes."""
+    if stage in ("member", "design", "check") and mesh_mode(exp) == "shared":
+        return None
+    return mesh_seed(int(exp["seed"]), stage, k, index, record)
 
 
 @dataclass(frozen=True)
@@ -83,6 +107,9 @@ class ExperimentSpec:
     temper_base: float = 4.0
     posterior: str = "ensemble"
     discrepancy: str = "none"
+    mesh_mode: str = "per_run"
+    replicates: int = 0
+    smoothing: object = "loo"
 
     @classmethod
     def from_config(cls, name: str, exp: Mapping, sensitivity_report: Mapping | str | None = None) -> "ExperimentSpec":
@@ -117,7 +144,9 @@ class ExperimentSpec:
                    inner_members=int(emulated.get("inner_members", cls.inner_members)),
                    inner_steps=int(emulated.get("inner_steps", cls.inner_steps)),
                    temper_base=float(emulated.get("temper_base", cls.temper_base)),
-                   posterior=str(exp.get("posterior", cls.posterior)), discrepancy=discrepancy_kind(exp))
+                   posterior=str(exp.get("posterior", cls.posterior)), discrepancy=discrepancy_kind(exp),
+                   mesh_mode=mesh_mode(exp), replicates=replicate_count(exp),
+                   smoothing=emulated.get("smoothing", cls.smoothing))
 
     @property
     def transform(self) -> BoxTransform:
@@ -180,7 +209,7 @@ def _nan(v) -> float:
 
 def analysis_step(spec: ExperimentSpec, k: int, params: pd.DataFrame, responses: np.ndarray,
                   member_status: pd.DataFrame, obs: Observations, prior_params: pd.DataFrame,
-                  history: Sequence[tuple[pd.DataFrame, np.ndarray]] = ()) -> dict:
+                  history: Sequence[tuple[pd.DataFrame, np.ndarray]] = (), replicates: np.ndarray | None = None) -> dict:
     """The ``iter_<k>/analysis.json`` dict: misfits, failures, spread, decision, analysis ensemble.
 
     Parameters
@@ -191,6 +220,9 @@ def analysis_step(spec: ExperimentSpec, k: int, params: pd.DataFrame, responses:
     prior_params : ``iter_0/params.csv`` (the reference spread of the collapse guard and inflation).
     history : ``(params, responses)`` of iterations ``0 .. k-1`` (failed members as NaN rows); used by
         ``emulated_esmda``, whose emulator is built on every run so far.
+    replicates : (M, m) curves of the replicate runs at this iteration's ensemble mean, each on its own
+        mesh realization (failed: NaN rows), which measure the simulator's variability ``S``
+        (:mod:`calibration.model_error`); None or empty: ``S`` is not measured.
 
     Raises
     ------
@@ -223,9 +255,11 @@ def analysis_step(spec: ExperimentSpec, k: int, params: pd.DataFrame, responses:
         raise EnsembleFailure(f"{spec.name}, iteration {k}: only {int(alive.sum())} of {N} members succeeded "
                               f"(need {needed}, min_alive_fraction={spec.min_alive_fraction}). Failures:\n{lines}")
 
-    # The likelihood's error model: R plus the model discrepancy estimated on these members.
-    total, model_error = analysis_error(spec.discrepancy, obs, Y, alive)
-    misfit_out = misfit_block(Y, obs, err, total, alive)
+    # The likelihood's terms: R, the simulator's variability S measured by this iteration's replicates,
+    # and the model discrepancy D estimated on these members over R + 2S.
+    terms, model_error = analysis_error(spec.discrepancy, obs, Y, alive, replicates=replicates, mode=spec.mesh_mode,
+                                        measured=spec.truth is None)
+    misfit_out = misfit_block(Y, obs, err, terms, alive)
     spread = _spread(spec, P, alive)
     members = misfit_table(Y, d, err, alive).rename(columns={"rmse": "rmse_Pa"})
     members["member"] = params["member"].to_numpy(int)
@@ -238,17 +272,19 @@ def analysis_step(spec: ExperimentSpec, k: int, params: pd.DataFrame, responses:
     elif spec.method == "enkf":
         alpha = 1.0
     if spec.method == "emulated_esmda":
-        res = _emulated_analysis(spec, k, P, Y, alive, obs, history, total)
+        res = _emulated_analysis(spec, k, P, Y, alive, obs, history, terms.emulated(),
+                                 loo_scale=terms.likelihood().std)
         update = res.to_dict()
         next_params = res.params.tolist()
         if res.error is not None:
             # A diagnostic, not the stop test (see _misfit_for_decide): the fit measured against R plus
             # the emulator's leave-one-out error, which holds the simulator's ruggedness once the design
             # is dense where the posterior is.
-            C = DenseError(total.dense() + res.error.dense(), _symmetric=True)
+            C = DenseError(terms.emulated().dense() + res.error.dense(), _symmetric=True)
             misfit_out["chi2_per_obs_model_error"] = mean_misfit(Y, d, C, alive)["chi2_per_obs"]
     elif alpha is not None:
         base = spec.truncation if spec.truncation is not None else (0.99 if spec.method == "esmda" else 1.0)
+        total = terms.assimilation(alpha)
         truncation = capped_truncation(Y, alive, total, base, spec.max_rank)
         common = dict(rng=rng_for(spec.seed, "analysis", k), transform=transform,
                       localization=spec.localization(obs), prior_std=prior_spread, alive=alive,
@@ -291,7 +327,7 @@ def analysis_step(spec: ExperimentSpec, k: int, params: pd.DataFrame, responses:
 
 
 def _emulated_analysis(spec: ExperimentSpec, k: int, P: np.ndarray, Y: np.ndarray, alive: np.ndarray,
-                       obs: Observations, history: Sequence[tuple[pd.DataFrame, np.ndarray]], error):
+                       obs: Observations, history: Sequence[tuple[pd.DataFrame, np.ndarray]], error, loo_scale=None):
     """:func:`enkf.emulated_esmda_update` on every successful run of iterations ``0..k``."""
     if len(history) != k:
         raise ValueError(f"{spec.name}, iteration {k}: emulated_esmda needs the runs of iterations 0..{k - 1}, "
@@ -305,6 +341,7 @@ def _emulated_analysis(spec: ExperimentSpec, k: int, P: np.ndarray, Y: np.ndarra
                                  groups=obs.frame["record"].to_numpy(str), inner_members=spec.inner_members,
                                  inner_steps=spec.inner_steps,
                                  temper=spec.temper_base ** max(0, spec.max_iterations - 1 - k),
+                                 smoothing=spec.smoothing, loo_scale=loo_scale,
                                  transform_kind=spec.transform_kind, names=names)
 
 
@@ -402,7 +439,8 @@ def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], 
     # worse (calibration.verdict.reported_iteration).
     R = K if iteration_params is None else reported_iteration([member_chi2(m) for m in misfits])
     P, alive_R = (final_params, final_alive) if R == K else (iteration_params[R], analyses[R]["alive"])
-    post_ensemble = posterior_dict(P[names].to_numpy(float), names, np.asarray(alive_R, bool))
+    # the reported intervals hold one more draw of the members' distribution (enkf.prediction_interval_dict)
+    post_ensemble = prediction_interval_dict(P[names].to_numpy(float), names, np.asarray(alive_R, bool), spec.transform)
     # posterior: emulator_mcmc reports the MCMC sample of the emulator posterior (calibration.posterior)
     post = post_ensemble if posterior_samples is None else interval_summary(
         posterior_samples[names].to_numpy(float), names)
@@ -438,6 +476,8 @@ def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], 
     }
     out["posterior_ensemble_info"] = posterior_tempering(spec, R, K)
     out["discrepancy"] = (analyses[R].get("model_error") or {}).get("discrepancy")
+    svar = (analyses[R].get("model_error") or {}).get("simulator_variability")
+    out["simulator_variability"] = None if svar is None else {k: v for k, v in svar.items() if k != "sd_Pa"}
     out["inflated_noise_baseline"] = (analyses[R].get("model_error") or {}).get("inflated_noise_baseline")
     if predictive is not None:
         out["predictive_coverage_90"] = predictive
@@ -489,7 +529,7 @@ def final_verdict(spec: ExperimentSpec, analyses: Sequence[Mapping], params: Seq
         return None
     misfits = [{"iteration": int(a["iteration"]), **a["misfit"]} for a in analyses[:K + 1]]
     _, P, alive = reported_ensemble(spec, analyses, params)
-    post = posterior_dict(P[list(spec.names)].to_numpy(float), list(spec.names), alive)
+    post = prediction_interval_dict(P[list(spec.names)].to_numpy(float), list(spec.names), alive, spec.transform)
     R = reported_ensemble(spec, analyses, params)[0]
     return calibration_verdict(misfits=misfits, decision=decision, posterior=post, lower=spec.lower,
                                upper=spec.upper, names=spec.names, diagnosed=_diagnosed(exp),
@@ -557,7 +597,8 @@ def experiment_outcome(*, name: str, exp: Mapping, params: Sequence[pd.DataFrame
                                       analyses[R], rng_for(spec.seed, "predictive"))
     out = summary(spec=spec, exp=exp, analyses=analyses, decision=decision, final_params=params[K],
                   final_alive=alive, forecast_misfit=fc_misfit,
-                  n_simulations=(K + 1) * spec.ensemble_size * n_records + len(forecast_runs) + len(extra_runs),
+                  n_simulations=(K + 1) * (spec.ensemble_size + spec.replicates) * n_records + len(forecast_runs)
+                  + len(extra_runs),
                   wall_s=None if started is None or finished is None else finished - started,
                   simulation_wall_s=sim_wall, sensitivity=sens, iteration_params=params,
                   posterior_samples=posterior_samples, posterior_sampler=posterior_sampler, predictive=predictive)

@@ -1,53 +1,153 @@
-"""The likelihood's error model of an experiment: instrument noise plus, where declared, model error.
+"""The likelihood's error model of an experiment: instrument noise, simulator variability, model discrepancy.
 
-``C = R + D``: ``R`` is the records' instrument noise (:meth:`Observations.error_model`); ``D`` is the
-model discrepancy, an AR(1) term per record (its amplitude free to differ before and after the
-record's observed peak) estimated at every analysis from that iteration's members
-(:mod:`enkf.discrepancy`; ``observations.model_error.discrepancy``: ``ar1`` by default, ``none`` to
-assimilate against the instrument noise alone). ``C`` is what the analysis assimilates with, what the stop test and the
-verdict score the members against, and what the posterior-predictive band adds to the members' curves.
+The data model is ``d = mu(theta) + eta + delta + e`` (:mod:`enkf.variability`): ``e ~ N(0, R)`` the
+records' instrument noise (:meth:`Observations.error_model`); ``eta ~ N(0, S)`` the simulator's own
+variability, what one run departs from the mean over mesh realizations, measured at every iteration
+by replicate runs at the ensemble mean (``observations.model_error.simulator_replicates``); ``delta ~
+N(0, D)`` the model discrepancy, an AR(1) term per record (its amplitude free before and after the
+record's observed peak) estimated at every analysis from that iteration's members (:mod:`enkf.discrepancy`;
+``observations.model_error.discrepancy``: ``ar1`` by default, ``none`` to leave it out).
 
-Each ``analysis.json`` stores the estimate (``model_error``), so the summary rebuilds the same ``C``
+Which combination each step uses (:class:`ErrorModel`) follows from what a member's run is. With
+``simulation.mesh_realizations: per_run`` (default) every run has its own mesh realization, so a member
+is a draw ``mu(theta_i) + eta_i``:
+
+* a member against the data differs by two realizations: ``R + 2 S + D`` is what the stop test scores
+  the members against, and ``R + 2 S`` is the base the discrepancy is estimated over (so ``D`` holds
+  only what the simulator's variability does not);
+* the ensemble's own scatter already carries ``S`` into the ES-MDA gain (a stochastic forward model),
+  so analysis step ``alpha`` assimilates with ``R + D + (1 - 1/alpha) S``: its perturbations then have
+  covariance ``alpha (R + D + S) - S``, and with the members' own ``S`` the steps multiply to the
+  likelihood ``N(d; mu, R + S + D)`` as ES-MDA's schedule requires;
+* the emulator of :mod:`enkf.emulated` is built on runs that each carry their ``eta``, and its
+  leave-one-out error holds ``S``: it assimilates with ``R + D`` plus that error;
+* the posterior-predictive band of the members (each a realization) adds ``R + D``.
+
+With ``shared`` the members run on the unperturbed mesh: its departure is one fixed unknown draw, so
+``S`` is added once more where the members do not sample it (assimilation ``R + 2 S + D``, emulated and
+predictive ``+ S``).
+
+Each ``analysis.json`` stores the estimates (``model_error``), so the summary rebuilds the same terms
 from files alone (:func:`stored_error`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 
 import numpy as np
 
-from enkf import DenseError, ObservationError
+from enkf import AR1Error, DenseError, ObservationError
 from enkf.diagnostics import member_misfit, mean_misfit
 from enkf.discrepancy import combined_error, estimate_discrepancy, inflated_noise_factor, record_loglik
 from enkf.predictive import predictive_coverage
+from enkf.variability import simulator_variability
 
 from .observations import Observations
 
-__all__ = ["discrepancy_kind", "analysis_error", "stored_error", "misfit_block", "posterior_predictive"]
+__all__ = ["MESH_MODES", "ErrorModel", "discrepancy_kind", "mesh_mode", "replicate_count", "analysis_error",
+           "stored_error", "misfit_block", "posterior_predictive", "variability_from_replicates"]
+
+#: ``simulation.mesh_realizations``: every run its own mesh realization, or the members on one mesh.
+MESH_MODES = ("per_run", "shared")
 
 
 def discrepancy_kind(exp: Mapping) -> str:
-    """``"ar1"`` (default, twins included: the simulator's own post-peak variability is a model error
-    the noise does not hold) or ``"none"``."""
+    """``"ar1"`` (default, twins included) or ``"none"``."""
     kind = ((exp.get("observations") or {}).get("model_error") or {}).get("discrepancy")
     return "ar1" if kind is None else str(kind)
 
 
-def analysis_error(kind: str, obs: Observations, Y: np.ndarray, alive: np.ndarray) -> tuple[ObservationError, dict]:
-    """``(C, model_error block of analysis.json)`` for one analysis on the members ``Y`` (alive rows)."""
+def replicate_count(exp: Mapping) -> int:
+    """Replicate runs per iteration at the ensemble mean that measure ``S`` (0: ``S`` is not measured)."""
+    n = ((exp.get("observations") or {}).get("model_error") or {}).get("simulator_replicates")
+    return 0 if n is None else int(n)
+
+
+def mesh_mode(exp: Mapping) -> str:
+    return str((exp.get("simulation") or {}).get("mesh_realizations") or "per_run")
+
+
+def _dense(C: np.ndarray) -> DenseError:
+    return DenseError(C, _symmetric=True)
+
+
+@dataclass(frozen=True)
+class ErrorModel:
+    """The terms of one analysis as dense matrices on the observation vector (``S``, ``D`` zero where
+    not measured or not estimated) and how the members relate to the mesh (``per_run``/``shared``)."""
+
+    R: np.ndarray
+    S: np.ndarray
+    D: np.ndarray
+    mode: str = "per_run"
+    measured: bool = True
+
+    def _shared(self) -> float:
+        return 1.0 if self.mode == "shared" else 0.0
+
+    def stop(self) -> DenseError:
+        """A member's run against the data: ``R + 2 S + D`` for measured data, ``R + 2 S`` for a twin.
+
+        A twin's data come from the simulator itself, so its declared error model is the noise and the
+        simulator's variability: a discrepancy fitted to the members' residuals would absorb any misfit
+        and a stop test against it could not fail. Measured data need ``D`` (a model never fits them to
+        the noise), and the verdict's ``misfit_unexplained`` says so."""
+        return _dense(self.R + 2.0 * self.S + (self.D if self.measured else 0.0))
+
+    def simulator_only(self) -> DenseError:
+        """``R + 2 S``: what a member misses the data by when the model lacks nothing."""
+        return _dense(self.R + 2.0 * self.S)
+
+    def likelihood(self) -> DenseError:
+        """The data about the mean over realizations: ``R + S + D``."""
+        return _dense(self.R + self.S + self.D)
+
+    def assimilation(self, alpha: float = 1.0) -> DenseError:
+        """The error an ES-MDA step ``alpha`` (1: ES, EnKF) assimilates with (module docstring)."""
+        if self.mode == "shared":
+            return _dense(self.R + 2.0 * self.S + self.D)
+        return _dense(self.R + self.D + (1.0 - 1.0 / float(alpha)) * self.S)
+
+    def emulated(self) -> DenseError:
+        """What the emulated analysis adds its emulator error to: ``R + D`` (``+ S`` for a shared mesh)."""
+        return _dense(self.R + self.D + self._shared() * self.S)
+
+    def predictive(self) -> DenseError:
+        """What the members' predictive band adds: ``R + D`` (``+ S`` for a shared mesh)."""
+        return _dense(self.R + self.D + self._shared() * self.S)
+
+
+def variability_from_replicates(obs: Observations, replicates) -> tuple[AR1Error | None, dict | None]:
+    """``S`` from the replicate curves ``(M, m)`` on the observation grid (None without replicates)."""
+    if replicates is None or np.size(replicates) == 0:
+        return None, None
+    peaks = peak_times(obs)
+    S, info = simulator_variability(replicates, obs.time, obs.frame["record"].to_numpy(str),
+                                    split_times={rec: peaks[g] for g, rec in enumerate(obs.records)})
+    return S, info
+
+
+def analysis_error(kind: str, obs: Observations, Y: np.ndarray, alive: np.ndarray, *, replicates=None,
+                   mode: str = "per_run", measured: bool = True) -> tuple[ErrorModel, dict]:
+    """``(terms, model_error block of analysis.json)`` for one analysis on the members ``Y`` (alive rows);
+    ``measured``: the data are measured (not a twin's), so the stop test includes ``D``."""
     R = obs.error_model()
-    block = {"noise": R.describe(), "discrepancy": None}
-    if kind == "none":
-        return R, block
-    est = estimate_discrepancy(obs.values[None, :] - Y, R, obs.time, obs.groups, alive,
-                               split_times=peak_times(obs))
-    block["discrepancy"] = est.to_dict(obs.records)
-    best = obs.values - Y[est.member]
-    # The simplest honest alternative, for comparison: R inflated until the same member's chi^2/m is 1.
-    block["inflated_noise_baseline"] = {
-        rec: {"factor": inflated_noise_factor(best[obs.record_slice(rec)], obs.of_record(rec).error_model())}
-        for rec in obs.records}
+    block = {"noise": R.describe(), "discrepancy": None, "mesh_realizations": mode, "measured_data": bool(measured)}
+    S_err, s_info = variability_from_replicates(obs, replicates)
+    block["simulator_variability"] = s_info
+    Rd = R.dense()
+    Sd = np.zeros_like(Rd) if S_err is None else S_err.dense()
+    if kind != "none":
+        est = estimate_discrepancy(obs.values[None, :] - Y, _dense(Rd + 2.0 * Sd), obs.time, obs.groups, alive,
+                                   split_times=peak_times(obs))
+        block["discrepancy"] = est.to_dict(obs.records)
+        best = obs.values - Y[est.member]
+        # The simplest honest alternative, for comparison: R inflated until the same member's chi^2/m is 1.
+        block["inflated_noise_baseline"] = {
+            rec: {"factor": inflated_noise_factor(best[obs.record_slice(rec)], obs.of_record(rec).error_model())}
+            for rec in obs.records}
     return stored_error(obs, {"model_error": block}), block
 
 
@@ -61,35 +161,47 @@ def peak_times(obs: Observations) -> dict:
     return out
 
 
-def stored_error(obs: Observations, analysis: Mapping) -> ObservationError:
-    """``R + D`` as stored in an ``analysis.json`` (``R`` alone where it has no discrepancy)."""
-    R = obs.error_model()
-    disc = (analysis.get("model_error") or {}).get("discrepancy")
-    if not disc:
-        return R
-    labels = {rec: i for i, rec in enumerate(obs.records)}
-    terms = {labels[rec]: (float(v["sigma_pre"]), float(v["sigma_post"]), float(v["corr_time_s"]),
-                           None if v.get("split_time_s") is None else float(v["split_time_s"]))
-             for rec, v in disc["records"].items()}
-    return combined_error(R, obs.time, obs.groups, terms)
+def stored_error(obs: Observations, analysis: Mapping) -> ErrorModel:
+    """The terms as stored in an ``analysis.json`` (``S`` and ``D`` zero where it has none)."""
+    block = analysis.get("model_error") or {}
+    R = obs.error_model().dense()
+    s_info = block.get("simulator_variability") or {}
+    if s_info.get("sd_Pa"):
+        S = AR1Error(np.asarray(s_info["sd_Pa"], float), obs.time, float(s_info["corr_time_s"]),
+                     groups=obs.groups).dense()
+    else:
+        S = np.zeros_like(R)
+    disc = block.get("discrepancy")
+    D = np.zeros_like(R)
+    if disc:
+        labels = {rec: i for i, rec in enumerate(obs.records)}
+        terms = {labels[rec]: (float(v["sigma_pre"]), float(v["sigma_post"]), float(v["corr_time_s"]),
+                               None if v.get("split_time_s") is None else float(v["split_time_s"]))
+                 for rec, v in disc["records"].items()}
+        D = combined_error(_dense(R), obs.time, obs.groups, terms, as_matrix=True) - R
+    return ErrorModel(R=R, S=S, D=D, mode=str(block.get("mesh_realizations") or "per_run"),
+                      measured=bool(block.get("measured_data", True)))
 
 
-def misfit_block(Y: np.ndarray, obs: Observations, noise: ObservationError, total: ObservationError,
+def misfit_block(Y: np.ndarray, obs: Observations, noise: ObservationError, terms: ErrorModel,
                  alive: np.ndarray) -> dict:
     """The ``misfit`` block of ``analysis.json``.
 
     ``chi2_per_obs`` / ``rmse_Pa`` / ``nrmse``: the ensemble-mean curve against ``R`` (kept for the
     plots and for comparison); ``median_chi2_per_obs`` and ``best_chi2_per_obs``: the members against
-    ``R``; ``*_total``: the members against the full error model; ``stop_chi2_per_obs``: the median
-    member against the full error model, the stop test's statistic.
+    ``R``; ``median_chi2_per_obs_simulator``: the median member against ``R + 2 S`` (what a member misses
+    by when the model lacks nothing but the mesh); ``*_total``: the members against the stop test's
+    model (:meth:`ErrorModel.stop`); ``stop_chi2_per_obs``: the median member against it.
     """
     mean = mean_misfit(Y, obs.values, noise, alive)
     mem = member_misfit(Y, obs.values, noise, alive)
     out = {"rmse_Pa": mean["rmse"], "nrmse": mean["nrmse"], "chi2_per_obs": mean["chi2_per_obs"],
            "median_chi2_per_obs": mem["median_chi2_per_obs"], "best_chi2_per_obs": mem["best_chi2_per_obs"],
            "median_rmse_Pa": mem["median_rmse"], "median_nrmse": mem["median_nrmse"]}
-    tot = mem if total is noise else member_misfit(Y, obs.values, total, alive)
-    out.update({"median_chi2_per_obs_total": tot["median_chi2_per_obs"],
+    sim = member_misfit(Y, obs.values, terms.simulator_only(), alive)
+    tot = member_misfit(Y, obs.values, terms.stop(), alive)
+    out.update({"median_chi2_per_obs_simulator": sim["median_chi2_per_obs"],
+                "median_chi2_per_obs_total": tot["median_chi2_per_obs"],
                 "best_chi2_per_obs_total": tot["best_chi2_per_obs"],
                 "stop_chi2_per_obs": tot["median_chi2_per_obs"]})
     return out
@@ -101,7 +213,7 @@ def posterior_predictive(obs: Observations, Y: np.ndarray, alive: np.ndarray, an
     ``level`` posterior-predictive band of the members ``Y`` with the full error model of
     ``analysis``, and the check of that fraction against its spread for data drawn from the
     predictive itself (``expected_5_95``; ``consistent`` when the fraction lies inside)."""
-    C = stored_error(obs, analysis)
+    C = stored_error(obs, analysis).predictive()
     cov = predictive_coverage(Y, obs.values, C, rng, level, groups=obs.groups, alive=alive, n_replicates=400)
     fractions = {rec: cov["groups"][i] for i, rec in enumerate(obs.records)}
     checks = {}
@@ -133,15 +245,16 @@ def posterior_tempering(spec, R: int, K: int) -> dict:
 
 def compare_with_inflated_noise(obs: Observations, Y: np.ndarray, alive: np.ndarray, analysis: Mapping,
                                 rng: np.random.Generator) -> dict:
-    """The workflow's error model (``R + D`` of ``analysis``) against the simplest honest baseline, ``R``
+    """The workflow's error model (``R + 2 S + D`` of ``analysis`` for a member's residual) against the simplest honest baseline, ``R``
     inflated per record until the carrying member's chi^2 per observation is 1: log-likelihood of that
     member's residual and 90 % predictive coverage, per record."""
     disc = (analysis.get("model_error") or {}).get("discrepancy")
     if not disc:
         raise ValueError("this analysis has no estimated discrepancy to compare")
     member = int(disc["member"])
-    C = stored_error(obs, analysis)
-    Cd, Rd = C.dense(), obs.error_model().dense()
+    terms = stored_error(obs, analysis)
+    # a member's residual against R + 2S + D; the members' band with R + D (per_run meshes)
+    Cd, Cp, Rd = terms.stop().dense(), terms.predictive().dense(), obs.error_model().dense()
     out = {}
     for g, rec in enumerate(obs.records):
         sl = obs.record_slice(rec)
@@ -152,7 +265,7 @@ def compare_with_inflated_noise(obs: Observations, Y: np.ndarray, alive: np.ndar
         ll_ar1 = record_loglik(r, Cd[sl, sl], t, 0.0, 0.0)
         sub = obs.of_record(rec)
         infl = predictive_coverage(Y[:, sl], obs.values[sl], _scaled(sub.error_model(), factor), rng, 0.9, alive=alive)
-        ar1 = predictive_coverage(Y[:, sl], obs.values[sl], _dense(Cd[sl, sl]), rng, 0.9, alive=alive)
+        ar1 = predictive_coverage(Y[:, sl], obs.values[sl], _dense(Cp[sl, sl]), rng, 0.9, alive=alive)
         bare = predictive_coverage(Y[:, sl], obs.values[sl], sub.error_model(), rng, 0.9, alive=alive)
         out[rec] = {"inflation_factor": factor, "loglik_inflated": ll_inf, "loglik_ar1": ll_ar1,
                     "coverage_90_inflated": infl["all"], "coverage_90_ar1": ar1["all"],
@@ -171,10 +284,6 @@ def linear_posterior_std(P: np.ndarray, Y: np.ndarray, C: np.ndarray) -> np.ndar
     L = np.linalg.cholesky(C)
     W = np.linalg.solve(L, G)
     return np.sqrt(np.diag(np.linalg.inv(W.T @ W)))
-
-
-def _dense(C: np.ndarray) -> DenseError:
-    return DenseError(C, _symmetric=True)
 
 
 def _scaled(err: ObservationError, factor: float):

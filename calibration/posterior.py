@@ -20,6 +20,7 @@ import pandas as pd
 from enkf.ces import EmulatorPosterior, emulator_posterior
 
 from .experiment import ExperimentSpec, all_runs, final_iteration, reported_ensemble, rng_for
+from .model_error import stored_error
 from .observations import Observations
 
 __all__ = ["POSTERIORS", "forecast_parameters", "sample_posterior", "samples_frame"]
@@ -35,7 +36,10 @@ def sample_posterior(spec: ExperimentSpec, params: Sequence[pd.DataFrame], respo
     if X.shape[0] < len(spec.names) + 2 or latest.sum() < 2:
         raise ValueError(f"{spec.name}: the emulator posterior needs at least {len(spec.names) + 2} successful runs "
                          f"and 2 in the last iteration; got {X.shape[0]} and {int(latest.sum())}")
-    return emulator_posterior(X, Y, latest, obs.values, obs.error_model(), lower=spec.lower, upper=spec.upper,
+    # R + D of the last analysis (+ S for a shared mesh); the emulator's leave-one-out error holds S
+    # (calibration.model_error.ErrorModel.emulated)
+    error = stored_error(obs, last_analysis).emulated()
+    return emulator_posterior(X, Y, latest, obs.values, error, lower=spec.lower, upper=spec.upper,
                               times=obs.time, groups=obs.frame["record"].to_numpy(str),
                               rng=rng_for(spec.seed, "posterior"), start=X[latest], names=list(spec.names))
 

@@ -59,8 +59,10 @@ def simulator_command(spec: str | Sequence[str] | None = None) -> list[str]:
 
 def simulate_argv(command: Sequence[str], *, geometry: str, preset: str, params: Mapping[str, float],
                   out_dir: str | Path, record: str | None = None, t_end: float | None = None,
-                  sample_dt: float | None = None, snapshots: int | None = None) -> list[str]:
-    """The argv of one simulation (the ``python -m shpb simulate`` contract)."""
+                  sample_dt: float | None = None, snapshots: int | None = None,
+                  mesh_seed: int | None = None) -> list[str]:
+    """The argv of one simulation (the ``python -m shpb simulate`` contract); ``mesh_seed`` None keeps
+    the unperturbed specimen mesh, an integer is one realization of it (``--mesh-seed``)."""
     argv = list(command) + ["--geometry", geometry, "--preset", preset]
     if record:
         argv += ["--record", str(record)]
@@ -72,6 +74,8 @@ def simulate_argv(command: Sequence[str], *, geometry: str, preset: str, params:
         argv += ["--sample-dt", repr(float(sample_dt))]
     if snapshots is not None:
         argv += ["--snapshots", str(int(snapshots))]
+    if mesh_seed is not None:
+        argv += ["--mesh-seed", str(int(mesh_seed))]
     return argv + ["--out", str(out_dir)]
 
 
@@ -97,7 +101,8 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
                curve_path: str | Path, run_path: str | Path, record: str | None = None,
                t_end: float | None = None, sample_dt: float | None = None, attempt: int = 1,
                max_attempts: int = 1, log_path: str | Path | None = None, extra_run: Mapping | None = None,
-               time_limit_s: float | None = None, snapshots: int | None = None) -> dict:
+               time_limit_s: float | None = None, snapshots: int | None = None,
+               mesh_seed: int | None = None) -> dict:
     """Run one simulation and leave ``curve_path`` and ``run_path`` behind, atomically.
 
     Exit code 0: the simulator's ``curve.csv``/``run.json`` are moved into place. Exit code 3 (numerical
@@ -125,7 +130,7 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
     out.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=".sim-", dir=out))
     argv = simulate_argv(command, geometry=geometry, preset=preset, params=params, out_dir=tmp, record=record,
-                         t_end=t_end, sample_dt=sample_dt, snapshots=snapshots)
+                         t_end=t_end, sample_dt=sample_dt, snapshots=snapshots, mesh_seed=mesh_seed)
     t0 = time.perf_counter()
     try:
         try:

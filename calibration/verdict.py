@@ -8,16 +8,17 @@ blurred mean can fit where no member does.
 
 Flags, in this order; the verdict is the first that applies:
 
-- ``worse_than_prior``: the reported ensemble's median member fits worse (against the instrument noise
-  ``R``) than the prior ensemble's. The model lacks an effect the data carry (run the diagnosis).
+- ``worse_than_prior``: the reported ensemble's median member fits worse (against ``R + 2 S``, the
+  instrument noise and the simulator's own variability; :func:`member_chi2`) than the prior ensemble's. The model lacks an effect the data carry (run the diagnosis).
 - ``mcmc_not_converged``: the MCMC posterior's chain is shorter than its autocorrelation rule asks;
   its intervals are not yet a posterior.
 - ``box_limited``: a posterior mean lies within ``PIN_FRACTION`` of its box width from a bound.
 - ``not_converged``: the stop rule was not met (iteration budget spent or ensemble collapse).
-- ``misfit_unexplained``: the median member's chi^2 per observation against the declared error model
-  (``R`` alone, before any estimated discrepancy) exceeds the noise level by more than its own
-  sampling uncertainty: the fit needs model error to be explained, and the intervals are only as good
-  as the discrepancy model (``summary.json``'s ``discrepancy`` gives its size).
+- ``misfit_unexplained``: the median member's chi^2 per observation against the error model without
+  the estimated discrepancy (``R + 2 S``: the instrument noise and the simulator's own variability
+  between two mesh realizations, :mod:`calibration.model_error`) exceeds the noise level by more than
+  its own sampling uncertainty: the fit needs model error to be explained, and the intervals are only
+  as good as the discrepancy model (``summary.json``'s ``discrepancy`` gives its size).
 - ``uninformative``: a parameter's 90 % interval covers more than ``UNINFORMATIVE_FRACTION`` of its prior
   box: the data did not constrain it (the posterior is the prior's).
 - ``ok``: none of the above.
@@ -55,8 +56,9 @@ NEXT_STEP = {
                       "iteration is not the last; check the noise model or run the diagnosis"),
     "mcmc_not_converged": ("the MCMC chain did not reach its autocorrelation rule ({chain}): raise the "
                            "sampler's steps before reading its intervals"),
-    "misfit_unexplained": ("the members miss the data by more than the instrument noise (chi^2 per "
-                           "observation {chi2_noise:.4g} against {target:.4g}); the intervals include an "
+    "misfit_unexplained": ("the members miss the data by more than the instrument noise and the simulator's "
+                           "own variability (chi^2 per observation {chi2_noise:.4g} against {target:.4g}); "
+                           "the intervals include an "
                            "estimated model discrepancy{discrepancy} and are as good as that model; "
                            "{diagnosis}"),
     "uninformative": ("the data did not constrain {wide}: its 90 % interval covers more than "
@@ -110,9 +112,11 @@ def uninformative_parameters(posterior: Mapping[str, Mapping], lower: Sequence[f
 
 
 def member_chi2(m: Mapping) -> float:
-    """The median member's chi^2 per observation against R (the mean curve's for files written before
-    the members were scored)."""
-    v = m.get("median_chi2_per_obs", m.get("chi2_per_obs"))
+    """The median member's chi^2 per observation against ``R + 2 S`` (the noise and the simulator's own
+    variability between two mesh realizations: a member that differs from the data only by its mesh
+    is not a worse fit), against ``R`` where ``S`` was not measured (the mean curve's for files written
+    before the members were scored)."""
+    v = m.get("median_chi2_per_obs_simulator") or m.get("median_chi2_per_obs", m.get("chi2_per_obs"))
     return float(v) if v is not None else math.nan
 
 
@@ -151,7 +155,7 @@ def calibration_verdict(*, misfits: Sequence[Mapping], decision: Mapping, poster
         diagnosis=DIAGNOSIS_STEP[bool(diagnosed)], params=", ".join(pinned),
         bounds=", ".join(f"its {side} bound" if len(pinned) == 1 else f"{p}'s {side} bound" for p, side in pinned.items()),
         reason=decision.get("reason"), chi2=float((decision.get("values") or {}).get("chi2_per_obs") or last),
-        target=math.nan if target is None else float(target), chi2_noise=final,
+        target=noise_target, chi2_noise=final,
         chain=_chain_words(sampler), wide=", ".join(wide), discrepancy=_discrepancy_words(discrepancy))
     if reported != len(chi2) - 1:
         text += (f"; the posterior reported (and forecast) is iteration {reported}'s ensemble (median member chi^2 "
@@ -159,7 +163,7 @@ def calibration_verdict(*, misfits: Sequence[Mapping], decision: Mapping, poster
     return {
         "verdict": verdict,
         "flags": flags,
-        "chi2_per_obs": {"statistic": "median member against R", "prior": prior, "final": last,
+        "chi2_per_obs": {"statistic": "median member against R + 2S", "prior": prior, "final": last,
                          "reported": final, "best": best_chi2, "best_iteration": int(best),
                          "final_over_prior": last / prior if prior and math.isfinite(prior) else None,
                          "noise_level": noise_target, "stop_target": target},

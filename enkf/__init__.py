@@ -21,7 +21,7 @@ from .analysis import (AnalysisResult, EnsembleFailure, enkf_update, esmda_alpha
 from .covariance import (AR1Error, DenseError, DiagonalError, NoiseEstimate, ObservationError,
                          SquaredExponentialError, estimate_noise, observation_error)
 from .diagnostics import (chi2_per_obs, jsonable, mean_misfit, member_table, misfit_table, nrmse,
-                          parameter_summary, posterior_dict, rmse)
+                          parameter_summary, posterior_dict, prediction_interval_dict, rmse)
 from .inflation import Multiplicative, SpreadFloor, as_inflation, inflate
 from .loop import AssimilationResult, assimilate
 from .sampling import latin_hypercube, latin_hypercube_unit, stratum_index
@@ -34,7 +34,7 @@ __all__ = [
     "SpreadFloor", "SquaredExponentialError", "StopCriteria", "StopDecision", "as_inflation", "assimilate",
     "check_stop", "chi2_per_obs", "enkf_update", "esmda_alphas", "esmda_update", "estimate_noise", "inflate",
     "jsonable", "latin_hypercube", "latin_hypercube_unit", "localization_mask", "mean_misfit",
-    "member_table", "misfit_table", "nrmse", "observation_error", "parameter_summary", "posterior_dict",
+    "member_table", "misfit_table", "nrmse", "observation_error", "parameter_summary", "posterior_dict", "prediction_interval_dict",
     "rmse", "stratum_index", "truncation_rank",
 ]
 

@@ -36,7 +36,7 @@ from ._rng import RngLike, as_generator
 from .covariance import DenseError, ObservationError
 from .diagnostics import default_names, jsonable
 from .emulated import emulator_error_model
-from .emulator import CurveEmulator, design_arrays
+from .emulator import design_arrays, smoothed_emulator
 
 __all__ = ["EmulatorPosterior", "emulator_posterior", "interval_summary", "QUANTILES"]
 
@@ -71,26 +71,6 @@ class EmulatorPosterior:
         return jsonable({"posterior": self.summary, **self.diagnostics})
 
 
-#: Smoothing values tried by ``smoothing="loo"`` (SciPy's RBF ``smoothing``, inputs in the unit box).
-SMOOTHING_GRID = (0.0, 1e-4, 1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0)
-
-
-def _smoothest_emulator(X, Y, lo, hi, names, latest, smoothing):
-    # A rugged simulator (the disc's fragment pattern) makes an interpolant rugged between its runs,
-    # and the likelihood on it a field of needles the sampler cannot cross. Smoothing the emulator
-    # treats the ruggedness as error instead, and the leave-one-out residuals of the smoothed emulator
-    # carry it into C_em. "loo": the value with the least leave-one-out error at the latest runs.
-    if smoothing != "loo":
-        return CurveEmulator(X, Y, lo, hi, names=names, smoothing=float(smoothing)), {"smoothing": float(smoothing)}
-    best, scores = None, {}
-    for value in SMOOTHING_GRID:
-        em = CurveEmulator(X, Y, lo, hi, names=names, smoothing=value)
-        scores[value] = float(np.sqrt(np.mean(em.loo_residuals()[latest] ** 2)))
-        if best is None or scores[value] < scores[best[0]]:
-            best = (value, em)
-    return best[1], {"smoothing": best[0], "loo_rms_by_smoothing": {str(k): v for k, v in scores.items()}}
-
-
 def emulator_posterior(design_params, design_responses, latest, obs, obs_error: ObservationError, *,
                        lower, upper, times, groups=None, rng: RngLike, start=None,
                        names: Sequence[str] | None = None, walkers: int = 32, min_steps: int = 2000,
@@ -118,7 +98,7 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
     import emcee  # a heavy import, needed only here
 
     rng = as_generator(rng)
-    em, smoothing_info = _smoothest_emulator(X, Y, lo, hi, names, latest, smoothing)
+    em, smoothing_info = smoothed_emulator(X, Y, lo, hi, names, latest, smoothing)
     emu_info = {"n_residuals": 0}
     C = DenseError(obs_error.dense(), _symmetric=True)
     if emulator_error:

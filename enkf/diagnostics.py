@@ -151,6 +151,44 @@ def parameter_summary(params, names: Sequence[str] | None = None, alive=None) ->
     )
 
 
+#: Central levels of the reported intervals and the summary keys of their bounds.
+INTERVAL_LEVELS = {"90": ("q05", "q95", 0.90), "50": ("q25", "q75", 0.50)}
+
+
+def prediction_interval_dict(params, names: Sequence[str] | None = None, alive=None, transform=None) -> dict:
+    """``{param: {mean, std, q05, q25, q75, q95, n, interval}}`` of an ensemble of ``N`` members read as
+    ``N`` draws from the posterior: the bounds are the normal-theory *prediction* intervals of one more
+    draw, ``zbar +- t_{N-1} s sqrt(1 + 1/N)`` in the unbounded space of ``transform`` (a
+    :class:`enkf.transforms.BoxTransform`; None: the parameters as they are), mapped back.
+
+    Why not the members' 5-95 % sample quantiles: the truth of a calibrated posterior is one more draw
+    from the same distribution, and the interval between sample quantiles of ``N`` draws holds it with
+    probability ``0.9 (N - 1) / (N + 1)`` only (83 % at N = 25, 70 % at N = 8). The prediction interval
+    holds it with the stated probability for any ``N`` when the unbounded members are Gaussian, which
+    the ensemble smoother's linear update makes them close to. ``mean``/``std`` are the members' own.
+    """
+    from scipy import stats
+
+    p = _rows(params)
+    names = default_names(p.shape[1], names)
+    a = np.ones(p.shape[0], bool) if alive is None else np.asarray(alive, bool)
+    q = p[a]
+    n = q.shape[0]
+    z = q if transform is None else transform.to_unbounded(q)
+    zbar, sz = z.mean(axis=0), (z.std(axis=0, ddof=1) if n > 1 else np.zeros(z.shape[1]))
+    out = {name: {"mean": float(q[:, j].mean()), "std": float(q[:, j].std(ddof=1)) if n > 1 else 0.0, "n": int(n),
+                  "interval": "t prediction interval of one more draw, unbounded space"}
+           for j, name in enumerate(names)}
+    for lo_key, hi_key, level in INTERVAL_LEVELS.values():
+        half = (stats.t.ppf(0.5 + 0.5 * level, n - 1) if n > 1 else 0.0) * sz * math.sqrt(1.0 + 1.0 / max(n, 1))
+        bounds = [zbar - half, zbar + half]
+        if transform is not None:
+            bounds = [transform.to_bounded(b[None, :])[0] for b in bounds]
+        for j, name in enumerate(names):
+            out[name][lo_key], out[name][hi_key] = float(bounds[0][j]), float(bounds[1][j])
+    return out
+
+
 def posterior_dict(params, names: Sequence[str] | None = None, alive=None) -> dict:
     """``{param: {mean, std, q05, q95}}``, the ``posterior`` block of ``summary.json``."""
     s = parameter_summary(params, names, alive)

@@ -41,7 +41,7 @@ from ._rng import RngLike, as_generator
 from .analysis import esmda_alphas
 from .covariance import AR1Error, DenseError, ObservationError
 from .diagnostics import default_names, jsonable, posterior_dict
-from .emulator import CurveEmulator, design_arrays
+from .emulator import design_arrays, smoothed_emulator
 from .loop import assimilate
 from .sampling import latin_hypercube
 from .transforms import BoxTransform
@@ -96,7 +96,7 @@ def emulator_error_model(residuals: np.ndarray, times, groups=None) -> tuple[AR1
 def emulated_esmda_update(design_params, design_responses, latest, obs, obs_error: ObservationError, *,
                           lower, upper, n_members: int, rng: RngLike, times, groups=None,
                           inner_members: int = 400, inner_steps: int = 8, transform_kind: str = "logit",
-                          temper: float = 1.0,
+                          temper: float = 1.0, smoothing="loo", loo_scale=None,
                           names: Sequence[str] | None = None) -> EmulatedAnalysis:
     """One analysis of the emulator-assisted ES-MDA (module docstring).
 
@@ -110,6 +110,9 @@ def emulated_esmda_update(design_params, design_responses, latest, obs, obs_erro
     n_members : size of the next ensemble (at most ``inner_members``).
     rng : the analysis' random stream (inner Latin hypercube and ES-MDA perturbations).
     times, groups : observation times and record labels, for the AR(1) emulator error.
+    smoothing : the emulator's nugget (RBF smoothing) or ``"loo"`` (default: the value with the least
+        leave-one-out error at the latest runs, :func:`enkf.emulator.smoothed_emulator`), each time's
+        residual divided by ``loo_scale`` (m,) where given.
     """
     X, Y, latest, d = design_arrays(design_params, design_responses, latest, obs)
     lo, hi = np.asarray(lower, float), np.asarray(upper, float)
@@ -124,8 +127,9 @@ def emulated_esmda_update(design_params, design_responses, latest, obs, obs_erro
                          f"got {X.shape[0]} and {int(latest.sum())}")
     rng = as_generator(rng)
 
-    em = CurveEmulator(X, Y, lo, hi, names=names)
+    em, smoothing_info = smoothed_emulator(X, Y, lo, hi, names, latest, smoothing, loo_scale)
     emu_err, emu_info = emulator_error_model(em.loo_residuals()[latest], times, groups)
+    emu_info.update(smoothing_info)
 
     C = DenseError(temper * (obs_error.dense() + emu_err.dense()), _symmetric=True)
     P0 = latin_hypercube(lo, hi, inner_members, rng)

@@ -22,7 +22,7 @@ from scipy.interpolate import RBFInterpolator
 
 from .covariance import DenseError, ObservationError
 
-__all__ = ["CurveEmulator", "with_emulator_error", "design_arrays"]
+__all__ = ["CurveEmulator", "SMOOTHING_GRID", "smoothed_emulator", "with_emulator_error", "design_arrays"]
 
 
 class CurveEmulator:
@@ -98,6 +98,33 @@ class CurveEmulator:
         """The emulator error as an independent (diagonal) term, for :func:`with_emulator_error`."""
         s = self.error_std(weights)
         return DenseError(np.diag(np.maximum(s, 1e-12 * max(float(s.max()), 1.0)) ** 2), _symmetric=True)
+
+
+#: Smoothing values tried by ``smoothing="loo"`` (SciPy's RBF ``smoothing``, inputs in the unit box).
+SMOOTHING_GRID = (0.0, 1e-4, 1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0)
+
+
+def smoothed_emulator(X, Y, lo, hi, names, latest, smoothing="loo", scale=None) -> tuple[CurveEmulator, dict]:
+    """``(emulator, info)`` with the RBF smoothing (the emulator's nugget) given, or with ``"loo"`` the
+    value of :data:`SMOOTHING_GRID` with the least leave-one-out error at the ``latest`` runs, each
+    output's residual divided by ``scale`` (m,) where given (e.g. the data's error sd per time, so that
+    the post-peak scatter of a fracture curve does not outvote the rise where the parameters act).
+
+    A fracture simulator is rugged between its runs (another crack path at a nearby parameter point,
+    another mesh realization on every run): an interpolant then threads every run's own departure and
+    the likelihood on it is a field of needles. A smoothed one treats that scatter as error, which its
+    leave-one-out residuals then carry into the emulator's error term; the leave-one-out choice finds
+    how much smoothing the runs' scatter asks for without being told its size."""
+    if smoothing != "loo":
+        return CurveEmulator(X, Y, lo, hi, names=names, smoothing=float(smoothing)), {"smoothing": float(smoothing)}
+    w = 1.0 if scale is None else 1.0 / np.asarray(scale, dtype=float)
+    best, scores = None, {}
+    for value in SMOOTHING_GRID:
+        em = CurveEmulator(X, Y, lo, hi, names=names, smoothing=value)
+        scores[value] = float(np.sqrt(np.mean((em.loo_residuals()[latest] * w) ** 2)))
+        if best is None or scores[value] < scores[best[0]]:
+            best = (value, em)
+    return best[1], {"smoothing": best[0], "loo_rms_by_smoothing": {str(k): v for k, v in scores.items()}}
 
 
 def with_emulator_error(obs_error: ObservationError, emulator_std) -> DenseError:

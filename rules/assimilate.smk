@@ -2,10 +2,10 @@
 # members, stop decision, analysis ensemble for k + 1).
 
 
-def member_files(wc, name):
-    return expand("results/{exp}/iter_{it}/members/{member}/{record}/{name}", exp=wc.exp, it=wc.it,
-                  member=member_ids(EXPERIMENTS[wc.exp]["ensemble_size"]), record=list(records(wc.exp)),
-                  name=name)
+def member_files(wc, name, folder="members"):
+    ids = member_ids(EXPERIMENTS[wc.exp]["ensemble_size"]) if folder == "members" else replicate_ids(wc.exp)
+    return expand("results/{exp}/iter_{it}/{folder}/{member}/{record}/{name}", exp=wc.exp, it=wc.it,
+                  folder=folder, member=ids, record=list(records(wc.exp)), name=name)
 
 
 rule aggregate:
@@ -15,10 +15,14 @@ rule aggregate:
         obs_meta="results/{exp}/observations/obs.json",
         curves=lambda wc: member_files(wc, "curve.csv"),
         runs=lambda wc: member_files(wc, "run.json"),
+        replicate_curves=lambda wc: member_files(wc, "curve.csv", "replicates"),
+        replicate_runs=lambda wc: member_files(wc, "run.json", "replicates"),
     output:
         responses="results/{exp}/iter_{it}/responses.csv",
+        replicates="results/{exp}/iter_{it}/replicates.csv",
     params:
         records=lambda wc: list(records(wc.exp)),
+        replicates=lambda wc: replicate_ids(wc.exp),
     script:
         "../scripts/aggregate.py"
 
@@ -35,6 +39,7 @@ checkpoint analysis:
         params="results/{exp}/iter_{it}/params.csv",
         prior="results/{exp}/iter_0/params.csv",
         responses="results/{exp}/iter_{it}/responses.csv",
+        replicates="results/{exp}/iter_{it}/replicates.csv",
         obs="results/{exp}/observations/obs.csv",
         obs_meta="results/{exp}/observations/obs.json",
         history_params=lambda wc: earlier_iterations(wc, "params.csv"),

@@ -4,6 +4,8 @@
 # targets with `-R summary forecast_params plots` to apply it).
 from calibration.experiment import ExperimentSpec
 from calibration.experiment import final_iteration as _final_iteration
+from calibration.experiment import run_mesh_seed
+from calibration.model_error import replicate_count
 from calibration.workflow_io import experiment_records, member_ids, read_json
 
 EXPERIMENTS = config["experiments"]
@@ -44,6 +46,17 @@ def final_k(exp):
 def iteration_files(exp, name):
     """`name` of every iteration 0..K of the final loop."""
     return [f"results/{exp}/iter_{k}/{name}" for k in range(final_k(exp) + 1)]
+
+
+def mesh_seed_of(exp, stage, k=0, index=0, record=None):
+    """The mesh realization of one simulation (calibration.experiment.run_mesh_seed; None: unperturbed)."""
+    names = list(records(exp))
+    return run_mesh_seed(EXPERIMENTS[exp], stage, int(k), int(index), names.index(record) if record in names else 0)
+
+
+def replicate_ids(exp):
+    """Folder names of the replicate runs per iteration (none when S is not measured)."""
+    return member_ids(replicate_count(EXPERIMENTS[exp])) if replicate_count(EXPERIMENTS[exp]) else []
 
 
 def sim_settings(exp, preset=None):

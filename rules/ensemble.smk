@@ -47,6 +47,7 @@ rule member:
     params:
         sim=lambda wc: sim_settings(wc.exp),
         record_file=lambda wc: records(wc.exp)[wc.record],
+        mesh_seed=lambda wc: mesh_seed_of(wc.exp, "member", wc.it, wc.member, wc.record),
         max_attempts=config["member_retries"] + 1,
     threads: 1
     retries: config["member_retries"]
@@ -57,3 +58,30 @@ rule member:
         runtime=lambda wc: runtime_min(wc.exp, None),
     script:
         "../scripts/member.py"
+
+
+rule replicate:
+    """One replicate run at the iteration's ensemble mean on its own mesh realization: the replicates of
+    an iteration differ only in the mesh and measure the simulator's own variability S
+    (calibration.model_error; observations.model_error.simulator_replicates)."""
+    input:
+        unpack(member_inputs),
+    output:
+        curve="results/{exp}/iter_{it}/replicates/{member}/{record}/curve.csv",
+        run="results/{exp}/iter_{it}/replicates/{member}/{record}/run.json",
+    log:
+        "results/{exp}/iter_{it}/replicates/{member}/{record}/simulate.log",
+    params:
+        sim=lambda wc: sim_settings(wc.exp),
+        record_file=lambda wc: records(wc.exp)[wc.record],
+        mesh_seed=lambda wc: mesh_seed_of(wc.exp, "replicate", wc.it, wc.member, wc.record),
+        max_attempts=config["member_retries"] + 1,
+    threads: 1
+    retries: config["member_retries"]
+    group: lambda wc: simulation_group(wc.exp, f"rep_{wc.it}", wc.member, len(replicate_ids(wc.exp)), wc.record, records(wc.exp))
+    resources:
+        attempt=lambda wc, attempt: attempt,
+        time_limit_s=lambda wc: time_limit_s(wc.exp, None),
+        runtime=lambda wc: runtime_min(wc.exp, None),
+    script:
+        "../scripts/replicate.py"

@@ -15,6 +15,7 @@ rule truth:
         sim=lambda wc: sim_settings(wc.exp, EXPERIMENTS[wc.exp]["observations"]["preset"]),
         truth=lambda wc: EXPERIMENTS[wc.exp]["observations"]["truth"],
         record_file=lambda wc: records(wc.exp)[wc.record],
+        mesh_seed=lambda wc: mesh_seed_of(wc.exp, "truth", 0, 0, wc.record),
     threads: 1
     retries: config["member_retries"]
     resources:

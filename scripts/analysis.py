@@ -12,7 +12,8 @@ status, Y = read_responses(snakemake.input.responses)
 obs = read_observations(snakemake.input.obs, snakemake.input.obs_meta)
 history = [(pd.read_csv(p), read_responses(r)[1])
            for p, r in zip(snakemake.input.history_params, snakemake.input.history_responses)]
+_, replicates = read_responses(snakemake.input.replicates)
 result = analysis_step(spec, int(snakemake.wildcards.it), pd.read_csv(snakemake.input.params), Y, status, obs,
-                       pd.read_csv(snakemake.input.prior), history)
+                       pd.read_csv(snakemake.input.prior), history, replicates=replicates)
 atomic_write_json(snakemake.output.analysis, result)
 print(analysis_line(result), flush=True)  # the misfit of this iteration in the run's log

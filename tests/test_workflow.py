@@ -52,7 +52,7 @@ def twin_config(**overrides) -> dict:
         "parameters": {"sigma_t": [4.0e6, 60.0e6], "E_t": [200.0, 2400.0]},
         "simulation": {"t_end": 1.2e-4, "sample_dt": 1.0e-6},
         "observations": {"t_end": 1.0e-4, "dt": 1.0e-6, "truth": {"sigma_t": 45.0e6, "E_t": 500.0},
-                         "noise": {"relative_sigma": 0.01}},
+                         "noise": {"relative_sigma": 0.01}, "model_error": {"simulator_replicates": 3}},
     }
     for key, value in overrides.items():
         exp[key] = value
@@ -62,7 +62,9 @@ def twin_config(**overrides) -> dict:
 STAND_IN = textwrap.dedent('''
     """Stand-in for `python -m shpb simulate` in workflow robustness tests (an analytic pulse, not FDEM).
 
-    Peak 0.8 sigma_t at 20 us, exponential decay with tau = 5 us + 30 us E_t / 2400 J/m^2.
+    Peak 0.8 sigma_t at 20 us, exponential decay with tau = 5 us + 30 us E_t / 2400 J/m^2. A mesh
+    realization (--mesh-seed) adds a ripple after the peak, 0.5 % of it at 10 us period with a phase
+    drawn from the seed: the stand-in's own "simulator variability".
     Injected failures (environment): STAND_IN_FAIL_BELOW: sigma_t below it -> exit 3 with a failed
     run.json; STAND_IN_CRASH_ONCE_BELOW: sigma_t below it -> crash (exit 1) on the first call only
     (a marker file per parameter set); STAND_IN_SLEEP: seconds per run; STAND_IN_HANG_RANGE "lo,hi":
@@ -77,6 +79,7 @@ STAND_IN = textwrap.dedent('''
     ap.add_argument("--param", action="append", default=[])
     ap.add_argument("--t-end", type=float, default=1.0e-4)
     ap.add_argument("--sample-dt", type=float, default=1.0e-6)
+    ap.add_argument("--mesh-seed", type=int, default=None)
     a = ap.parse_args()
     p = {k: float(v) for k, v in (s.split("=") for s in a.param)}
     if os.environ.get("STAND_IN_REJECT"):
@@ -96,6 +99,9 @@ STAND_IN = textwrap.dedent('''
     t = np.arange(0.0, a.t_end + 1e-12, a.sample_dt)
     tau = 5e-6 + 30e-6 * et / 2400.0
     y = np.where(t < 20e-6, 0.8 * st * np.sin(0.5 * np.pi * t / 20e-6) ** 2, 0.8 * st * np.exp(-(t - 20e-6) / tau))
+    if a.mesh_seed is not None:
+        phase = 2.0 * np.pi * np.random.default_rng(a.mesh_seed).random()
+        y = y + np.where(t < 20e-6, 0.0, 0.004 * st * np.sin(2.0 * np.pi * (t - 20e-6) / 10e-6 + phase))
     fail = st < float(os.environ.get("STAND_IN_FAIL_BELOW", "-1"))
     os.makedirs(a.out, exist_ok=True)
     cols = ["time_s", "stress_Pa", "stress_front_Pa", "stress_back_Pa", "force_balance", "centre_sxx_Pa",
@@ -353,7 +359,14 @@ def test_workflow_runs_end_to_end_and_a_second_run_has_nothing_to_do(tmp_path, m
                 "misfit", "wall_s"):
         assert key in summary, key
     assert summary["iterations"] == 2 and summary["stop_reason"] == "max_iterations" or summary["converged"]
-    assert summary["n_simulations"] == 3 * 8 + 1 + 1
+    # 8 members and 3 replicates per iteration, the truth and the forecast
+    assert summary["n_simulations"] == 3 * (8 + 3) + 1 + 1
+    for k in range(3):
+        for r in member_ids(3):
+            run = json.loads((res / f"iter_{k}" / "replicates" / r / "synthetic" / "run.json").read_text())
+            assert run.get("mesh_seed") is not None or method["method"] == "emulated_esmda"  # the stand-in writes none
+    assert summary["simulator_variability"]["n_replicates"] == 3
+    assert summary["simulator_variability"]["rms_Pa"] > 0.0
     assert summary["misfit"][-1]["rmse_Pa"] < summary["misfit"][0]["rmse_Pa"]
     assert summary["misfit"][-1]["chi2_per_obs"] < summary["misfit"][0]["chi2_per_obs"]
     assert set(summary["posterior"]) == {"sigma_t", "E_t"}

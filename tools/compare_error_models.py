@@ -35,7 +35,7 @@ def compare(folder: Path) -> dict:
     records = compare_with_inflated_noise(obs, Y, alive, analysis, rng_for(summary["seed"], "predictive", 1))
     names = list(summary["posterior"])
     P = pd.read_csv(folder / f"iter_{R}" / "params.csv")[names].to_numpy(float)[alive]
-    Cd = stored_error(obs, analysis).dense()
+    Cd = stored_error(obs, analysis).likelihood().dense()
     Ci = np.zeros_like(Cd)
     for rec in obs.records:
         sl = obs.record_slice(rec)
