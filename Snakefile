@@ -40,6 +40,12 @@ except ConfigError as exc:
     raise WorkflowError(str(exc)) from None
 config.clear()
 config.update(_validated)
+# `diagnosis: {validation: loro}`: one fold experiment per record, that record held out (calibration.closing)
+from calibration.closing import loro_folds
+
+for _name, _exp in list(config["experiments"].items()):
+    if _exp.get("kind") == "measured" and (_exp.get("diagnosis") or {}).get("validation") == "loro":
+        config["experiments"].update(loro_folds(_name, _exp))
 
 if workflow.is_main_process:
     for _name, _exp in config["experiments"].items():
@@ -68,11 +74,12 @@ include: "rules/sensitivity.smk"
 
 rule all:
     input:
-        expand("results/{exp}/summary.json", exp=RUN),
-        expand("results/{exp}/summary.html", exp=RUN),
-        expand("results/{exp}/plots/{plot}.png", exp=RUN, plot=PLOTS),
+        expand("results/{exp}/summary.json", exp=calibrated_experiments()),
+        expand("results/{exp}/summary.html", exp=calibrated_experiments()),
+        expand("results/{exp}/plots/{plot}.png", exp=calibrated_experiments(), plot=PLOTS),
         expand("results/{exp}/diagnosis/report.json", exp=diagnosed_experiments()),
         expand("results/{exp}/diagnosis/check.json", exp=diagnosed_experiments()),
+        expand("results/{exp}/loro/summary.json", exp=loro_experiments()),
         expand("results/{exp}/sensitivity/report.json", exp=SENSITIVITY_RUN),
     default_target: True
 
@@ -84,6 +91,6 @@ onsuccess:
         from calibration.run_summary import experiments_of_run, run_summary
 
         _targets = getattr(getattr(workflow, "dag_settings", None), "targets", None) or ()
-        print(run_summary(experiments_of_run(_targets, list(EXPERIMENTS), RUN), "results"), flush=True)
+        print(run_summary(experiments_of_run(_targets, list(EXPERIMENTS), calibrated_experiments()), "results"), flush=True)
     except Exception as exc:  # noqa: BLE001
         print(f"(no run summary: {type(exc).__name__}: {exc})", flush=True)

@@ -237,12 +237,22 @@ def _diagnosis_errors(where: str, exp: Mapping, obs: Mapping, base: Path) -> lis
         if record_name(r) in calib:
             errors.append(f"{where}.diagnosis.heldout_records: {record_name(r)} is also a calibration "
                           f"record; held-out data must not be used to calibrate")
+    from .closing import candidate_effects
+
+    offered = candidate_effects(diag)
     for key in diag.get("physical_upper") or {}:
-        if key.split(".")[0] not in (diag.get("candidates") or []):
-            errors.append(f"{where}.diagnosis.physical_upper.{key}: not a parameter of a listed candidate")
+        if key.split(".")[0] not in offered:
+            errors.append(f"{where}.diagnosis.physical_upper.{key}: not a parameter of an offered candidate")
     for key in diag.get("scopes") or {}:
-        if key not in (diag.get("candidates") or []):
-            errors.append(f"{where}.diagnosis.scopes.{key}: not a listed candidate")
+        if key not in offered:
+            errors.append(f"{where}.diagnosis.scopes.{key}: not an offered candidate")
+    if diag.get("validation") == "loro":
+        if held:
+            errors.append(f"{where}.diagnosis.heldout_records: with validation loro every record of "
+                          f"observations.records is held out once; list no others")
+        if len(obs.get("records") or []) < 3:
+            errors.append(f"{where}.diagnosis.validation: loro needs at least 3 records (each fold calibrates "
+                          f"on the others), got {len(obs.get('records') or [])}")
     return errors
 
 

@@ -9,7 +9,7 @@ import re
 from collections.abc import Mapping
 from pathlib import Path
 
-from shpb.atomic import atomic_write_text
+from shpb.atomic import atomic_write_bytes, atomic_write_text  # noqa: F401 (atomic_write_bytes: re-exported)
 
 __all__ = ["PARAM_NAMES", "ConfigError", "atomic_write_text", "atomic_write_json", "atomic_write_csv", "read_json",
            "record_name", "experiment_records", "known_parameters"]

@@ -276,3 +276,30 @@ def plot_diagnosis_check(path, curves: Mapping[str, Mapping], errors: Mapping[st
         fig.suptitle(confirmation, fontsize=9)
     fig.tight_layout()
     return _save(fig, path)
+
+
+def plot_loro(path, table: Mapping) -> Path:
+    """Leave one record out (:func:`calibration.closing.loro_table`): per fold, the held-out record's real
+    FDEM RMSE with the base model and with the model the fold kept, the effects named under each pair."""
+    rows = list(table["rows"])
+    fig, ax = plt.subplots(figsize=(max(4.0, 1.6 * len(rows) + 1.5), 3.8))
+    x = np.arange(len(rows))
+    before = [r["rmse_before"] / 1e6 for r in rows]
+    after = [r["rmse_after"] / 1e6 for r in rows]
+    ax.bar(x - 0.18, before, 0.36, label="base model", color="0.6")
+    ax.bar(x + 0.18, after, 0.36, label="model kept by the fold", color="tab:blue")
+    labels = []
+    for r in rows:
+        rate = r.get("strain_rate_per_s")
+        head = r["heldout"] + (f"\n{rate:.0f} 1/s" if rate else "")
+        labels.append(head + "\n" + (", ".join(r["effects"]) or "base kept"))
+    ax.set_xticks(x, labels, fontsize=7)
+    ax.set_ylabel("held-out RMSE, real FDEM [MPa]")
+    t = table["totals"]
+    if t.get("mean_rmse_change") is not None:
+        sd = t.get("sd_rmse_change")
+        ax.set_title(f"leave one record out: mean change {t['mean_rmse_change'] / 1e6:+.2f} MPa"
+                     + (f" (sd {sd / 1e6:.2f})" if sd is not None else "") + f" over {t['folds']} folds", fontsize=9)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    return _save(fig, path)

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from .config_check import (ConfigError, apply_defaults, coerce_yaml_floats, config_sources,  # noqa: F401
                            load_config_file, load_yaml, validate_config)
-from .contracts import (PARAM_NAMES, atomic_write_csv, atomic_write_json, atomic_write_text,  # noqa: F401
+from .contracts import (PARAM_NAMES, atomic_write_bytes, atomic_write_csv, atomic_write_json, atomic_write_text,  # noqa: F401
                         experiment_records, known_parameters, read_json, record_name)
 from .ensemble_files import (combine_member_runs, ensemble_mean_params, member_ids, member_params, read_responses,  # noqa: F401
                              write_responses)

@@ -73,14 +73,18 @@ def simulator_variability(replicates, times, groups=None, *, window: int = SMOOT
     var = _smooth(np.sum(dev ** 2, axis=0) / (M - 1), g, int(window))
     sd = np.sqrt(np.maximum(var, 0.0))
     top = float(sd.max())
-    if top <= 0.0:
-        return None, {**info, "rms": 0.0}
+    if top <= 1e-12 * max(float(np.max(np.abs(Y))), 1e-300):  # replicates that agree to round-off
+        return None, {**info, "rms_Pa": 0.0}
     sd = np.maximum(sd, 1e-9 * top)
-    z = dev / sd
+    # lag-1 correlation per pair of neighbouring times across the replicates, averaged over the pairs
+    # where both times vary: no standardisation by the smoothed sd, which would blur a jump of S (at the
+    # failure peak) into a false loss of correlation
     same = g[1:] == g[:-1]
-    a, b = z[:, 1:][:, same], z[:, :-1][:, same]
-    den = math.sqrt(float(np.sum(a * a) * np.sum(b * b)))
-    rho = min(max(float(np.sum(a * b) / den) if den > 0 else 0.0, 0.0), 0.999)
+    a, b = dev[:, 1:][:, same], dev[:, :-1][:, same]
+    den = np.sqrt(np.sum(a * a, axis=0) * np.sum(b * b, axis=0))
+    live = den > 1e-12 * top ** 2
+    rho = float(np.mean(np.sum(a * b, axis=0)[live] / den[live])) if np.any(live) else 0.0
+    rho = min(max(rho, 0.0), 0.999)
     steps = np.diff(t)[same]
     dt = float(np.median(steps)) if steps.size else 1.0
     corr_time = -dt / math.log(rho) if rho > 0 else 0.0

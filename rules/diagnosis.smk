@@ -1,7 +1,12 @@
-# Closing the loop (README, "Closing the loop"): after a measured experiment's calibration, a design of
-# FDEM runs around its posterior (one job per design point and record, calibration and held-out
-# records), then the discrepancy loop (calibration.diagnose on enkf.diagnosis) on an emulator of those runs:
-# residual structure, candidate ranking, re-calibration, accept/reject, error before and after.
+# Closing the loop by the frozen protocol (docs/closing-the-loop.md, calibration.closing): after a measured
+# experiment's calibration, a design of FDEM runs around its posterior (one job per design point and
+# record, calibration and held-out records), the selection of effects by cross-validation within the
+# calibration records on the emulator of those runs (a checkpoint: it decides which real runs the check
+# needs), one real FDEM run per cross-validation point and held-out prediction point, then the
+# confirmation walk and, last, the held-out records' errors. With `diagnosis: {validation: loro}` the
+# experiment's records are each held out once (one fold experiment `<exp>__<record>` each, added to the
+# config by the Snakefile) and rule loro tabulates the folds.
+from calibration.closing import FOLD_SEPARATOR, candidate_effects
 from calibration.experiment import diagnosis_settings
 from calibration.workflow_io import record_name
 
@@ -10,8 +15,26 @@ def diagnosis_cfg(exp):
     return diagnosis_settings(EXPERIMENTS[exp])
 
 
+def is_loro(exp):
+    d = diagnosis_cfg(exp)
+    return bool(d) and d.get("validation") == "loro"
+
+
+def loro_experiments():
+    return [e for e in RUN if is_loro(e)]
+
+
+def loro_fold_names(exp):
+    return [f for f, e in EXPERIMENTS.items() if e.get("loro_of") == exp]
+
+
+def calibrated_experiments():
+    """The experiments of the run that calibrate: a leave-one-record-out series runs its folds instead."""
+    return [e for e in RUN if not is_loro(e)] + [f for e in loro_experiments() for f in loro_fold_names(e)]
+
+
 def diagnosed_experiments():
-    return [e for e in RUN if diagnosis_cfg(e)]
+    return [e for e in calibrated_experiments() if diagnosis_cfg(e)]
 
 
 def heldout_records(exp):
@@ -29,7 +52,14 @@ def design_files(exp, name):
                   name=name)
 
 
+def reported_analysis(exp):
+    """The analysis.json of the calibration's reported ensemble (its error terms: noise, S, D)."""
+    return iteration_files(exp, "analysis.json")
+
+
 rule diagnosis_heldout_observations:
+    """The held-out records reduced like the calibration records: their curves are read by the final
+    evaluation only; before it, their incident wave (the simulations) and noise level (their band)."""
     input:
         lambda wc: list(heldout_records(wc.exp).values()),
     output:
@@ -69,6 +99,8 @@ rule diagnosis_member:
     params:
         sim=lambda wc: sim_settings(wc.exp),
         record_file=lambda wc: design_records(wc.exp)[wc.record],
+        mesh_seed=lambda wc: run_mesh_seed(EXPERIMENTS[wc.exp], "design", 0, int(wc.point),
+                                           list(design_records(wc.exp)).index(wc.record)),
         max_attempts=config["member_retries"] + 1,
     threads: 1
     retries: config["member_retries"]
@@ -86,57 +118,60 @@ def diagnosis_inputs(wc):
              "design_meta": f"results/{wc.exp}/diagnosis/design/design.json",
              "curves": design_files(wc.exp, "curve.csv"),
              "obs": f"results/{wc.exp}/observations/obs.csv",
-             "obs_meta": f"results/{wc.exp}/observations/obs.json"}
+             "obs_meta": f"results/{wc.exp}/observations/obs.json",
+             "analyses": reported_analysis(wc.exp),
+             "summary": f"results/{wc.exp}/summary.json"}
     if heldout_records(wc.exp):
         files["heldout"] = f"results/{wc.exp}/diagnosis/heldout/obs.csv"
         files["heldout_meta"] = f"results/{wc.exp}/diagnosis/heldout/obs.json"
     return files
 
 
-rule diagnosis:
+checkpoint diagnosis_select:
+    """The selection on the emulator (calibration records only); lists the real FDEM runs of the check."""
     input:
         unpack(diagnosis_inputs),
     output:
-        report=report("results/{exp}/diagnosis/report.json", category="{exp}", subcategory="diagnosis"),
-        candidates="results/{exp}/diagnosis/candidates.csv",
-        params="results/{exp}/diagnosis/params.csv",
-        errors="results/{exp}/diagnosis/errors.csv",
+        selection="results/{exp}/diagnosis/selection.pkl",
+        rows="results/{exp}/diagnosis/check_runs.json",
         covariates="results/{exp}/diagnosis/covariates.csv",
-        fit=report("results/{exp}/diagnosis/fit.png", category="{exp}", subcategory="diagnosis",
-                   caption="../report/diagnosis_fit.rst"),
-        candidates_png=report("results/{exp}/diagnosis/candidates.png", category="{exp}", subcategory="diagnosis",
-                              caption="../report/diagnosis_candidates.rst"),
     params:
         exp=lambda wc: EXPERIMENTS[wc.exp],
-        records=lambda wc: list(records(wc.exp)),
-        heldout=lambda wc: list(heldout_records(wc.exp)),
+        candidates=lambda wc: candidate_effects(diagnosis_cfg(wc.exp)),
         design_records=lambda wc: list(design_records(wc.exp)),
         points=lambda wc: member_ids(diagnosis_cfg(wc.exp)["design_points"]),
     script:
         "../scripts/diagnosis.py"
 
 
+def check_rows_of(exp):
+    return read_json(checkpoints.diagnosis_select.get(exp=exp).output.rows)["rows"]
+
+
 rule diagnosis_check_member:
-    """The FDEM check of the loop's answer: one real run per record (calibration and held-out) at the
-    posterior mean before the loop (base model) and after it (with the effects it added), so the errors
-    before and after are stated on FDEM, not only on the emulator."""
+    """One real FDEM run of the check: a step's cross-validation point of a calibration record, or its
+    prediction point of a held-out record (check_runs.json, row `row`)."""
     input:
-        unpack(lambda wc: {"report": f"results/{wc.exp}/diagnosis/report.json",
-                           "record": [design_records(wc.exp)[wc.record]]}),
+        rows="results/{exp}/diagnosis/check_runs.json",
+        record=lambda wc: [design_records(wc.exp)[check_rows_of(wc.exp)[int(wc.row)]["record"]]],
     output:
-        curve="results/{exp}/diagnosis/check/{which}/{record}/curve.csv",
-        run="results/{exp}/diagnosis/check/{which}/{record}/run.json",
+        curve="results/{exp}/diagnosis/check/{row}/curve.csv",
+        run="results/{exp}/diagnosis/check/{row}/run.json",
     log:
-        "results/{exp}/diagnosis/check/{which}/{record}/simulate.log",
+        "results/{exp}/diagnosis/check/{row}/simulate.log",
     wildcard_constraints:
-        which="before|after",
+        row="[0-9]+",
     params:
         sim=lambda wc: sim_settings(wc.exp),
-        record_file=lambda wc: design_records(wc.exp)[wc.record],
+        record_file=lambda wc: design_records(wc.exp)[check_rows_of(wc.exp)[int(wc.row)]["record"]],
+        # every step of one record on the same mesh realization: two steps' runs differ by their
+        # parameters, not their meshes (a paired comparison)
+        mesh_seed=lambda wc: run_mesh_seed(EXPERIMENTS[wc.exp], "check", 0, 0,
+                                           list(design_records(wc.exp)).index(check_rows_of(wc.exp)[int(wc.row)]["record"])),
         max_attempts=config["member_retries"] + 1,
     threads: 1
     retries: config["member_retries"]
-    group: lambda wc: simulation_group(wc.exp, "check", ["before", "after"].index(wc.which), 2, wc.record, design_records(wc.exp))
+    group: lambda wc: simulation_group(wc.exp, "check", int(wc.row), len(check_rows_of(wc.exp)), "all", ["all"])
     resources:
         attempt=lambda wc, attempt: attempt,
         time_limit_s=lambda wc: time_limit_s(wc.exp),
@@ -146,17 +181,19 @@ rule diagnosis_check_member:
 
 
 def diagnosis_check_inputs(wc):
-    files = {k: v for k, v in diagnosis_inputs(wc).items() if k in ("obs", "obs_meta", "heldout", "heldout_meta")}
-    files["report"] = f"results/{wc.exp}/diagnosis/report.json"
-    files["curves"] = expand("results/{exp}/diagnosis/check/{which}/{record}/curve.csv", exp=wc.exp,
-                             which=["before", "after"], record=list(design_records(wc.exp)))
+    files = {k: v for k, v in diagnosis_inputs(wc).items() if k not in ("summary",)}
+    files["selection"] = f"results/{wc.exp}/diagnosis/selection.pkl"
+    files["rows"] = f"results/{wc.exp}/diagnosis/check_runs.json"
+    files["runs"] = [f"results/{wc.exp}/diagnosis/check/{i}/curve.csv" for i in range(len(check_rows_of(wc.exp)))]
     return files
 
 
 rule diagnosis_check:
+    """The confirmation walk on the real cross-validation runs; then, last, the held-out records."""
     input:
         unpack(diagnosis_check_inputs),
     output:
+        report=report("results/{exp}/diagnosis/report.json", category="{exp}", subcategory="diagnosis"),
         check=report("results/{exp}/diagnosis/check.json", category="{exp}", subcategory="diagnosis"),
         png=report("results/{exp}/diagnosis/check.png", category="{exp}", subcategory="diagnosis",
                    caption="../report/diagnosis_check.rst"),
@@ -164,3 +201,18 @@ rule diagnosis_check:
         exp=lambda wc: EXPERIMENTS[wc.exp],
     script:
         "../scripts/diagnosis_check.py"
+
+
+rule loro:
+    """Leave one record out over a series: the folds' held-out errors before and after, per fold and in
+    total, and the figure."""
+    input:
+        reports=lambda wc: expand("results/{fold}/diagnosis/report.json", fold=loro_fold_names(wc.exp)),
+        obs=lambda wc: expand("results/{fold}/diagnosis/heldout/obs.json", fold=loro_fold_names(wc.exp)),
+    output:
+        summary="results/{exp}/loro/summary.json",
+        png=report("results/{exp}/loro/folds.png", category="{exp}", subcategory="leave one record out"),
+    params:
+        folds=lambda wc: loro_fold_names(wc.exp),
+    script:
+        "../scripts/loro.py"

@@ -3,6 +3,7 @@ import numpy as np
 import pandas as pd
 
 from calibration.experiment import ExperimentSpec
+from calibration.closing import candidate_effects
 from calibration.diagnose import base_design_box, design_points, physical_design_ranges
 from calibration.workflow_io import atomic_write_csv, atomic_write_json
 
@@ -12,7 +13,7 @@ spec = ExperimentSpec.from_config(exp, e)
 post = pd.read_csv(snakemake.input.posterior)
 blo, bhi = base_design_box(post, spec.names, spec.lower, spec.upper, width_sd=d["base_width_sd"],
                            min_rel_width=d["base_min_rel_width"])
-pnames, plo, phi = physical_design_ranges(d["candidates"], d["physical_upper"])
+pnames, plo, phi = physical_design_ranges(candidate_effects(d), d["physical_upper"])
 X = design_points(blo, bhi, plo, phi, d["design_points"], seed=d["seed"], null_fraction=d["null_fraction"])
 names = list(spec.names) + pnames
 frame = pd.DataFrame(X, columns=names)

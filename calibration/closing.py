@@ -1,0 +1,256 @@
+"""Closing the loop in the workflow: the frozen protocol (:mod:`calibration.protocol`) on an experiment's
+files, and leave-one-record-out over a whole series (rules/diagnosis.smk).
+
+The order is fixed before anything is fitted (docs/closing-the-loop.md):
+
+1. the experiment's calibration records are calibrated on FDEM (the workflow's loop); its held-out
+   records are reduced for their incident wave, their sheet and their noise level only;
+2. a design of FDEM runs around that posterior (every record: a held-out record's runs use its incident
+   wave only) gives the emulator (:func:`emulated_model`);
+3. :func:`select_effects` chooses effects by cross-validation within the calibration records on the
+   emulator, with the calibration's own error terms (instrument noise, the estimated discrepancy, the
+   simulator's variability) beside the emulator's time-correlated error (:func:`protocol_errors`);
+4. real FDEM runs at every step's cross-validation points and held-out prediction points
+   (:func:`check_rows`, one Snakemake job each; every step of one record on the same mesh realization,
+   so that the comparison of two steps is paired);
+5. :func:`assemble`: the confirmation walk on the real cross-validation runs, and only then the held-out
+   records' curves are read: their errors before (base model) and after (the confirmed model).
+
+With ``diagnosis: {validation: loro}`` an experiment's records are each held out once
+(:func:`loro_folds`): one experiment per fold, ``<experiment>__<record>``, and the folds' checks are
+tabulated by :func:`loro_table`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from enkf.covariance import DenseError, ObservationError
+from enkf.diagnosis import curve_errors, heldout_evaluation
+from shpb import effects as fx
+
+from .diagnose import EmulatedSHPB, emulators_from_design
+from .model_error import stored_error
+from .observations import Observations
+from .protocol import check_runs, confirm, real_curves, select
+
+__all__ = ["FOLD_SEPARATOR", "candidate_effects", "emulated_model", "protocol_errors", "select_effects",
+           "check_rows", "covariate_table", "assemble", "loro_folds", "loro_table"]
+
+#: Between an experiment's name and a held-out record's in a leave-one-record-out fold's name.
+FOLD_SEPARATOR = "__"
+
+
+def candidate_effects(diagnosis: Mapping) -> list[str]:
+    """The effects the loop may add: the whole catalogue, less ``exclude`` (``candidates`` narrows it
+    further where given)."""
+    names = list(diagnosis.get("candidates") or [e.name for e in fx.effects()])
+    return [n for n in names if n not in set(diagnosis.get("exclude") or [])]
+
+
+def emulated_model(X, names: Sequence[str], lower, upper, curves: Mapping[str, Sequence], model_times,
+                   obs_times: Mapping[str, np.ndarray], label: str) -> tuple[EmulatedSHPB, dict]:
+    """The emulated FDEM model of every record (:func:`calibration.diagnose.emulators_from_design`)."""
+    emulators, n_failed = emulators_from_design(X, curves, model_times, lower, upper, names, label=label)
+    return EmulatedSHPB(emulators, list(names), model_times, dict(obs_times)), n_failed
+
+
+def _per_record(C: np.ndarray, obs: Observations) -> dict[str, np.ndarray]:
+    return {r: C[obs.record_slice(r), obs.record_slice(r)] for r in obs.records}
+
+
+def _mean_block(blocks: Sequence[np.ndarray]) -> np.ndarray:
+    return sum(blocks) / len(blocks)
+
+
+def protocol_errors(obs: Observations, analysis: Mapping, heldout: Observations | None) -> tuple[dict, dict]:
+    """``(noise, simulator)`` per record for the protocol, from the calibration's reported analysis.
+
+    ``noise``: the record's instrument noise plus the discrepancy the calibration estimated (what the
+    calibration believes the data deviate by; leaving it out would read a structural misfit as
+    significant); ``simulator``: the simulator's variability the replicates measured. A held-out record
+    takes its own instrument noise and the calibration records' average discrepancy and variability
+    (the same grid), never anything estimated from its own curve."""
+    terms = stored_error(obs, analysis)
+    D, S = _per_record(terms.D, obs), _per_record(terms.S, obs)
+    noise = {r: DenseError(obs.of_record(r).error_model().dense() + D[r], _symmetric=True) for r in obs.records}
+    sim = {r: DenseError(S[r] + 1e-12 * np.eye(S[r].shape[0]) * max(1.0, float(np.max(np.diag(S[r])))),
+                         _symmetric=True) for r in obs.records if np.any(S[r])}
+    if heldout is not None:
+        Dm, Sm = _mean_block(list(D.values())), _mean_block(list(S.values()))
+        for h in heldout.records:
+            R = heldout.of_record(h).error_model().dense()
+            if R.shape != Dm.shape:
+                raise ValueError(f"held-out record {h} has {R.shape[0]} observations, the calibration records "
+                                 f"{Dm.shape[0]}: give them the same observation grid")
+            noise[h] = DenseError(R + Dm, _symmetric=True)
+            if np.any(Sm):
+                sim[h] = DenseError(Sm + 1e-12 * np.eye(Sm.shape[0]) * max(1.0, float(np.max(np.diag(Sm)))),
+                                    _symmetric=True)
+    return noise, sim
+
+
+def select_effects(model: EmulatedSHPB, *, base_names: Sequence[str], candidates: Sequence[str], obs: Observations,
+                   noise: Mapping[str, ObservationError], simulator: Mapping[str, ObservationError],
+                   heldout_records: Sequence[str], settings: Mapping):
+    """:func:`calibration.protocol.select` with the experiment's ``diagnosis`` settings; reads the
+    calibration records' observations only."""
+    return select(model, base_names=list(base_names), candidates=[fx.get_effect(c) for c in candidates],
+                  calib_records=list(obs.records), obs={r: obs.values[obs.record_slice(r)] for r in obs.records},
+                  noise=noise, heldout_records=list(heldout_records), simulator=simulator,
+                  scopes=settings.get("scopes") or None, max_additions=int(settings["max_additions"]),
+                  alpha=float(settings["alpha"]), seed=int(settings["seed"]), n_members=int(settings["members"]),
+                  esmda_steps=int(settings["esmda_steps"]))
+
+
+def covariate_table(selection, model: EmulatedSHPB, obs: Observations):
+    """``(table, trends)``: per calibration record, its residual at the base model's calibration on all
+    calibration records (emulated, at the posterior mean) against every covariate its sheet gives
+    (:func:`calibration.covariates.record_covariates`), and the trends across records
+    (:func:`calibration.covariates.covariate_table_trends`; None with fewer than three records)."""
+    from .covariates import covariate_table_trends, record_covariates
+
+    fit = selection.steps[0].final
+    mean = fit.mean()
+    x = np.array([mean[n] for n in fit.names])
+    resid, sigma = {}, {}
+    for r in obs.records:
+        s = obs.record_slice(r)
+        sim = model.forward(fit.names, [r])(x)[0]
+        resid[r] = obs.values[s] - sim
+        sigma[r] = float(np.sqrt(np.mean(obs.sigma[s] ** 2)))
+    table = record_covariates(obs.meta.get("record_info", {}), resid, sigma)
+    return table, covariate_table_trends(table)
+
+
+def check_rows(selection) -> list[dict]:
+    """The real FDEM runs of the check (:func:`calibration.protocol.check_runs`), JSON-ready."""
+    rows = check_runs(selection)
+    return [{k: (dict(v) if isinstance(v, Mapping) else v) for k, v in row.items()} for row in rows]
+
+
+def _errors_table(selection, conf: dict, real: Mapping, obs: Observations, held: Mapping) -> dict:
+    """Per record, the FDEM errors before (base model) and after (the confirmed model): a calibration
+    record's at its cross-validation points (predicted without it), a held-out record's at its
+    prediction points."""
+    k = int(conf["confirmed"])
+    out = {}
+    for r in obs.records:
+        s = obs.record_slice(r)
+        t, y = obs.time[s], obs.values[s]
+        before, after = real["cv"].get(0, {}).get(r), real["cv"].get(k, {}).get(r)
+        out[r] = {"data": "calibration (cross-validated)",
+                  "before": None if before is None else curve_errors(t, before, y),
+                  "after": None if after is None else curve_errors(t, after, y)}
+    keys = ("rmse", "nrmse", "peak_error", "peak_rel_error", "time_to_peak_error")
+    for h, ev in held.items():
+        out[h] = {"data": "heldout", **{w: {k2: ev[w][k2] for k2 in keys if k2 in ev[w]} for w in ("before", "after")}}
+    return out
+
+
+def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: EmulatedSHPB, obs: Observations,
+             heldout: Observations | None, noise: Mapping, simulator: Mapping) -> tuple[dict, dict, dict]:
+    """``(report, check, curves)`` of the loop: the confirmation walk on the real cross-validation runs,
+    then (read here for the first time) the held-out records' errors before and after on the real
+    held-out runs. ``runs[i]``: the FDEM curve (DataFrame, or None if it failed) of ``rows[i]``."""
+    real = real_curves(rows, runs, model)
+    conf = confirm(selection, real["cv"], {r: obs.values[obs.record_slice(r)] for r in obs.records},
+                   {r: noise[r] for r in obs.records}, simulator={r: simulator[r] for r in obs.records if r in simulator})
+    k = int(conf["confirmed"])
+    held = {}
+    if heldout is not None and heldout.records:
+        hv = {h: heldout.values[heldout.record_slice(h)] for h in heldout.records}
+        ht = {h: heldout.time[heldout.record_slice(h)] for h in heldout.records}
+        missing = [h for h in heldout.records for st in (0, k) if real["heldout"].get(st, {}).get(h) is None]
+        if missing:
+            raise RuntimeError(f"the held-out FDEM runs of {sorted(set(missing))} failed; no held-out error to report")
+        held = heldout_evaluation(selection, hv, ht, final=k,
+                                  real={"before": real["heldout"][0], "after": real["heldout"][k]})
+    shipped = selection.steps[k]
+    if k == 0:
+        verdict = "base_kept"
+        why = ("no addition survived: " + (conf["steps"][-1]["text"] if conf["steps"] else selection.why))
+    else:
+        verdict = "confirmed"
+        why = conf["text"]
+    errors = _errors_table(selection, conf, real, obs, held)
+    report = {"protocol": "frozen (docs/closing-the-loop.md): effects chosen by cross-validation within the "
+                          "calibration records on the emulator, confirmed on real FDEM runs at the "
+                          "cross-validation points, the held-out records read last",
+              "verdict": verdict, "why": why, "calib_records": list(obs.records),
+              "heldout_records": [] if heldout is None else list(heldout.records),
+              "added": list(shipped.spec.effect_names), "shipped_step": k,
+              "selection": selection.to_dict(), "confirmation": conf, "heldout": held,
+              "errors_per_record": errors}
+    check = {"added": list(shipped.spec.effect_names), "verdict": verdict,
+             "fdem_confirmation": {"status": verdict, "text": why, "steps": conf["steps"],
+                                   "real_cv_rmse_Pa": conf["real_cv_rmse"]},
+             "errors_per_record": errors, "heldout": held,
+             "note": "real FDEM runs: calibration records at their cross-validation points (each predicted by a "
+                     "calibration without it), held-out records at their prediction points; before = base "
+                     "model, after = the confirmed model"}
+    curves = {}
+    for r in obs.records:
+        s = obs.record_slice(r)
+        curves[r] = {"data": "calibration (cross-validated)", "time": obs.time[s], "obs": obs.values[s],
+                     "before": real["cv"].get(0, {}).get(r), "after": real["cv"].get(k, {}).get(r)}
+    for h in held:
+        s = heldout.record_slice(h)
+        curves[h] = {"data": "heldout", "time": heldout.time[s], "obs": heldout.values[s],
+                     "before": real["heldout"][0][h], "after": real["heldout"][k][h]}
+    return report, check, curves
+
+
+# --------------------------------------------------------------------------------------------------
+# leave one record out
+# --------------------------------------------------------------------------------------------------
+def loro_folds(name: str, exp: Mapping) -> dict[str, dict]:
+    """``{<name>__<record>: experiment}``: one experiment per record of ``exp``'s ``observations.records``,
+    that record held out and the others calibrated, everything else as ``exp`` (its seed included, so
+    the folds differ only in their split)."""
+    from .contracts import record_name
+
+    records = list(exp["observations"]["records"])
+    folds = {}
+    for path in records:
+        rec = record_name(path)
+        fold = {**exp, "observations": {**exp["observations"], "records": [p for p in records if p != path]},
+                "diagnosis": {**exp["diagnosis"], "validation": "holdout", "heldout_records": [path]},
+                "description": f"leave-one-record-out fold of {name}: {rec} held out", "loro_of": name}
+        folds[f"{name}{FOLD_SEPARATOR}{rec}"] = fold
+    return folds
+
+
+def loro_table(folds: Mapping[str, Mapping], record_info: Mapping[str, Mapping] | None = None) -> dict:
+    """Per fold (``{fold: report.json}``) and in total: the effects kept and their estimates, the held-out
+    record's FDEM errors before and after (RMSE, peak, time to peak), and the mean change with its
+    spread across folds."""
+    rows = []
+    for fold, rep in folds.items():
+        for h, ev in (rep.get("heldout") or {}).items():
+            step = rep["selection"]["steps"][int(rep["shipped_step"])]
+            shared = {n: v for n, v in (step.get("posterior") or {}).items()}
+            row = {"fold": fold, "heldout": h, "calib_records": rep["calib_records"], "effects": rep["added"],
+                   "verdict": rep["verdict"], "estimates": shared,
+                   "heldout_values": ev["after"].get("point"), "heldout_intervals": ev["after"].get("intervals")}
+            for w in ("before", "after"):
+                for key in ("rmse", "peak_error", "time_to_peak_error"):
+                    row[f"{key}_{w}"] = ev[w].get(key)
+            row["rmse_change"] = ev["after"]["rmse"] - ev["before"]["rmse"]
+            info = (record_info or {}).get(h, {})
+            row["strain_rate_per_s"] = info.get("strain_rate_at_peak_per_s")
+            rows.append(row)
+    ch = np.array([r["rmse_change"] for r in rows], float)
+    n = ch.size
+    totals = {"folds": n, "mean_rmse_before": float(np.mean([r["rmse_before"] for r in rows])) if n else None,
+              "mean_rmse_after": float(np.mean([r["rmse_after"] for r in rows])) if n else None,
+              "mean_rmse_change": float(ch.mean()) if n else None,
+              "sd_rmse_change": float(ch.std(ddof=1)) if n > 1 else None,
+              "se_mean_rmse_change": float(ch.std(ddof=1) / math.sqrt(n)) if n > 1 else None,
+              "folds_worse": int(np.sum(ch > 0)), "folds_better": int(np.sum(ch < 0)),
+              "effects_kept": {e: sum(e in r["effects"] for r in rows) for e in sorted({e for r in rows for e in r["effects"]})}}
+    return {"rows": rows, "totals": totals}
+

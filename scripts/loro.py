@@ -1,0 +1,12 @@
+"""loro/summary.json + folds.png: leave one record out over a series (calibration.closing.loro_table)."""
+from calibration.closing import loro_table
+from calibration.plots import plot_loro
+from calibration.workflow_io import atomic_write_json, read_json
+
+folds = dict(zip(snakemake.params.folds, (read_json(p) for p in snakemake.input.reports)))
+info = {}
+for p in snakemake.input.obs:
+    info.update(read_json(p).get("record_info", {}))
+table = loro_table(folds, info)
+atomic_write_json(snakemake.output.summary, {"experiment": snakemake.wildcards.exp, **table})
+plot_loro(snakemake.output.png, table)
