@@ -157,7 +157,8 @@ def build(geometry: str, preset: str, params: dict | None = None, record=None,
                                transmission_gauge_m=DISC_GAUGE_M,
                                incident_length_m=DISC_INCIDENT_LENGTH_M,
                                transmission_length_m=DISC_TRANSMISSION_LENGTH_M, enforce_window=False,
-                               face_gap_m=p["face_gap.gap_m"], mesh_seed=mesh_seed, mesh_jitter=mesh_jitter,
+                               face_gap_m=p["face_gap.gap_m"], closure_range_m=p["closure.range_m"],
+                               mesh_seed=mesh_seed, mesh_jitter=mesh_jitter,
                                **{"flat_half_angle_deg": DISC_FLAT_HALF_ANGLE_DEG, **disc_kw})
         bar = g.bar_material
         if red is not None:
@@ -187,8 +188,8 @@ def build(geometry: str, preset: str, params: dict | None = None, record=None,
         if injection_distance_m is not None:
             bar_kw["incident_gauge_m"] = float(injection_distance_m)
         g = geo.cylinder(preset, L, D, Material(p["E"], p["nu"], p["rho"]), enforce_window=False,
-                         face_gap_m=p["face_gap.gap_m"], mesh_seed=mesh_seed, mesh_jitter=mesh_jitter,
-                         **bar_kw)
+                         face_gap_m=p["face_gap.gap_m"], closure_range_m=p["closure.range_m"],
+                         mesh_seed=mesh_seed, mesh_jitter=mesh_jitter, **bar_kw)
         bar = g.bar_material
         if red is not None:
             t_g, eps_g = red.incident_wave_at_gauge()
