@@ -17,7 +17,8 @@ Conventions
   effect (``face_gap_m > 0``): the incident bar's face is then at ``x_front - face_gap_m``. With the
   ``closure`` effect (``closure_range_m`` = Delta > 0) the specimen's front face is not parallel to the
   bar's: it is tilted so that the gap grows linearly across the face, from ``face_gap_m`` at its top
-  edge (largest y, where contact starts) to ``face_gap_m + Delta`` at its bottom edge (``_tilt_front``).
+  edge (largest y, where contact starts) to ``face_gap_m + Delta`` at its bottom edge (``_tilt_front``;
+  the catalogue's parameters, a mean gap and its spread, map onto these two by ``closure_faces``).
 * Plane stress with a thickness per body chosen so that each cross-section area matches the 3D test:
   a bar of diameter ``D`` is a strip of height ``D`` and thickness ``t = pi D / 4`` (so ``D t = pi D^2/4``);
   the disc's thickness is its real thickness; a cylinder of diameter ``D`` is a rectangle of height ``D``
@@ -435,6 +436,19 @@ def _realize(nodes: np.ndarray, tris: np.ndarray, node_sets: list, element_sets:
     keep = np.concatenate([np.asarray(s, np.int64).ravel() for s in node_sets]
                           + [tris[np.asarray(s, np.int64)].ravel() for s in element_sets])
     return perturb_interior_nodes(nodes, tris, keep, mesh_seed, jitter)
+
+
+def closure_faces(gap_m: float, range_m: float) -> tuple[float, float]:
+    """``(face_gap_m, closure_range_m)`` of the builders for the catalogue's ``face_gap.gap_m`` = g (the
+    mean gap: the bar face's travel to half contact) and ``closure.range_m`` = Delta (the spread of the
+    gap across the face): the face's gap runs from ``g_lo = max(0, g - Delta/2)`` (first touch) to
+    ``g_hi = g + Delta/2`` (full contact), so the builders get ``(g_lo, g_hi - g_lo)``. Delta = 0 gives
+    ``(g, 0)``, today's hard gap; g < Delta/2 clips the first touch at 0 (contact from the start)."""
+    g, d = float(gap_m), float(range_m)
+    if d == 0.0:
+        return g, 0.0
+    lo = max(0.0, g - 0.5 * d)
+    return lo, g + 0.5 * d - lo
 
 
 def _tilt_front(nodes: np.ndarray, front: np.ndarray, x_front: float, x_back: float,

@@ -2,7 +2,8 @@
 
 Checked here: at its null the base model is bit for bit what it was (a fast member against the curve
 of commit c4562fb, before the effect existed); the tilted face is the geometry the law assumes (the
-contact fraction a(u) = clip((u - g0) / Delta, 0, 1)); and on the model, the front force follows the
+contact fraction a(u) = clip((u - g0) / Delta, 0, 1), g0 the first touch, the catalogue's mean gap
+minus Delta / 2); and on the model, the front force follows the
 law's dynamic form F(t) = a(u(t)) 2 Z_s / (Z_s + Z_b) F_I(t) through the whole closure (1D fibre
 theory, first transit), starting at the time the free face has travelled g0 and without the step the
 hard gap has (2 Z_s / (Z_s + Z_b) F_I(t_c) within one sample).
@@ -81,6 +82,10 @@ def test_tilted_front_face_gives_a_contact_fraction_linear_in_the_closure(kind):
         closed = np.interp(u, gs[::-1], ys[::-1])  # the gap is monotone in y
         assert (ys.max() - closed) / (ys.max() - ys.min()) == pytest.approx(frac, abs=1e-9)
     assert tilt.summary()["closure_range_m"] == delta
+    # the catalogue's mean gap g and spread Delta -> first touch max(0, g - Delta/2), tilt to g + Delta/2
+    assert geo.closure_faces(190e-6, 0.0) == (190e-6, 0.0)
+    assert geo.closure_faces(135e-6, 150e-6) == pytest.approx((60e-6, 150e-6), abs=1e-15)
+    assert geo.closure_faces(50e-6, 200e-6) == pytest.approx((0.0, 150e-6), abs=1e-15)
     with pytest.raises(ValueError, match="flat front face"):
         geo.brazilian_disc("fast", closure_range_m=1e-4)
 
@@ -122,7 +127,7 @@ def test_gradual_closure_follows_the_fibre_law_from_first_touch_without_a_jump()
     its largest rise over one 0.25 us sample is under a quarter of the hard gap's step and a fifth of
     the hard gap's measured jump (measured 1.07 MPa, the contact's node-by-node ringing, against the
     hard gap's 5.94 MPa in one sample; the law's step 2 Z_s / (Z_s + Z_b) F_I(t_c) = 6.35 MPa)."""
-    t, s = _ramp({"face_gap.gap_m": G0, "closure.range_m": DELTA})
+    t, s = _ramp({"face_gap.gap_m": G0 + 0.5 * DELTA, "closure.range_m": DELTA})  # mean gap, spread
     t0, t_full = np.sqrt(G0 * T_R / A_V), np.sqrt((G0 + DELTA) * T_R / A_V)
     law = fibre_theory(t, G0, DELTA)
     # first touch: the model leaves zero (0.05 MPa) when the law does (it is quadratic there: 0.5 us after t_0)

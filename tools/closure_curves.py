@@ -3,7 +3,8 @@
 One fast cylinder member on CaMa_SHPB_004 (its measured incident wave, injected at the lab's gauge):
 the base model (faces in contact from the start), the hard gap (``face_gap``, the record's own face
 travel before load), the linear seating (``seating``, the top of its box) and the gradual closure
-(``closure``: first touch at g0, full contact at g0 + Delta), against the record; with a zoom on the
+(``closure``: the mean gap spread over Delta across the face, first touch at g - Delta/2,
+full contact at g + Delta/2), against the record; with a zoom on the
 closure and the stress rise per sample. The parameters are set by hand (printed in the title), not
 fitted. ``python -m tools.closure_curves [--out PNG]`` (about 15 s on one core).
 """
@@ -21,7 +22,7 @@ def cases(closure_before_load: float) -> dict[str, dict]:
     return {"base model (no gap)": {},
             f"hard gap {closure_before_load * 1e6:.0f} um": {"face_gap.gap_m": closure_before_load},
             "linear seating 2e-12 m/Pa": {"seating.compliance_m_per_Pa": 2e-12},
-            "gradual closure g0 150 um, Delta 200 um": {"face_gap.gap_m": 150e-6, "closure.range_m": 200e-6}}
+            "gradual closure: mean gap 250 um, spread 200 um": {"face_gap.gap_m": 250e-6, "closure.range_m": 200e-6}}
 
 
 def main(argv=None) -> None:
