@@ -5,8 +5,8 @@ the base model (faces in contact from the start), the hard gap (``face_gap``, th
 travel before load), the linear seating (``seating``, the top of its box) and the gradual closure
 (``closure``: the mean gap spread over Delta across the face, first touch at g - Delta/2,
 full contact at g + Delta/2), against the record; with a zoom on the
-closure and the stress rise per sample. The parameters are set by hand (printed in the title), not
-fitted. ``python -m tools.closure_curves [--out PNG]`` (about 15 s on one core).
+closure and the stress rise per sample. The parameters are set by hand, not
+fitted (they are in the legend). ``python -m tools.closure_curves [--out PNG]`` (about 15 s on one core).
 """
 from __future__ import annotations
 
