@@ -328,7 +328,9 @@ def measured_observations(records: Mapping[str, str | Path], *, t_start: float, 
                       "spreadsheet_strength_Pa": _float_or_none(spec.get("reference_stress_Pa")),
                       # the incident bar face's travel before the specimen carries 2 % of its peak: the
                       # record's own measure of the face gap (prior centre of its face_gap.gap_m)
-                      "closure_before_load_m": _closure_or_none(red)}
+                      "closure_before_load_m": _closure_or_none(red),
+                      # test covariates for the residual's trends across records (calibration.covariates)
+                      **_test_covariates(red, spec)}
     obs = Observations(pd.concat(frames, ignore_index=True), error_kind, corr,
                        {"source": "measured", "sigma_scale": sigma_scale, "record_info": info})
     return obs, reduced
@@ -360,6 +362,19 @@ def _float_or_none(v):
     except (TypeError, ValueError):
         return None
     return f if math.isfinite(f) else None
+
+
+def _test_covariates(red, spec) -> dict:
+    """The covariates of a test that its sheet or spreadsheet row gives, beside the strain rate: the
+    specimen's ``length_to_diameter`` [-], the gas (striker) pressure ``gas_pressure_Pa`` (the Freiburg
+    spreadsheet's "P (bar)", or a sheet's metadata) and the ``striker_velocity_m_s`` (a sheet's metadata);
+    None where not given."""
+    get = spec.get if hasattr(spec, "get") else (lambda k, d=None: d)
+    D = _float_or_none(red.specimen_diameter)
+    L = _float_or_none(red.specimen_length)
+    return {"length_to_diameter": L / D if (L is not None and D) else None,
+            "gas_pressure_Pa": _float_or_none(get("gas_pressure_Pa")),
+            "striker_velocity_m_s": _float_or_none(get("striker_velocity_m_s"))}
 
 
 def _closure_or_none(red, level: float = 0.02):

@@ -65,6 +65,47 @@ the model is the base model) and a one-line description with its equation. Two k
                                     own evidence: the incident bar's face (from incident and
                                     reflected waves) travels 100-270 um while the specimen carries
                                     under 5 % of its peak (README, "Closing the loop"). Box [0, 400 um].
+                                    With ``closure`` on, gap_m is the mean of a gap spread across the face.
+  ``closure.range_m``               Delta [m]: a **gradual closure** of the loaded face (a non-parallel
+                                    or rough front end). The gap between the incident bar's face and
+                                    the specimen is not one number: it spreads linearly across the face
+                                    over Delta around the mean gap g = ``face_gap.gap_m``, from
+                                    g_lo = max(0, g - Delta/2) (first touch) to g_hi = g + Delta/2
+                                    (full contact). When the bar's face has advanced by u the contact
+                                    covers the fraction a(u) = clip((u - g_lo) / (g_hi - g_lo), 0, 1)
+                                    of the face, so the face's contact stiffness rises with closure
+                                    instead of jumping. Two forms of the law (tests/test_closure.py
+                                    checks the second on the model): quasi-static, on a bed of
+                                    independent fibres of stiffness k per unit area and Delta <= 2 g,
+                                    F(u) = k A (u - g_lo)^2 / (2 Delta) for g_lo <= u <= g_hi, then
+                                    k A (u - g) (quadratic closure, then linear: the hard gap's line);
+                                    dynamic, each fibre that touches carries the 1D transmitted force,
+                                    so during the specimen's first transit the front force is
+                                    F(t) = a(u(t)) 2 Z_s / (Z_s + Z_b) F_I(t) (Z = rho c A of specimen
+                                    and bar, F_I the incident force, u(t) = 2 int v_I dt the free face's
+                                    travel), rising from zero at u = g_lo without a step. Delta -> 0 is
+                                    today's hard gap g, whose force jumps by 2 Z_s / (Z_s + Z_b) F_I(t_c)
+                                    at closure (30-40 MPa on the marble records). Null 0 (flat, parallel
+                                    ends; the base mesh bit for bit). Box [0, 400 um], the records' face
+                                    travel before load. Why this law and this parameterisation: one
+                                    parameter, a length; a uniform spread of gap heights over
+                                    [g_lo, g_hi] (a rough end's asperities, in the mean) gives the same
+                                    a(u) as a tilted flat end; and with g the mean gap the closure nests
+                                    the hard gap (a calibration that has fitted ``face_gap`` keeps its g
+                                    and only grows Delta from 0). Measured on a fast CaMa_SHPB_004 member
+                                    (g 135 um, Delta 150 um, 1.5 % noise, linearised): g and Delta are
+                                    correlated +0.14, where first touch and Delta would be -0.82.
+                                    ``face_gap``'s measured prior centre (the travel until 2 % of the
+                                    peak) is then nearer g_lo than g. Usable with ``face_gap`` (mean gap
+                                    g) or without it (g = 0: contact from the start, full at Delta/2).
+                                    Implemented as geometry (``shpb.geometry.closure_faces`` and
+                                    ``_tilt_front``: the specimen's front face tilted by g_hi - g_lo, the
+                                    back face flat), not as a kernel law: the engine's node-to-edge
+                                    penalty contact resolves the growing contact itself, so the effect
+                                    costs nothing per step and nothing at all at its null. In 2D the face
+                                    is a line and the contact width grows linearly with closure; a 3D
+                                    tilted circular end would first touch at one rim point (area ~
+                                    (u - g_lo)^(3/2) early on).
 
 **Scope.** Every entry says whether it is a property of one test (``per_record``: the seating of that
 specimen, the trigger and amplifier settings of that recording) or of the material and model
@@ -303,6 +344,15 @@ CATALOGUE: dict[str, Effect] = {e.name: e for e in (
            # per record: every specimen has its own ends and seating; the record's own incident and
            # reflected waves measure the face's travel before load (its prior centre)
            scope="per_record", record_prior=(("gap_m", "closure_before_load_m"),)),
+    Effect("closure", "physical", (_P("range_m", 0.0, 4e-4, 0.0, "m"),),
+           "gradual face closure: a non-parallel (or rough) front end, the gap spread across the face over "
+           "range_m around the mean gap g = face_gap.gap_m, from max(0, g - range/2) to g + range/2, so the "
+           "contact fraction grows linearly with the bar face's advance (no step at closure)",
+           fdem="the specimen's front face tilted across its height (shpb.geometry.closure_faces, "
+                "closure_range_m; the back face flat); the bar-specimen penalty contact closes it "
+                "progressively",
+           # per record: every specimen has its own ends
+           scope="per_record"),
     Effect("seating", "physical", (_P("compliance_m_per_Pa", 0.0, 2e-12, 0.0, "m/Pa"),),
            "contact seating: extra face closure delta = C sigma_n at the loaded faces",
            fdem="normal stiffness per unit area of the bar-specimen contact 1/(1/k_contact + C), "

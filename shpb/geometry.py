@@ -14,7 +14,11 @@ Conventions
   the incident bar's end face is the line ``x = x_front`` (the specimen's minimum x), the transmission
   bar's is ``x = x_back`` (its maximum x). A disc touches each bar at one node, its extreme node
   ``(+-R, 0)``; a cylinder touches along its whole end face. The one exception is the ``face_gap``
-  effect (``face_gap_m > 0``): the incident bar's face is then at ``x_front - face_gap_m``.
+  effect (``face_gap_m > 0``): the incident bar's face is then at ``x_front - face_gap_m``. With the
+  ``closure`` effect (``closure_range_m`` = Delta > 0) the specimen's front face is not parallel to the
+  bar's: it is tilted so that the gap grows linearly across the face, from ``face_gap_m`` at its top
+  edge (largest y, where contact starts) to ``face_gap_m + Delta`` at its bottom edge (``_tilt_front``;
+  the catalogue's parameters, a mean gap and its spread, map onto these two by ``closure_faces``).
 * Plane stress with a thickness per body chosen so that each cross-section area matches the 3D test:
   a bar of diameter ``D`` is a strip of height ``D`` and thickness ``t = pi D / 4`` (so ``D t = pi D^2/4``);
   the disc's thickness is its real thickness; a cylinder of diameter ``D`` is a rectangle of height ``D``
@@ -155,6 +159,7 @@ class Geometry:
     centre_radius_m: float = 0.0
     mesh_seed: int | None = None
     mesh_jitter: float = MESH_JITTER
+    closure_range_m: float = 0.0
 
     def body(self, name: str) -> Body:
         """The body called ``name`` (a body name or one of the roles' names)."""
@@ -221,6 +226,7 @@ class Geometry:
             "centre_radius_m": float(self.centre_radius_m),
             "mesh_seed": None if self.mesh_seed is None else int(self.mesh_seed),
             "mesh_jitter": float(self.mesh_jitter),
+            "closure_range_m": float(self.closure_range_m),
             "element_counts": self.element_counts,
             "n_triangles_total": int(sum(self.element_counts.values())),
             "bodies": bodies,
@@ -239,7 +245,8 @@ def brazilian_disc(preset: str | Preset = "standard", *,
                    incident_length_m: float | None = None, transmission_length_m: float | None = None,
                    enforce_window: bool = True, flat_half_angle_deg: float = 0.0,
                    face_gap_m: float = 0.0, bar_face_h_m: float | None = None,
-                   mesh_seed: int | None = None, mesh_jitter: float = MESH_JITTER) -> Geometry:
+                   mesh_seed: int | None = None, mesh_jitter: float = MESH_JITTER,
+                   closure_range_m: float = 0.0) -> Geometry:
     """Brazilian disc between an incident and a transmission bar (the paper's set-up), 2D along x.
 
     diameter_m, thickness_m: disc diameter and real thickness [m] (the plane-stress thickness).
@@ -260,6 +267,8 @@ def brazilian_disc(preset: str | Preset = "standard", *,
         pressed by bar nodes, not by one bar node every few specimen elements).
     mesh_seed, mesh_jitter: None (default) keeps Triangle's disc mesh; a seed perturbs its interior
         nodes (``_realize``).
+    closure_range_m: the ``closure`` effect's Delta [m]: the front flat is tilted so that its gap to the
+        bar grows from ``face_gap_m`` to ``face_gap_m + Delta`` across it (``_tilt_front``; flats only).
     """
     p = get_preset(preset)
     _check_positive(diameter_m=diameter_m, thickness_m=thickness_m, bar_diameter_m=bar_diameter_m,
@@ -285,6 +294,7 @@ def brazilian_disc(preset: str | Preset = "standard", *,
     front = np.flatnonzero((nodes[:, 0] == x_front) & on_axis)
     back = np.flatnonzero((nodes[:, 0] == x_back) & on_axis)
     nodes = _realize(nodes, tris, [front, back], [centre], mesh_seed, mesh_jitter)
+    nodes = _tilt_front(nodes, front, x_front, x_back, closure_range_m)
     specimen = Body("disc", nodes, tris, disc, thickness=thickness_m, fracturable=True,
                     node_sets={"front_face": front, "back_face": back},
                     element_sets={"centre": centre})
@@ -301,7 +311,8 @@ def brazilian_disc(preset: str | Preset = "standard", *,
         specimen_dims={"diameter_m": float(diameter_m), "thickness_m": float(thickness_m)},
         bar_material=bar, bar_diameter_m=float(bar_diameter_m), bar_thickness_m=bar_thickness(bar_diameter_m),
         bar_length_m=(float(L_i), float(L_t)), window_s=float(window_s), loading="free_end_velocity",
-        element_size_m=_sizes(p), centre_radius_m=r_c, mesh_seed=mesh_seed, mesh_jitter=float(mesh_jitter))
+        element_size_m=_sizes(p), centre_radius_m=r_c, mesh_seed=mesh_seed, mesh_jitter=float(mesh_jitter),
+        closure_range_m=float(closure_range_m))
 
 
 def cylinder(preset: str | Preset, length_m: float, diameter_m: float, rock: Material, *, bar: Material = TITANIUM_BAR, bar_diameter_m: float = 0.050,
@@ -310,7 +321,7 @@ def cylinder(preset: str | Preset, length_m: float, diameter_m: float, rock: Mat
              transmission_gauge_m: float = FREIBURG_GAUGE_DISTANCES_M[1],
              transmission_length_m: float | None = None, enforce_window: bool = True,
              face_gap_m: float = 0.0, mesh_seed: int | None = None,
-             mesh_jitter: float = MESH_JITTER) -> Geometry:
+             mesh_jitter: float = MESH_JITTER, closure_range_m: float = 0.0) -> Geometry:
     """Cylindrical compression specimen between titanium bars (the Freiburg set-up), 2D along x.
 
     length_m, diameter_m: specimen length (along x) and diameter [m]; it is a rectangle of height D with
@@ -326,6 +337,9 @@ def cylinder(preset: str | Preset, length_m: float, diameter_m: float, rock: Mat
         bar moves back by it, so the gauge stays ``incident_gauge_m`` from the bar's face.
     mesh_seed, mesh_jitter: None (default) keeps Triangle's rectangle mesh; a seed perturbs its interior
         nodes (``_realize``).
+    closure_range_m: the ``closure`` effect's Delta [m] (a non-parallel front end): the front face is
+        tilted so that its gap to the bar grows from ``face_gap_m`` at ``y = +D/2`` to ``face_gap_m +
+        Delta`` at ``y = -D/2`` (``_tilt_front``).
     """
     p = get_preset(preset)
     _check_positive(length_m=length_m, diameter_m=diameter_m, bar_diameter_m=bar_diameter_m,
@@ -349,6 +363,7 @@ def cylinder(preset: str | Preset, length_m: float, diameter_m: float, rock: Mat
     centre, r_c = _centre_set(nodes, tris, (0.0, 0.0), CENTRE_RADIUS_FRACTION * min(length_m, diameter_m))
     front, back = np.flatnonzero(nodes[:, 0] == x_front), np.flatnonzero(nodes[:, 0] == x_back)
     nodes = _realize(nodes, tris, [front, back], [centre], mesh_seed, mesh_jitter)
+    nodes = _tilt_front(nodes, front, x_front, x_back, closure_range_m)
     specimen = Body("cylinder", nodes, tris, rock, thickness=bar_thickness(diameter_m), fracturable=True,
                     node_sets={"front_face": front, "back_face": back},
                     element_sets={"centre": centre})
@@ -364,7 +379,8 @@ def cylinder(preset: str | Preset, length_m: float, diameter_m: float, rock: Mat
                        "thickness_m": bar_thickness(diameter_m)},
         bar_material=bar, bar_diameter_m=float(bar_diameter_m), bar_thickness_m=bar_thickness(bar_diameter_m),
         bar_length_m=(L_i, float(L_t)), window_s=float(window_s), loading="gauge_injection",
-        element_size_m=_sizes(p), centre_radius_m=r_c, mesh_seed=mesh_seed, mesh_jitter=float(mesh_jitter))
+        element_size_m=_sizes(p), centre_radius_m=r_c, mesh_seed=mesh_seed, mesh_jitter=float(mesh_jitter),
+        closure_range_m=float(closure_range_m))
 
 
 def plot_geometry(geometry: Geometry, path, *, zoom_m: float | None = None) -> None:
@@ -420,6 +436,44 @@ def _realize(nodes: np.ndarray, tris: np.ndarray, node_sets: list, element_sets:
     keep = np.concatenate([np.asarray(s, np.int64).ravel() for s in node_sets]
                           + [tris[np.asarray(s, np.int64)].ravel() for s in element_sets])
     return perturb_interior_nodes(nodes, tris, keep, mesh_seed, jitter)
+
+
+def closure_faces(gap_m: float, range_m: float) -> tuple[float, float]:
+    """``(face_gap_m, closure_range_m)`` of the builders for the catalogue's ``face_gap.gap_m`` = g (the
+    mean gap: the bar face's travel to half contact) and ``closure.range_m`` = Delta (the spread of the
+    gap across the face): the face's gap runs from ``g_lo = max(0, g - Delta/2)`` (first touch) to
+    ``g_hi = g + Delta/2`` (full contact), so the builders get ``(g_lo, g_hi - g_lo)``. Delta = 0 gives
+    ``(g, 0)``, today's hard gap; g < Delta/2 clips the first touch at 0 (contact from the start)."""
+    g, d = float(gap_m), float(range_m)
+    if d == 0.0:
+        return g, 0.0
+    lo = max(0.0, g - 0.5 * d)
+    return lo, g + 0.5 * d - lo
+
+
+def _tilt_front(nodes: np.ndarray, front: np.ndarray, x_front: float, x_back: float,
+                closure_range_m: float) -> np.ndarray:
+    """The specimen's nodes with its front face tilted by ``closure_range_m`` = Delta (``closure`` effect).
+
+    With ``eta(y) = (y_hi - y) / (y_hi - y_lo)`` clipped to [0, 1] (``y_lo``, ``y_hi`` the front face's
+    extent), every node moves by ``Delta eta(y) (x_back - x) / (x_back - x_front)`` along +x: the front
+    face becomes the straight line ``x = x_front + Delta eta(y)`` (its gap to a flat bar face grows
+    linearly across it, 0 extra at ``y_hi``), the back face stays, and the strain of the map (at most
+    Delta / L, 1 % for 400 um on 40 mm) is spread over the specimen. Delta = 0 returns ``nodes``
+    itself (the base model's mesh, bit for bit)."""
+    d = float(closure_range_m)
+    if not (math.isfinite(d) and d >= 0.0):
+        raise ValueError(f"closure_range_m must be a finite range >= 0 m, got {closure_range_m}")
+    if d == 0.0:
+        return nodes
+    y_f = nodes[np.asarray(front, np.int64), 1]
+    y_lo, y_hi = float(y_f.min()), float(y_f.max())
+    if not y_hi > y_lo:
+        raise ValueError("closure_range_m > 0 needs a flat front face (a round disc touches the bar at one node)")
+    eta = np.clip((y_hi - nodes[:, 1]) / (y_hi - y_lo), 0.0, 1.0)
+    out = nodes.copy()
+    out[:, 0] += d * eta * (x_back - nodes[:, 0]) / (x_back - x_front)
+    return out
 
 
 # --------------------------------------------------------------------------------------------------

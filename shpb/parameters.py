@@ -11,7 +11,9 @@ interface_friction.mu (Coulomb friction at the bar-specimen faces), seating.comp
 rate_strength.k (DIF = max(1, 1 + k log10(rate / 1 s^-1)) on both joint strengths, rate = the
 joint's relative face velocity over its element size; fdem.model.JointParams.rate_k), face_gap.gap_m
 (an initial gap [m] between the incident bar and the specimen's front face, which the bar's face must
-close before the specimen takes load; shpb.geometry).
+close before the specimen takes load; shpb.geometry), closure.range_m (a non-parallel front end: the gap
+grows across the face from face_gap.gap_m to face_gap.gap_m + range, so the face closes progressively;
+shpb.geometry).
 """
 from __future__ import annotations
 
@@ -44,7 +46,7 @@ BRAZILIAN_DEFAULTS = {
     "E": 35e9, "nu": 0.16, "rho": 2550.0,
     "phi_deg": 54.0, "mu_crack": 0.85, "penalty_factor": 10.0, "contact_penalty_factor": 2.0,
     "damping.beta": 0.0, "interface_friction.mu": 0.0, "seating.compliance_m_per_Pa": 0.0,
-    "rate_strength.k": 0.0, "face_gap.gap_m": 0.0,
+    "rate_strength.k": 0.0, "face_gap.gap_m": 0.0, "closure.range_m": 0.0,
 }
 
 # Cylinder (uniaxial compression, Carrara marble records): E, nu, rho are overwritten by the
@@ -58,7 +60,7 @@ CYLINDER_DEFAULTS = {
     "E": 50e9, "nu": 0.27, "rho": 2700.0,
     "phi_deg": 30.0, "mu_crack": 0.85, "penalty_factor": 10.0, "contact_penalty_factor": 2.0,
     "damping.beta": 0.0, "interface_friction.mu": 0.0, "seating.compliance_m_per_Pa": 0.0,
-    "rate_strength.k": 0.0, "face_gap.gap_m": 0.0,
+    "rate_strength.k": 0.0, "face_gap.gap_m": 0.0, "closure.range_m": 0.0,
 }
 
 _BOUNDS = {
@@ -72,6 +74,7 @@ _BOUNDS = {
     "seating.compliance_m_per_Pa": (0.0, 1e-9, True),
     "rate_strength.k": (0.0, 2.0, True),
     "face_gap.gap_m": (0.0, 2e-3, True),
+    "closure.range_m": (0.0, 2e-3, True),
 }
 
 

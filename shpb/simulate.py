@@ -125,6 +125,13 @@ def _sheet_bars(bars) -> dict:
             "transmission_length_m": max(CYL_TRANSMISSION_LENGTH_M, float(d_t) + 0.10)}
 
 
+def _faces(p: dict) -> dict:
+    """The builders' face arguments for the catalogue's mean face gap and its spread across the face
+    (``face_gap.gap_m``, ``closure.range_m``; ``shpb.geometry.closure_faces``): first touch and tilt."""
+    lo, tilt = geo.closure_faces(p["face_gap.gap_m"], p["closure.range_m"])
+    return {"face_gap_m": lo, "closure_range_m": tilt}
+
+
 def build(geometry: str, preset: str, params: dict | None = None, record=None,
           pulse: TrapezoidPulse | None = None, window_s: float | None = None,
           specimen_size_m: tuple[float, float] | None = None, unbreakable: bool = False,
@@ -152,12 +159,14 @@ def build(geometry: str, preset: str, params: dict | None = None, record=None,
             red, disc_kw, base = _measured_disc(record)
         base.update(p_given)
         p = resolve(geometry, base)
+        faces = _faces(p)
         disc = Material(p["E"], p["nu"], p["rho"])
         g = geo.brazilian_disc(preset, disc=disc, incident_gauge_m=DISC_GAUGE_M,
                                transmission_gauge_m=DISC_GAUGE_M,
                                incident_length_m=DISC_INCIDENT_LENGTH_M,
                                transmission_length_m=DISC_TRANSMISSION_LENGTH_M, enforce_window=False,
-                               face_gap_m=p["face_gap.gap_m"], mesh_seed=mesh_seed, mesh_jitter=mesh_jitter,
+                               **faces,
+                               mesh_seed=mesh_seed, mesh_jitter=mesh_jitter,
                                **{"flat_half_angle_deg": DISC_FLAT_HALF_ANGLE_DEG, **disc_kw})
         bar = g.bar_material
         if red is not None:
@@ -184,11 +193,12 @@ def build(geometry: str, preset: str, params: dict | None = None, record=None,
             red, (L, D), base = None, specimen_size_m, {}
         base.update(p_given)
         p = resolve(geometry, base)
+        faces = _faces(p)
         if injection_distance_m is not None:
             bar_kw["incident_gauge_m"] = float(injection_distance_m)
         g = geo.cylinder(preset, L, D, Material(p["E"], p["nu"], p["rho"]), enforce_window=False,
-                         face_gap_m=p["face_gap.gap_m"], mesh_seed=mesh_seed, mesh_jitter=mesh_jitter,
-                         **bar_kw)
+                         **faces,
+                         mesh_seed=mesh_seed, mesh_jitter=mesh_jitter, **bar_kw)
         bar = g.bar_material
         if red is not None:
             t_g, eps_g = red.incident_wave_at_gauge()

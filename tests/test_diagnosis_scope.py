@@ -99,9 +99,9 @@ def run(candidates, seed=4):
 def test_every_catalogue_entry_declares_a_scope():
     assert fx.SCOPES == ("per_record", "shared")
     scopes = {e.name: e.scope for e in fx.effects()}
-    assert set(scopes.values()) <= set(fx.SCOPES) and len(scopes) == 9
+    assert set(scopes.values()) <= set(fx.SCOPES) and len(scopes) == 10
     assert {n for n, s in scopes.items() if s == "per_record"} == {
-        "face_gap", "seating", "trigger_shift", "gauge_gain", "baseline", "lowpass"}
+        "face_gap", "closure", "seating", "trigger_shift", "gauge_gain", "baseline", "lowpass"}
     assert {n for n, s in scopes.items() if s == "shared"} == {"rate_strength", "damping", "interface_friction"}
     assert fx.get_effect("face_gap").record_prior == (("gap_m", "closure_before_load_m"),)
     assert fx.get_effect("face_gap").to_dict()["scope"] == "per_record"

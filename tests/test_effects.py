@@ -19,10 +19,10 @@ def test_catalogue_declares_the_issue_effects_with_boxes_containing_their_nulls(
     names = {n for e in fx.effects() for n in e.param_names}
     assert {"trigger_shift.dt_s", "gauge_gain.g", "baseline.offset_Pa", "baseline.drift_Pa_per_s", "lowpass.tau_s",
             "rate_strength.k", "damping.beta", "interface_friction.mu",
-            "seating.compliance_m_per_Pa", "face_gap.gap_m"} <= names
+            "seating.compliance_m_per_Pa", "face_gap.gap_m", "closure.range_m"} <= names
     assert {e.name for e in fx.effects("measurement")} == {"trigger_shift", "gauge_gain", "baseline", "lowpass"}
     assert {e.name for e in fx.effects("physical")} == {"rate_strength", "damping", "interface_friction", "seating",
-                                                          "face_gap"}
+                                                          "face_gap", "closure"}
     for e in fx.effects():
         assert e.description and all(lo <= z <= hi for lo, z, hi in zip(e.lower, e.nulls, e.upper))
         assert (e.apply is not None) == (e.kind == "measurement")
