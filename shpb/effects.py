@@ -180,6 +180,11 @@ class Effect:
     scope: str = ""
     record_prior: tuple[tuple[str, str], ...] = ()
 
+    def __reduce__(self):
+        # a catalogue entry travels by name (its apply functions are lambdas, which pickle cannot carry):
+        # the diagnosis hands its selection from one Snakemake job to the next as a pickle
+        return (get_effect, (self.name,))
+
     def __post_init__(self):
         if self.kind not in KINDS:
             raise ValueError(f"effect {self.name!r}: kind must be one of {KINDS}")

@@ -149,10 +149,13 @@ def _ranked(model, spec: ModelSpec, step: ModelStep, remaining: list, calib: lis
     return [by_name[e] for e in table["effect"]]
 
 
-def _trial_text(name: str, cur: CVResult, new: CVResult, cmp: dict, level: float, K: int, ok: bool) -> str:
+def _trial_text(name: str, cur: CVResult, new: CVResult, cmp: dict, level: float, K: int, ok: bool,
+                gate: str = "significance") -> str:
+    verdict = (("proposed for the real-simulator check" if ok else "not proposed (the error does not fall)")
+               if gate == "improvement" else ("accepted" if ok else "not accepted"))
     return (f"{name}: cross-validated RMSE {cur.rmse:.4g} -> {new.rmse:.4g}; the squared-error sum falls by "
             f"{cmp['delta']:.4g} with sd {cmp['sd']:.4g} (z = {cmp['z']:.2f}, one-sided p = {cmp['p']:.3g}, "
-            f"Holm level {level:.3g} over {K} candidate(s)): " + ("accepted" if ok else "not accepted"))
+            f"Holm level {level:.3g} over {K} candidate(s)): " + verdict)
 
 
 def _round(model, state: dict, remaining: list, calib: list, obs: Mapping, errors: RecordErrors, kw: dict) -> dict:
@@ -172,13 +175,18 @@ def _round(model, state: dict, remaining: list, calib: list, obs: Mapping, error
         cmp = compare_cv(obs, {j: cur.curve(j) for j in calib}, {j: cv.curve(j) for j in calib}, errors, **spreads)
         trials.append({"candidate": c, "cv": cv, "cmp": cmp})
     accepted, levels = holm([t["cmp"]["p"] for t in trials] + [1.0] * (K - len(tried)), kw["alpha"])
+    if kw["gate"] == "improvement":
+        # the emulator only proposes: a candidate goes on when its cross-validated squared error falls at
+        # all; the real-simulator walk (confirm_additions) is then the test, Holm-level per round
+        accepted = [t["cmp"]["delta"] > 0 for t in trials]
     rows = []
     for t, ok, lev in zip(trials, accepted, levels):
         t["accepted"] = ok
         rows.append({"effect": t["candidate"].name, "cv_rmse": t["cv"].rmse, "cv_lpd": t["cv"].lpd,
                      "delta_sq_error": t["cmp"]["delta"], "sd": t["cmp"]["sd"], "z": t["cmp"]["z"],
                      "p": t["cmp"]["p"], "level": lev, "accepted": bool(ok),
-                     "text": _trial_text(t["candidate"].name, cur, t["cv"], t["cmp"], lev, K, ok)})
+                     "text": _trial_text(t["candidate"].name, cur, t["cv"], t["cmp"], lev, K, ok,
+                                         kw["gate"])})
     passing = [t for t in trials if t["accepted"]]
     best = max(passing, key=lambda t: t["cmp"]["delta"]) if passing else None
     return {"current": spec.label(), "current_cv_rmse": cur.rmse, "in_play": K,
@@ -196,7 +204,8 @@ def select_effects(model: ForwardModel, *, base_names: Sequence[str], candidates
                    max_additions: int = 2, alpha: float = 0.05, seed: int = 0, n_members: int = 80,
                    esmda_steps: int = 4, scales: Mapping[str, str] | None = None, band_level: float = 0.90,
                    population_kw: Mapping | None = None, max_trials: int | None = None,
-                   fd_fraction: float = 1e-3, prediction_spread: bool = False) -> Selection:
+                   fd_fraction: float = 1e-3, prediction_spread: bool = False,
+                   gate: str = "significance") -> Selection:
     """Greedy forward selection of effects by cross-validation within the calibration records (module
     docstring, step 2).
 
@@ -214,14 +223,21 @@ def select_effects(model: ForwardModel, *, base_names: Sequence[str], candidates
         ``floor_fraction``, ``min_records``, ``predictive``).
     prediction_spread : add each cross-validated prediction's own calibration spread to the uncertainty
         of the difference (:mod:`.crossval`; more cautious, less power).
+    gate : ``"significance"`` (default): a candidate is added when its gain passes the Holm-corrected
+        test on the forward model given; ``"improvement"``: when its cross-validated squared error falls
+        at all, the best one first. Use ``"improvement"`` when the forward model is an emulator too coarse
+        to resolve the gains (its error dominates the difference's sd) and every addition is then
+        confirmed on the real simulator (:func:`confirm_additions`), which carries the test.
     """
+    if gate not in ("significance", "improvement"):
+        raise ValueError(f"gate must be 'significance' or 'improvement', got {gate!r}")
     calib, heldout = list(calib_records), list(heldout_records)
     if set(calib) & set(heldout):
         raise ValueError(f"records both calibration and held-out: {sorted(set(calib) & set(heldout))}")
     cal_obs = {r: np.array(obs[r], dtype=float) for r in calib}  # the only read of the observations
     kw = {"seed": seed, "n_members": n_members, "esmda_steps": esmda_steps, "scales": scales,
           "band_level": band_level, "population_kw": population_kw, "max_trials": max_trials, "alpha": alpha,
-          "scopes": scopes, "fd_fraction": fd_fraction, "prediction_spread": prediction_spread}
+          "scopes": scopes, "fd_fraction": fd_fraction, "prediction_spread": prediction_spread, "gate": gate}
     spec = ModelSpec.of(base_names)
     cv = cross_validate(model, spec, calib, cal_obs, errors, **_cv_kw(kw))
     steps = [_final_step(model, spec, cv, 0, 0, calib, heldout, cal_obs, errors, kw)]
@@ -236,7 +252,8 @@ def select_effects(model: ForwardModel, *, base_names: Sequence[str], candidates
         best = rnd.pop("_best")
         rounds.append(rnd)
         if best is None:
-            why = (f"no candidate lowers the cross-validated error of {spec.label()} by more than its "
+            why = (f"no candidate lowers the cross-validated error of {spec.label()}" if gate == "improvement" else
+                   f"no candidate lowers the cross-validated error of {spec.label()} by more than its "
                    f"uncertainty (one-sided, family-wise {alpha:g} over {rnd['in_play']} candidate(s))")
             rnd["text"] = why
             break

@@ -1,0 +1,128 @@
+"""The frozen protocol in the workflow (calibration.closing, rules/diagnosis.smk): candidates, the error
+terms a held-out record gets, leave-one-record-out folds and their table, and the DAG of a series."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from calibration.closing import candidate_effects, loro_folds, loro_table, protocol_errors
+from calibration.observations import Observations
+from calibration.workflow_io import ConfigError, load_yaml, validate_config
+from shpb import effects as fx
+
+REPO = Path(__file__).resolve().parents[1]
+SCHEMA = REPO / "config" / "schema.yaml"
+
+
+def test_the_whole_catalogue_is_offered_unless_the_config_leaves_an_effect_out():
+    everything = [e.name for e in fx.effects()]
+    assert candidate_effects({}) == everything
+    assert "closure" in everything and "interface_friction" in everything
+    assert candidate_effects({"exclude": ["damping", "seating"]}) == [e for e in everything
+                                                                       if e not in ("damping", "seating")]
+    assert candidate_effects({"candidates": ["face_gap", "gauge_gain"], "exclude": ["gauge_gain"]}) == ["face_gap"]
+
+
+def _series(validation="loro", held=()):
+    base = load_yaml(REPO / "config" / "diagnosis.yaml")
+    exp = base["experiments"]["marble_loro"]
+    exp["diagnosis"] = {**exp["diagnosis"], "validation": validation, "heldout_records": list(held)}
+    return {"run": ["marble_loro"], "experiments": {"marble_loro": exp}}
+
+
+def test_leave_one_record_out_folds_hold_each_record_out_once_and_change_nothing_else():
+    cfg = validate_config(_series(), SCHEMA, base_dir=REPO)
+    exp = cfg["experiments"]["marble_loro"]
+    folds = loro_folds("marble_loro", exp)
+    records = exp["observations"]["records"]
+    assert len(folds) == len(records) == 4
+    held = []
+    for name, fold in folds.items():
+        (h,) = fold["diagnosis"]["heldout_records"]
+        held.append(h)
+        assert name == "marble_loro__" + Path(h).name.split("_Ti")[0]
+        assert fold["observations"]["records"] == [r for r in records if r != h]
+        assert fold["diagnosis"]["validation"] == "holdout" and fold["loro_of"] == "marble_loro"
+        assert fold["seed"] == exp["seed"] and fold["parameters"] == exp["parameters"]
+    assert sorted(held) == sorted(records)
+
+
+def test_a_series_that_also_lists_held_out_records_or_has_two_records_is_refused():
+    with pytest.raises(ConfigError, match="validation loro every record"):
+        validate_config(_series(held=["data/freiburg-rae-rock-shpb/Rae2021/SHPBdata/CaMa/"
+                                      "CaMa_SHPB_004_Ti25_50b_Al12b_0_001.txt"]), SCHEMA, base_dir=REPO)
+    cfg = _series()
+    cfg["experiments"]["marble_loro"]["observations"]["records"] = cfg["experiments"]["marble_loro"]["observations"]["records"][:2]
+    with pytest.raises(ConfigError, match="at least 3 records"):
+        validate_config(cfg, SCHEMA, base_dir=REPO)
+
+
+def test_a_dry_run_of_a_series_runs_its_folds_and_not_the_series_itself(tmp_path):
+    cfg = _series()
+    o = cfg["experiments"]["marble_loro"]["observations"]
+    o["records"] = [str(REPO / r) for r in o["records"]]
+    (tmp_path / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    dag = subprocess.run([sys.executable, "-m", "snakemake", "--snakefile", str(REPO / "Snakefile"), "--directory",
+                          str(tmp_path), "--configfile", str(tmp_path / "config.yaml"), "--workflow-profile", "none",
+                          "-n", "--cores", "1", "--printshellcmds", "--summary"], capture_output=True, text=True,
+                         timeout=300)
+    assert dag.returncode == 0, dag.stderr[-3000:]
+    text = dag.stdout
+    for rec in ("CaMa_SHPB_016", "CaMa_SHPB_006", "CaMa_SHPB_015", "CaMa_SHPB_019"):
+        assert f"results/marble_loro__{rec}/iter_0/params.csv" in text
+    assert "results/marble_loro/loro/summary.json" in text
+    assert "results/marble_loro/iter_0/params.csv" not in text
+
+
+def _obs(values, sigma, records, t):
+    import pandas as pd
+
+    from calibration.observations import OBS_COLUMNS
+
+    frame = pd.DataFrame({"record": np.repeat(records, t.size), "time_s": np.tile(t, len(records)),
+                          "stress_Pa": values, "sigma_Pa": sigma})
+    assert list(frame.columns) == list(OBS_COLUMNS)
+    return Observations(frame, "ar1", {r: 2e-6 for r in records})
+
+
+def test_a_held_out_record_takes_its_noise_and_the_calibration_records_average_variability_never_its_curve():
+    t = np.arange(0.0, 40e-6, 2e-6)
+    m = t.size
+    cal = _obs(np.zeros(2 * m), np.full(2 * m, 1e5), ["A", "B"], t)
+    sd = np.concatenate([np.full(m, 2e5), np.full(m, 4e5)])
+    analysis = {"model_error": {"simulator_variability": {"sd_Pa": sd.tolist(), "corr_time_s": 5e-6},
+                                "discrepancy": {"records": {
+                                    r: {"sigma_pre": s, "sigma_post": s, "corr_time_s": 1e-5, "split_time_s": None}
+                                    for r, s in (("A", 1e6), ("B", 3e6))}}}}
+    held = _obs(np.linspace(0, 5e7, m), np.full(m, 2e5), ["H"], t)
+    noise, sim = protocol_errors(cal, analysis, held)
+    corrupted = _obs(np.random.default_rng(0).normal(0, 1e8, m), np.full(m, 2e5), ["H"], t)
+    noise2, sim2 = protocol_errors(cal, analysis, corrupted)
+    assert np.array_equal(noise["H"].dense(), noise2["H"].dense()) and np.array_equal(sim["H"].dense(), sim2["H"].dense())
+    # its own noise (0.2 MPa), the calibration records' average S (0.04 + 0.16)/2 MPa^2; the discrepancy,
+    # fitted to the base model's residual, is not a term of the selection's gate
+    assert noise["H"].dense()[0, 0] == pytest.approx(0.04e12, rel=1e-9)
+    assert sim["H"].dense()[0, 0] == pytest.approx(0.10e12, rel=1e-6)
+    assert noise["A"].dense()[0, 0] == pytest.approx(0.01e12, rel=1e-9)
+
+
+def test_the_series_table_reports_each_fold_and_the_mean_change_with_its_spread():
+    def rep(h, before, after, added):
+        return {"heldout": {h: {"before": {"rmse": before, "peak_error": 1.0, "time_to_peak_error": 0.0},
+                                "after": {"rmse": after, "peak_error": 0.5, "time_to_peak_error": 0.0,
+                                          "point": {}, "intervals": {}}}},
+                "selection": {"steps": [{"posterior": {}}, {"posterior": {"k": {"mean": 0.3}}}]},
+                "shipped_step": 1 if added else 0, "calib_records": ["x"], "added": added,
+                "verdict": "confirmed" if added else "base_kept"}
+    t = loro_table({"s__A": rep("A", 10.0, 6.0, ["face_gap"]), "s__B": rep("B", 8.0, 8.0, []),
+                    "s__C": rep("C", 12.0, 7.0, ["face_gap", "closure"])}, {"A": {"strain_rate_at_peak_per_s": 100.0}})
+    tot = t["totals"]
+    assert tot["folds"] == 3 and tot["folds_worse"] == 0 and tot["folds_better"] == 2
+    assert tot["mean_rmse_change"] == pytest.approx(-3.0)
+    assert tot["sd_rmse_change"] == pytest.approx(np.std([-4.0, 0.0, -5.0], ddof=1))
+    assert tot["effects_kept"] == {"closure": 1, "face_gap": 2}
+    assert t["rows"][0]["strain_rate_per_s"] == 100.0 and t["rows"][0]["estimates"] == {"k": {"mean": 0.3}}
