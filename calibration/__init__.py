@@ -4,7 +4,8 @@ inference (:mod:`enkf`).
 Observations from twins and measured records (:mod:`.observations`), the experiment's inference
 settings and its analysis steps, stop decision and summary (:mod:`.experiment`), the reported
 posterior (:mod:`.posterior`), the verdict (:mod:`.verdict`), the global sensitivity stage
-(:mod:`.sensitivity`), the discrepancy loop on SHPB experiments (:mod:`.diagnose`), the config
+(:mod:`.sensitivity`), closing the loop on SHPB experiments (the frozen protocol: :mod:`.closing`,
+:mod:`.protocol`, the emulated FDEM model :mod:`.diagnose`, test covariates :mod:`.covariates`), the config
 validation (:mod:`.config_check`), the member runner (:mod:`.runner`), the ensemble files
 (:mod:`.ensemble_files`; the three re-exported by :mod:`.workflow_io`) and the plots (:mod:`.plots`). The Snakemake
 rules call these through the adapters in ``scripts/``.

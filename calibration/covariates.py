@@ -1,6 +1,6 @@
 """Test covariates across records: the residual's trends against every covariate a test sheet gives.
 
-The discrepancy loop (docs/closing-the-loop.md, step 2) looks across records for a residual that
+Closing the loop (docs/closing-the-loop.md) looks across records for a residual that
 trends with a property of the test: a trend names the effect that depends on it. The strain rate
 points at a rate law; the specimen's length-to-diameter ratio at a geometry effect (end-friction
 confinement of a short specimen, the records' L/D runs from 0.74 to 1.1); the gas (striker) pressure
@@ -21,13 +21,9 @@ column                       record_info key               source
 information written before it existed.) :func:`record_covariates` returns one row per record with one
 column per covariate (NaN where the record does not give it) and the residual's statistics;
 :func:`covariate_table_trends` runs :func:`enkf.diagnosis.covariate_trends` against each covariate that
-varies across the records; :func:`pointed_at` names the covariates with a significant trend.
-
-To switch the workflow over (``scripts/diagnosis.py``): ``from calibration.covariates import
-record_covariates, covariate_table_trends`` in place of ``calibration.diagnose.record_covariates``, and
-``covariate_table_trends(cov, trend_cols)`` in place of ``covariate_trends(cov, "strain_rate_per_s",
-trend_cols)`` (its table has a ``covariate`` column; ``report.json``'s ``covariate_trends`` then lists
-every covariate).
+varies across the records; :func:`pointed_at` names the covariates with a significant trend. The
+workflow's table (:func:`calibration.closing.covariate_table`) holds the calibration records' residuals at
+the base model's calibration.
 """
 from __future__ import annotations
 
@@ -73,9 +69,7 @@ def record_covariates(record_info: Mapping[str, Mapping], residuals: Mapping[str
                       sigma: Mapping[str, float]) -> pd.DataFrame:
     """Per record (one row each, in the order of ``residuals``): ``record``, one column per covariate
     (:data:`COVARIATES`), ``peak_stress_Pa``, and the mean / RMS of the calibrated model's residual in
-    units of the record's noise sd (``mean_resid_sd``, ``rms_resid_sd``). The generalisation of
-    :func:`calibration.diagnose.record_covariates` (same columns, plus the covariates after the strain
-    rate)."""
+    units of the record's noise sd (``mean_resid_sd``, ``rms_resid_sd``)."""
     rows = []
     for rec, r in residuals.items():
         info = record_info.get(rec, {})

@@ -257,9 +257,9 @@ def plot_sensitivity(path, obs: Observations, params: pd.DataFrame, responses: n
 
 def plot_diagnosis_check(path, curves: Mapping[str, Mapping], errors: Mapping[str, Mapping],
                          added: Sequence[str], confirmation: str | None = None) -> Path:
-    """The FDEM check of a discrepancy-loop answer (``calibration.diagnose.check_errors``): per record, the data
-    and the real runs at the posterior means before and after the loop, with their RMSE; ``confirmation``
-    (``calibration.diagnose.fdem_confirmation``'s text) as the figure's title."""
+    """The FDEM check of the frozen protocol's answer (:func:`calibration.closing.assemble`'s curves and
+    errors): per record, the data and the real runs before (base model) and after (the confirmed model),
+    with their RMSE; ``confirmation`` (the confirmation's text) as the figure's title."""
     fig, axes = plt.subplots(1, len(curves), figsize=(4.2 * len(curves), 3.6), squeeze=False)
     after_label = "with " + ", ".join(added) if added else "after (nothing added)"
     for ax, (r, c) in zip(axes[0], curves.items()):

@@ -3,22 +3,22 @@ cross-validation within the calibration records on the emulated FDEM curves
 (:class:`calibration.diagnose.EmulatedSHPB`), confirmed on real FDEM runs at the cross-validation points,
 and only then the held-out records' curves read.
 
-What differs from :func:`calibration.diagnose.diagnose` (which stays as it is):
+Its rules on SHPB records:
 
 * **No record's own measurement of a per-record effect** is used. A record's face closure before load
   (``closure_before_load_m``) is measured until the *transmitted* stress reaches 2 % of its peak, so it
-  reads the record's own answer: it neither centres a box nor gives a held-out value here
-  (:func:`protocol_model` drops the ``record_centres``). A record the calibration has not seen takes
-  its per-record values from the population of the calibration records' estimates
+  reads the record's own answer: it neither centres a box nor gives any record a value
+  (:class:`calibration.diagnose.EmulatedSHPB` has no way to take one). A record the calibration has not
+  seen takes its per-record values from the population of the calibration records' estimates
   (:mod:`enkf.diagnosis.population`); each record's forward model must be given its own copy of every
-  per-record parameter (:class:`ProtocolModel` refuses a fallback).
+  per-record parameter (:class:`ProtocolModel` refuses a record without one).
 * **The emulator's error is time-correlated**: per-time rms of the leave-one-out residuals with an
-  AR(1) correlation (:func:`emulator_errors`, :func:`enkf.emulated.emulator_error_model`), where the
-  loop added a diagonal term.
-* The gates are the protocol's (cross-validated error against its own uncertainty, Holm-corrected; the
-  real-run confirmation walk), not BIC margins or a held-out error.
+  AR(1) correlation (:func:`emulator_errors`, :func:`enkf.emulated.emulator_error_model`), never a
+  diagonal term.
+* The gates are the protocol's: cross-validated error against its own uncertainty, Holm-corrected, and
+  the real-run confirmation walk.
 
-Workflow (the lead's integration, in this order): build the emulators from the FDEM design
+Workflow (:mod:`calibration.closing`, in this order): build the emulators from the FDEM design
 (:func:`calibration.diagnose.emulators_from_design`) and ``EmulatedSHPB``; :func:`select` with the
 calibration records' observations only; :func:`check_runs` lists the FDEM runs (per step and calibration
 record the cross-validation point, per step and held-out record its prediction point); run them;
@@ -30,7 +30,7 @@ reads the held-out records last.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -48,13 +48,13 @@ __all__ = ["ProtocolModel", "check_runs", "confirm", "emulator_errors", "protoco
 @dataclass
 class ProtocolModel:
     """An :class:`EmulatedSHPB` as the protocol's :class:`enkf.diagnosis.ForwardModel`: boxes are the
-    design's and the catalogue's (never centred on a record's measurement), and a record whose per-record
-    copy is missing from the names is an error, not a fallback to its own measurement."""
+    design's and the catalogue's, and a record whose per-record copy is missing from the names is an
+    error (where :class:`EmulatedSHPB` would read the null), never a value from elsewhere."""
 
     emulated: EmulatedSHPB
 
     def box(self, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
-        return self.emulated.box(list(names), centred=False)
+        return self.emulated.box(list(names))
 
     def forward(self, names: Sequence[str], records: Sequence[str]):
         names = list(names)
@@ -68,8 +68,8 @@ class ProtocolModel:
 
 
 def protocol_model(model: EmulatedSHPB) -> ProtocolModel:
-    """``model`` without its records' measured centres (they read the transmitted wave), wrapped."""
-    return ProtocolModel(replace(model, record_centres={}))
+    """``model`` as the protocol's forward model (:class:`ProtocolModel`)."""
+    return ProtocolModel(model)
 
 
 def emulator_errors(model: EmulatedSHPB, records: Sequence[str]) -> dict[str, ObservationError]:

@@ -38,17 +38,15 @@ __all__ = [
     "rmse", "stratum_index", "truncation_rank",
 ]
 
-# Diagnosis of the calibrated model's residual and choice of model extensions (issue 8).
-from .diagnosis import (CalibrationResult, Candidate, accept_effect, bic, covariate_trends, curve_errors,
-                        default_windows, diagnose_loop, effective_sample_size, ensemble_sensitivity,
-                        finite_difference_sensitivity, rank_candidates, report_to_json, score_test,
-                        structure_tests, whitened_residual, write_report)
+# Diagnosis of the calibrated model's residual and choice of model extensions (issue 8; the frozen
+# protocol, issue 32, is in enkf.diagnosis).
+from .diagnosis import (covariate_trends, curve_errors, default_windows, ensemble_sensitivity,
+                        finite_difference_sensitivity, rank_candidates, score_test, structure_tests,
+                        whitened_residual)
 
 __all__ += [
-    "CalibrationResult", "Candidate", "accept_effect", "bic", "covariate_trends", "curve_errors",
-    "default_windows", "diagnose_loop", "effective_sample_size", "ensemble_sensitivity",
-    "finite_difference_sensitivity", "rank_candidates", "report_to_json", "score_test", "structure_tests",
-    "whitened_residual", "write_report",
+    "covariate_trends", "curve_errors", "default_windows", "ensemble_sensitivity",
+    "finite_difference_sensitivity", "rank_candidates", "score_test", "structure_tests", "whitened_residual",
 ]
 
 # Emulator-assisted ES-MDA (the twin experiments' analysis, issue 6).

@@ -1,16 +1,16 @@
 """An interpolating emulator of a simulator's response curves over a parameter box.
 
 Used where a step needs many more model evaluations than the simulator can afford, e.g. the
-re-calibrations of the discrepancy loop (:mod:`enkf.diagnosis`): a design of simulator runs, then a
-radial-basis-function interpolant (SciPy's ``RBFInterpolator``; thin-plate spline plus a linear
-polynomial by default) of the whole curve, with inputs scaled to the unit box so that no parameter's
-units dominate the distances.
+re-calibrations of the frozen protocol (:mod:`enkf.diagnosis`) or the emulated analyses
+(:mod:`enkf.emulated`): a design of simulator runs, then a radial-basis-function interpolant (SciPy's
+``RBFInterpolator``; thin-plate spline plus a linear polynomial by default) of the whole curve, with
+inputs scaled to the unit box so that no parameter's units dominate the distances.
 
 The emulator is not the model: its error is measured by leave-one-out cross-validation at the design
-points (:meth:`CurveEmulator.loo_residuals`, exact refits, not an approximation) and should be carried
-as an extra, independent error term of the observations (:meth:`CurveEmulator.error_model`), so that a
-calibration on the emulator does not read interpolation error as signal (Kennedy & O'Hagan's "code
-uncertainty", in its simplest form: a diagonal variance per observation).
+points (:meth:`CurveEmulator.loo_residuals`, exact refits, not an approximation) and is carried as a
+time-correlated error term of the observations (:func:`enkf.emulated.emulator_error_model`: per-time rms
+with AR(1) correlation), so that a calibration on the emulator does not read interpolation error as
+signal (Kennedy & O'Hagan's "code uncertainty").
 """
 
 from __future__ import annotations
@@ -20,9 +20,7 @@ from typing import Sequence
 import numpy as np
 from scipy.interpolate import RBFInterpolator
 
-from .covariance import DenseError, ObservationError
-
-__all__ = ["CurveEmulator", "SMOOTHING_GRID", "smoothed_emulator", "with_emulator_error", "design_arrays"]
+__all__ = ["CurveEmulator", "SMOOTHING_GRID", "smoothed_emulator", "design_arrays"]
 
 
 class CurveEmulator:
@@ -88,17 +86,6 @@ class CurveEmulator:
             self._loo = out
         return self._loo
 
-    def error_std(self, weights=None) -> np.ndarray:
-        """``(m,)``: root-mean-square leave-one-out error per output (optionally weighted rows)."""
-        r = self.loo_residuals()
-        w = np.ones(r.shape[0]) if weights is None else np.asarray(weights, dtype=float)
-        return np.sqrt(np.average(r ** 2, axis=0, weights=w))
-
-    def error_model(self, weights=None) -> DenseError:
-        """The emulator error as an independent (diagonal) term, for :func:`with_emulator_error`."""
-        s = self.error_std(weights)
-        return DenseError(np.diag(np.maximum(s, 1e-12 * max(float(s.max()), 1.0)) ** 2), _symmetric=True)
-
 
 #: Smoothing values tried by ``smoothing="loo"`` (SciPy's RBF ``smoothing``, inputs in the unit box).
 SMOOTHING_GRID = (0.0, 1e-4, 1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0)
@@ -125,14 +112,6 @@ def smoothed_emulator(X, Y, lo, hi, names, latest, smoothing="loo", scale=None) 
         if best is None or scores[value] < scores[best[0]]:
             best = (value, em)
     return best[1], {"smoothing": best[0], "loo_rms_by_smoothing": {str(k): v for k, v in scores.items()}}
-
-
-def with_emulator_error(obs_error: ObservationError, emulator_std) -> DenseError:
-    """``R + diag(emulator_std^2)``: the observation error plus independent emulator error."""
-    s = np.asarray(emulator_std, dtype=float)
-    if s.shape != (obs_error.m,):
-        raise ValueError(f"emulator_std has shape {s.shape}, the observations {obs_error.m}")
-    return DenseError(obs_error.dense() + np.diag(s ** 2), _symmetric=True)
 
 
 def design_arrays(design_params, design_responses, latest, obs):

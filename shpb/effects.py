@@ -1,4 +1,4 @@
-"""Effect catalogue: switchable model extensions for the discrepancy loop (docs/closing-the-loop.md).
+"""Effect catalogue: switchable model extensions for closing the loop (docs/closing-the-loop.md).
 
 The base model declares none of these. Each effect is a named entry with its parameters (named
 ``<effect>.<param>``, SI units), a prior box, a null value (the value at which the effect is off and
@@ -28,8 +28,9 @@ the model is the base model) and a one-line description with its equation. Two k
   y = x.) The filter starts in steady state at the first sample. Its step response is
   ``1 - exp(-t / tau)``: 63.2% at t = tau. To first order in tau it is a delay by tau
   (``LP_tau[s] ~ s - tau s'``), the same first-order signature as a trigger shift; the two separate
-  at second order (the low-pass also rounds the peak), which is why the diagnosis loop
-  (:func:`enkf.diagnosis.diagnose_loop`) re-calibrates near-tied candidates before choosing.
+  at second order (the low-pass also rounds the peak), which is why the protocol
+  (:func:`enkf.diagnosis.select_effects`) re-calibrates each candidate it tries rather than choosing on
+  the linearised score test.
 
 * **physical** effects live in the FDEM engine and need a new simulation. They are declared here
   (name, parameters, box, null, meaning) and passed to the simulator as extra
@@ -95,8 +96,8 @@ the model is the base model) and a one-line description with its equation. Two k
                                     and only grows Delta from 0). Measured on a fast CaMa_SHPB_004 member
                                     (g 135 um, Delta 150 um, 1.5 % noise, linearised): g and Delta are
                                     correlated +0.14, where first touch and Delta would be -0.82.
-                                    ``face_gap``'s measured prior centre (the travel until 2 % of the
-                                    peak) is then nearer g_lo than g. Usable with ``face_gap`` (mean gap
+                                    A record's measured closure before load (the travel until 2 % of
+                                    the peak) is then nearer g_lo than g. Usable with ``face_gap`` (mean gap
                                     g) or without it (g = 0: contact from the start, full at Delta/2).
                                     Implemented as geometry (``shpb.geometry.closure_faces`` and
                                     ``_tilt_front``: the specimen's front face tilted by g_hi - g_lo, the
@@ -109,16 +110,16 @@ the model is the base model) and a one-line description with its equation. Two k
 
 **Scope.** Every entry says whether it is a property of one test (``per_record``: the seating of that
 specimen, the trigger and amplifier settings of that recording) or of the material and model
-(``shared``). The discrepancy loop (:func:`calibration.diagnose.diagnose`) estimates a per-record
-parameter once per calibration record, as ``<effect>.<param>@<record>`` (:func:`record_param`), each
-copy acting on its own record only; a held-out record cannot get its copy from the calibration. Where a
-record's own waves measure the effect (``record_prior``: the name of the measured quantity in the
-record's information, e.g. ``closure_before_load_m`` for the face gap, ``ReducedRecord.
-closure_before_load``), that value is the centre of the record's prior box (:func:`centred_box`).
+(``shared``). The protocol (:func:`enkf.diagnosis.select_effects`) estimates a per-record parameter
+once per calibration record, as ``<effect>.<param>@<record>`` (:func:`record_param`), each copy acting on
+its own record only; a record the calibration has not seen takes its copy from the population of the
+calibration records' estimates, never from its own curve. (A record's closure before load,
+``ReducedRecord.closure_before_load``, is measured until the *transmitted* stress rises: it reads the
+record's answer and sets no face gap.)
 
 Public helpers: :func:`get_effect`, :func:`effects`, :func:`effect_of`, :func:`split_params`,
 :func:`apply_measurement`, :func:`bounds`, :func:`null_values`, :func:`candidates`, :func:`record_param`,
-:func:`split_record`, :func:`centred_box`.
+:func:`split_record`.
 """
 
 from __future__ import annotations
@@ -138,8 +139,6 @@ KINDS = ("physical", "measurement")
 SCOPES = ("per_record", "shared")
 #: Separator of a per-record parameter copy's name: ``face_gap.gap_m@CaMa_SHPB_004``.
 RECORD_SEP = "@"
-#: Half-width of a record's prior box around its measured centre, as a fraction of the effect's box width.
-PRIOR_HALF_WIDTH_FRACTION = 0.5
 
 
 @dataclass(frozen=True)
@@ -165,10 +164,9 @@ class Effect:
 
     ``apply`` (measurement effects only) maps ``(time_s, stress_Pa, **short_params) -> stress_Pa``.
     ``fdem`` says, for physical effects, what the engine does with the parameters.
-    ``scope`` is ``per_record`` or ``shared`` (:data:`SCOPES`, module docstring); ``record_prior`` pairs a
-    short parameter name with the key of a record's information that measures it (its prior centre).
-    The attributes ``name``, ``param_names``, ``nulls``, ``lower``, ``upper`` are what
-    :func:`enkf.diagnosis.diagnose_loop` reads from a candidate.
+    ``scope`` is ``per_record`` or ``shared`` (:data:`SCOPES`, module docstring).
+    The attributes ``name``, ``param_names``, ``nulls``, ``scope`` are what
+    :func:`enkf.diagnosis.select_effects` reads from a candidate.
     """
 
     name: str
@@ -178,7 +176,6 @@ class Effect:
     fdem: str = ""
     apply: Callable[..., np.ndarray] | None = field(default=None, repr=False, compare=False)
     scope: str = ""
-    record_prior: tuple[tuple[str, str], ...] = ()
 
     def __reduce__(self):
         # a catalogue entry travels by name (its apply functions are lambdas, which pickle cannot carry):
@@ -190,11 +187,6 @@ class Effect:
             raise ValueError(f"effect {self.name!r}: kind must be one of {KINDS}")
         if self.scope not in SCOPES:
             raise ValueError(f"effect {self.name!r}: scope must be one of {SCOPES}, got {self.scope!r}")
-        if self.record_prior and self.scope != "per_record":
-            raise ValueError(f"effect {self.name!r}: only a per-record effect has a record prior")
-        for short, _ in self.record_prior:
-            if short not in {p.name for p in self.params}:
-                raise ValueError(f"effect {self.name!r}: record_prior names no parameter {short!r}")
         if (self.kind == "measurement") != (self.apply is not None):
             raise ValueError(f"effect {self.name!r}: measurement effects (only) need an apply function")
 
@@ -222,9 +214,9 @@ class Effect:
     def to_dict(self) -> dict:
         """JSON-ready description."""
         return {"name": self.name, "kind": self.kind, "scope": self.scope, "description": self.description,
-                "fdem": self.fdem, "record_prior": dict(self.record_prior),
-                "params": {f"{self.name}.{p.name}": {"lower": p.lower, "upper": p.upper, "null": p.null,
-                                                      "unit": p.unit} for p in self.params}}
+                "fdem": self.fdem, "params": {f"{self.name}.{p.name}": {"lower": p.lower, "upper": p.upper,
+                                                                         "null": p.null, "unit": p.unit}
+                                              for p in self.params}}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -346,9 +338,8 @@ CATALOGUE: dict[str, Effect] = {e.name: e for e in (
            "or not parallel, seating never closed by a preload, a squeezed interlayer)",
            fdem="initial gap between the incident bar's face and the specimen's front face "
                 "(shpb.geometry face_gap_m); contact closes it",
-           # per record: every specimen has its own ends and seating; the record's own incident and
-           # reflected waves measure the face's travel before load (its prior centre)
-           scope="per_record", record_prior=(("gap_m", "closure_before_load_m"),)),
+           # per record: every specimen has its own ends and seating
+           scope="per_record"),
     Effect("closure", "physical", (_P("range_m", 0.0, 4e-4, 0.0, "m"),),
            "gradual face closure: a non-parallel (or rough) front end, the gap spread across the face over "
            "range_m around the mean gap g = face_gap.gap_m, from max(0, g - range/2) to g + range/2, so the "
@@ -471,26 +462,8 @@ def null_values(param_names: Iterable[str] | None = None) -> dict[str, float]:
     return {n: _param(n).null for n in names}
 
 
-def centred_box(param_name: str, centre: float, *, within: tuple[float, float] | None = None,
-                half_width_fraction: float = PRIOR_HALF_WIDTH_FRACTION) -> tuple[float, float, float]:
-    """A record's prior box for a per-record parameter whose value the record measures (``record_prior``):
-    ``(c, lo, hi)`` with the centre ``c`` = ``centre`` clipped to the effect's box (intersected with
-    ``within``, e.g. an emulator's design range) and ``[lo, hi] = [c - h, c + h]`` clipped to the same
-    box, ``h = half_width_fraction`` x the effect's box width (the default keeps the prior as wide as
-    half the effect's box on either side: a measured closure is a centre, not a value)."""
-    p = _param(param_name)
-    lo, hi = p.lower, p.upper
-    if within is not None:
-        lo, hi = max(lo, float(within[0])), min(hi, float(within[1]))
-    if not (math.isfinite(centre) and lo < hi and half_width_fraction > 0):
-        raise ValueError(f"{param_name}: no prior box around {centre!r} inside [{lo}, {hi}]")
-    c = min(max(float(centre), lo), hi)
-    h = half_width_fraction * (p.upper - p.lower)
-    return c, max(lo, c - h), min(hi, c + h)
-
-
 def candidates(names: Iterable[str] | None = None, kind: str | None = None) -> list[Effect]:
-    """The effects to offer the diagnosis loop: the named ones, or all (of a ``kind``)."""
+    """The effects to offer the protocol: the named ones, or all (of a ``kind``)."""
     if names is not None:
         return [get_effect(n) for n in names]
     return effects(kind)

@@ -1,6 +1,6 @@
-"""A vectorised stand-in for the protocol tests (tests/test_protocol_*.py): the analytic SHPB-like surrogate
-of tests/test_diagnosis_loop.py per record, with the catalogue's face gap, trigger shift, gauge gain,
-baseline offset and rate-dependent strength written into the formula (no per-member loop).
+"""A vectorised stand-in for the protocol tests (tests/test_protocol_*.py): an analytic SHPB-like surrogate
+per record, with the catalogue's face gap, trigger shift, gauge gain, baseline offset and rate-dependent
+strength written into the formula (no per-member loop).
 
 Curve of record r (loading slope K_r [Pa/s], its input, like an incident wave): an elastic rise
 K_r * FOOT * softplus((t - t0) / FOOT) from the arrival t0 = T0 + gap / V_FACE + dt up to the strength

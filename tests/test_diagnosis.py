@@ -1,6 +1,6 @@
 """Residual diagnosis (issue 8), its parts: the whitened residual and structure tests, the score test and
-candidate ranking, BIC and acceptance, sensitivities, covariate trends across records, the FDEM-check
-errors. The loop end to end on an analytic surrogate is in test_diagnosis_loop.py."""
+candidate ranking, sensitivities, covariate trends across records, curve errors, the emulators of the FDEM
+design and the FDEM check's curves. The frozen protocol is tested in test_protocol_*.py."""
 
 import json
 import math
@@ -10,10 +10,10 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from enkf import AR1Error, DiagonalError
-from enkf.diagnosis import (accept_effect, bic, covariate_trends, curve_errors, durbin_watson, effective_sample_size,
-                            ensemble_sensitivity, finite_difference_sensitivity, ljung_box, rank_candidates,
-                            runs_test, score_test, spearman_exact, structure_tests, whitened_residual)
+from enkf import AR1Error
+from enkf.diagnosis import (covariate_trends, curve_errors, durbin_watson, ensemble_sensitivity,
+                            finite_difference_sensitivity, ljung_box, rank_candidates, runs_test, score_test,
+                            spearman_exact, structure_tests, whitened_residual)
 
 CHI2_1_999 = stats.chi2.ppf(0.999, 1)  # 10.83
 
@@ -187,43 +187,8 @@ def test_candidate_collinearity_flags_candidates_that_are_first_order_twins():
 
 
 # ----------------------------------------------------------------------------------------------
-# BIC, effective sample size, acceptance rule, sensitivities
+# sensitivities, curve errors, the emulated model's design and the FDEM check's curves
 # ----------------------------------------------------------------------------------------------
-
-def test_bic_and_effective_sample_size():
-    assert bic(100.0, 3, 400) == pytest.approx(100.0 + 3 * math.log(400))
-    t = np.arange(500) * 1e-6
-    assert effective_sample_size(DiagonalError(2.0, m=500)) == pytest.approx(500.0)
-    phi = math.exp(-1.0 / 4.0)  # tau = 4 samples
-    n_ar = effective_sample_size(AR1Error(2.0, t, 4e-6))
-    assert n_ar == pytest.approx((500 - 498 * phi) / (1 + phi), rel=1e-9)  # 1^T C^-1 1, exact
-    assert n_ar == pytest.approx(500 * (1 - phi) / (1 + phi), rel=0.02)
-    assert effective_sample_size(0.5, n=300) == pytest.approx(100.0)
-    white = np.random.default_rng(9).standard_normal(2000)
-    assert effective_sample_size(white) == pytest.approx(2000, rel=0.1)
-
-
-def test_accept_effect_needs_bic_margin_null_exclusion_and_a_heldout_improvement():
-    rng = np.random.default_rng(10)
-    post = rng.normal(1.1, 0.01, 200)
-    ok, why = accept_effect(1000.0, 900.0, post, 1.0, 2.0, 1.0)
-    assert ok and all(r.startswith("pass") for r in why) and len(why) == 3
-    ok, why = accept_effect(1000.0, 995.0, post, 1.0, 2.0, 1.0, margin=10)
-    assert not ok and why[0].startswith("fail")
-    ok, why = accept_effect(1000.0, 900.0, rng.normal(1.0, 0.05, 200), 1.0, 2.0, 1.0)
-    assert not ok and why[1].startswith("fail") and "contains" in why[1]
-    ok, why = accept_effect(1000.0, 900.0, post, 1.0, 1.0, 1.2)
-    assert not ok and why[2].startswith("fail")
-    ok, why = accept_effect(1000.0, 900.0, post, 1.0, None, None)
-    assert ok and "skipped" in why[2]
-    # a null at a bound: an interval hugging the bound does not count as excluding it
-    tau = np.abs(rng.normal(0.0, 1e-9, 200))
-    assert accept_effect(1000.0, 900.0, tau, 0.0, 2.0, 1.0)[0]
-    assert not accept_effect(1000.0, 900.0, tau, 0.0, 2.0, 1.0, null_tolerance=5e-8)[0]
-    # several parameters: one excluding its null is enough
-    two = np.column_stack([rng.normal(1e6, 1e4, 200), rng.normal(0.0, 1e8, 200)])
-    assert accept_effect(1000.0, 900.0, two, [0.0, 0.0], 2.0, 1.0)[0]
-
 
 def test_ensemble_and_finite_difference_sensitivities_recover_a_known_jacobian():
     A = np.random.default_rng(11).normal(size=(30, 3))
@@ -265,97 +230,29 @@ def test_emulators_from_design_leave_failed_runs_out_and_refuse_too_few():
                               label="diagnosis of x")
 
 
-def test_record_calibrations_fit_each_record_alone_and_expose_a_rate_trend():
-    # three records whose amplitude a (the "strength") rises with the record's strain rate: fitted one
-    # record at a time, the per-record estimates follow it; the trend test then sees the rise
-    from calibration.diagnose import EmulatedSHPB, emulators_from_design, record_calibrations
-    from calibration.observations import Observations
-    t = np.linspace(0.0, 2e-4, 81)
-    X = np.array([[a, b] for a in np.linspace(1.0, 3.0, 6) for b in np.linspace(0.5, 1.5, 6)])
-    recs = {"r135": 1.4, "r195": 1.9, "r257": 2.5}
-    curves = {r: [pd.DataFrame({"time_s": t, "stress_Pa": x[0] * 1e6 * np.sin(x[1] * t / 1e-4)}) for x in X]
-              for r in recs}
-    em, _ = emulators_from_design(X, curves, t, [1.0, 0.5], [3.0, 1.5], ["a", "b"])
-    model = EmulatedSHPB(em, ["a", "b"], t, {r: t for r in recs})
-    rng = np.random.default_rng(7)
-    frame = pd.concat([pd.DataFrame({"record": r, "time_s": t, "sigma_Pa": 2e4,
-                                     "stress_Pa": a * 1e6 * np.sin(t / 1e-4) + rng.normal(0, 2e4, t.size)})
-                       for r, a in recs.items()], ignore_index=True)
-    fits = record_calibrations(model, ["a", "b"], [Observations(frame)], seed=3, n_members=60, esmda_steps=4)
-    assert list(fits["record"]) == list(recs)
-    for r, a in recs.items():
-        row = fits.set_index("record").loc[r]
-        assert row["a_mean"] == pytest.approx(a, abs=0.05) and row["b_mean"] == pytest.approx(1.0, abs=0.05)
-    fits["strain_rate"] = [135.0, 195.0, 257.0]
-    tr = covariate_trends(fits, "strain_rate", ["a_mean"])
-    assert tr.loc["a_mean", "slope"] > 0 and tr.loc["a_mean", "rho"] == pytest.approx(1.0)
-
-
-def test_fdem_check_passes_physical_parameters_to_the_simulator_and_applies_measurement_ones_in_the_chain(tmp_path):
-    from calibration.diagnose import measured_curve, simulator_params
-    post = {"sigma_t": {"mean": 4e7}, "face_gap.gap_m": {"mean": 2e-4}, "gauge_gain.g": {"mean": 1.1},
-            "baseline.offset_Pa": {"mean": -1e6}}
-    assert simulator_params(post) == {"sigma_t": 4e7, "face_gap.gap_m": 2e-4}
+def test_measured_curve_applies_the_measurement_chain_on_the_model_grid_and_the_check_plots_it(tmp_path):
+    from calibration.diagnose import measured_curve, model_grid
+    from calibration.plots import plot_diagnosis_check
+    post = {"sigma_t": {"mean": 4e7}, "face_gap.gap_m": {"mean": 2e-4}, "gauge_gain.g@r1": {"mean": 1.1},
+            "gauge_gain.g@r2": {"mean": 0.9}, "baseline.offset_Pa": {"mean": -1e6}}
     # a run sampled from before the arrival (negative times), as FDEM writes it; the chain acts on the
     # model grid from t = 0, exactly as on the emulated curve: y = 1.1 s - 1 MPa at the observation times
+    # (record r1's own gain; physical parameters are the simulator's, not the chain's)
     t_run = np.arange(-50e-6, 300e-6 + 1e-12, 0.5e-6)
     s = 1e12 * np.clip(t_run, 0.0, None)  # 1 MPa/us ramp from the arrival
     model_t = np.arange(0.0, 280e-6 + 1e-12, 0.5e-6)
-    obs_t = np.arange(0.0, 280e-6 + 1e-12, 2e-6)
-    y = measured_curve(pd.DataFrame({"time_s": t_run, "stress_Pa": s}), model_t, post, obs_t)
-    np.testing.assert_allclose(y, 1.1 * 1e12 * obs_t - 1e6, rtol=0, atol=1e-3)
-    assert measured_curve(pd.DataFrame({"time_s": [], "stress_Pa": []}), model_t, post, obs_t) is None
-    # per record and data set: errors of each run, None for a failed one
-    from calibration.diagnose import check_errors
-    from calibration.observations import Observations
-    obs = Observations(pd.DataFrame({"record": "r1", "time_s": obs_t, "stress_Pa": 1.1e12 * obs_t - 1e6,
-                                     "sigma_Pa": 1e5}))
-    runs = {"after": {"r1": pd.DataFrame({"time_s": t_run, "stress_Pa": s})},
-            "before": {"r1": pd.DataFrame({"time_s": [], "stress_Pa": []})}}
-    errors, curves = check_errors([("heldout", obs)], runs, model_t, {"before": {}, "after": post})
-    assert errors["r1"]["data"] == "heldout" and errors["r1"]["before"] is None
-    assert errors["r1"]["after"]["rmse"] < 1e-3 and curves["r1"]["before"] is None
-    from calibration.diagnose import model_grid
-    from calibration.plots import plot_diagnosis_check
     np.testing.assert_array_equal(model_grid({"t_end": 280e-6, "sample_dt": 0.5e-6}), model_t)
-    png = plot_diagnosis_check(tmp_path / "check.png", curves, errors, ["face_gap"])
+    obs_t = np.arange(0.0, 280e-6 + 1e-12, 2e-6)
+    run = pd.DataFrame({"time_s": t_run, "stress_Pa": s})
+    y = measured_curve(run, model_t, post, obs_t, record="r1")
+    np.testing.assert_allclose(y, 1.1 * 1e12 * obs_t - 1e6, rtol=0, atol=1e-3)
+    with pytest.raises(ValueError, match="has no value for record 'r3'"):
+        measured_curve(run, model_t, post, obs_t, record="r3")  # never another record's gain
+    assert measured_curve(pd.DataFrame({"time_s": [], "stress_Pa": []}), model_t, post, obs_t, record="r1") is None
+    # the check's figure: per record the data, the run before (failed here) and after, with their RMSE
+    obs = 1.1e12 * obs_t - 1e6
+    curves = {"r1": {"data": "heldout", "time": obs_t, "obs": obs, "before": None, "after": y}}
+    errors = {"r1": {"data": "heldout", "before": None, "after": curve_errors(obs_t, y, obs)}}
+    assert errors["r1"]["after"]["rmse"] < 1e-3
+    png = plot_diagnosis_check(tmp_path / "check.png", curves, errors, ["face_gap"], "face_gap: confirmed")
     assert png.stat().st_size > 1000
-
-
-def test_errors_per_record_split_calibration_and_heldout():
-    from calibration.diagnose import errors_per_record
-    from calibration.observations import Observations
-
-    def obs(recs):
-        rows = [{"record": r, "time_s": t, "stress_Pa": 1e6 * k, "sigma_Pa": 2e5}
-                for r in recs for k, t in enumerate([0.0, 1e-6, 2e-6])]
-        return Observations(pd.DataFrame(rows))
-    cal, held = obs(["a", "b"]), obs(["c"])
-    err, resid, sigma = errors_per_record([("calibration", cal, cal.values + 1e5, cal.values),
-                                           ("heldout", held, held.values - 3e5, held.values + 1e5),
-                                           ("none", None, None, None)])
-    assert {r: e["data"] for r, e in err.items()} == {"a": "calibration", "b": "calibration", "c": "heldout"}
-    assert err["a"]["before"]["rmse"] == pytest.approx(1e5) and err["a"]["after"]["rmse"] == 0.0
-    assert err["c"]["before"]["rmse"] == pytest.approx(3e5) and err["c"]["after"]["rmse"] == pytest.approx(1e5)
-    np.testing.assert_allclose(resid["c"], [3e5] * 3)
-    assert sigma == {"a": pytest.approx(2e5), "b": pytest.approx(2e5), "c": pytest.approx(2e5)}
-
-
-def test_fdem_confirmation_holds_an_effect_only_where_real_runs_lower_every_heldout_error():
-    """The marble diagnosis of 2026-11-25: the loop kept face_gap on its emulator, the real held-out run
-    rose from 38.4 to 42.9 MPa: refuted. The default run's: 25.2 -> 18.4 MPa: confirmed."""
-    from calibration.diagnose import fdem_confirmation
-
-    def errs(held_before, held_after, cal=(24.9e6, 16.7e6)):
-        e = lambda v: None if v is None else {"rmse": v}
-        return {"CaMa_SHPB_004": {"data": "calibration", "before": e(cal[0]), "after": e(cal[1])},
-                "CaMa_SHPB_005": {"data": "heldout", "before": e(held_before), "after": e(held_after)}}
-
-    c = fdem_confirmation(errs(38.4e6, 42.9e6), ["face_gap"])
-    assert c["status"] == "refuted" and "38.4 -> 42.9 MPa" in c["text"] and "refute" in c["text"]
-    c = fdem_confirmation(errs(25.2e6, 18.4e6), ["face_gap"])
-    assert c["status"] == "confirmed" and c["rmse_Pa"]["CaMa_SHPB_005"] == {"before": 25.2e6, "after": 18.4e6}
-    assert fdem_confirmation(errs(25.2e6, None), ["face_gap"])["status"] == "refuted"   # a failed run confirms nothing
-    assert fdem_confirmation(errs(25.2e6, 18.4e6), [])["status"] == "nothing_added"
-    only_cal = {k: v for k, v in errs(1.0, 0.5).items() if v["data"] == "calibration"}
-    assert fdem_confirmation(only_cal, ["face_gap"])["status"] == "no_heldout"

@@ -157,3 +157,23 @@ def test_effects_serve_as_diagnosis_candidates_and_describe_themselves_for_json(
     assert [c.name for c in fx.candidates(["gauge_gain", "lowpass"])] == ["gauge_gain", "lowpass"]
     with pytest.raises(KeyError, match="catalogue"):
         fx.get_effect("ringing")
+
+
+def test_every_catalogue_entry_declares_a_scope_and_per_record_copies_resolve_to_their_effect():
+    assert fx.SCOPES == ("per_record", "shared")
+    scopes = {e.name: e.scope for e in fx.effects()}
+    assert set(scopes.values()) <= set(fx.SCOPES) and len(scopes) == 10
+    assert {n for n, s in scopes.items() if s == "per_record"} == {
+        "face_gap", "closure", "seating", "trigger_shift", "gauge_gain", "baseline", "lowpass"}
+    assert {n for n, s in scopes.items() if s == "shared"} == {"rate_strength", "damping", "interface_friction"}
+    assert fx.get_effect("face_gap").to_dict()["scope"] == "per_record"
+    with pytest.raises(ValueError, match="scope must be one of"):
+        fx.Effect("x", "physical", (fx.EffectParam("a", 0.0, 1.0, 0.0, "-"),), "no scope", fdem="none")
+    # per-record copies are named <effect>.<param>@<record> and resolve to their effect
+    name = fx.record_param("face_gap.gap_m", "CaMa_SHPB_004")
+    assert name == "face_gap.gap_m@CaMa_SHPB_004" and fx.split_record(name) == ("face_gap.gap_m", "CaMa_SHPB_004")
+    assert fx.effect_of(name).name == "face_gap" and fx.null_values([name]) == {name: 0.0}
+    assert fx.bounds([name])[1].tolist() == [4e-4]
+    t = np.linspace(0.0, 1e-4, 11)
+    with pytest.raises(ValueError, match="per-record parameters"):
+        fx.apply_measurement(t, t, {"gauge_gain.g@A": 1.1})

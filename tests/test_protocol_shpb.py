@@ -1,18 +1,18 @@
 """The frozen protocol on SHPB records (calibration.protocol, issue 32): the adapter around
-calibration.diagnose.EmulatedSHPB, with an exact stand-in for the FDEM emulator (the curve of
-tests/test_diagnosis_scope.py: arrival delayed by gap / 10 m/s, elastic rise, exponential decay) and its
+calibration.diagnose.EmulatedSHPB, with an exact stand-in for the FDEM emulator (arrival delayed by
+gap / 10 m/s, elastic rise with a 2 us rounded foot up to the strength, exponential decay) and its
 'FDEM runs' at the check points.
 
 Five calibration records at 0.6-1.4 MPa/us and a held-out one (0.85 MPa/us), face gaps planted per
-record (40-150 um; held out 95 um); every record also carries a measured closure before load (what
-``closure_before_load_m`` would give), which the protocol must not use.
+record (40-150 um; held out 95 um); every record also has a measured closure before load (what
+``closure_before_load_m`` would give, ``CLOSURE``), which nothing in the protocol can read.
 """
 
 import numpy as np
 import pandas as pd
 import pytest
 
-from calibration.diagnose import EmulatedSHPB, interpolation_matrix
+from calibration.diagnose import EmulatedSHPB, interpolation_matrix, record_params
 from calibration.protocol import (ProtocolModel, check_runs, confirm, emulator_errors, protocol_model, real_curves,
                                   select)
 from enkf import AR1Error
@@ -60,14 +60,10 @@ class ExactEmulator:
     def loo_residuals(self):
         return self._loo
 
-    def error_std(self):
-        return np.sqrt(np.mean(self._loo ** 2, axis=0))
 
-
-def emulated(closure=CLOSURE):
-    centres = {r: {"face_gap.gap_m": c} for r, c in closure.items()}
+def emulated():
     return EmulatedSHPB({r: ExactEmulator(k, i) for i, (r, k) in enumerate(K.items())}, NAMES, MODEL_T,
-                        {r: OBS_T for r in K}, record_centres=centres)
+                        {r: OBS_T for r in K})
 
 
 def data(seed=2):
@@ -91,14 +87,16 @@ def selected():
     return obs, run(emulated(), obs)
 
 
-def test_the_adapter_uses_no_records_measured_closure_and_a_time_correlated_emulator_error():
+def test_the_adapter_takes_no_records_measured_closure_and_a_time_correlated_emulator_error():
     model = emulated()
     pm = protocol_model(model)
-    assert isinstance(pm, ProtocolModel) and pm.emulated.record_centres == {} and model.record_centres["H"]
-    # the design's box, never one centred on a record's measurement
-    lo, hi = pm.box(["face_gap.gap_m@A", "sigma_p"])
-    assert lo.tolist() == [0.0, 30e6] and hi.tolist() == [300e-6, 50e6]
-    assert model.box(["face_gap.gap_m@A"])[1][0] == pytest.approx(CLOSURE["A"] + 200e-6)
+    assert isinstance(pm, ProtocolModel) and pm.emulated is model
+    # the emulated model has no way to take a record's measurement of a per-record parameter
+    with pytest.raises(TypeError, match="record_centres"):
+        EmulatedSHPB(model.emulators, NAMES, MODEL_T, model.obs_times, record_centres={"A": {"face_gap.gap_m": 30e-6}})
+    # the design's box for every record's copy, never one centred on a record's measurement
+    lo, hi = pm.box(["face_gap.gap_m@A", "face_gap.gap_m@H", "sigma_p"])
+    assert lo.tolist() == [0.0, 0.0, 30e6] and hi.tolist() == [300e-6, 300e-6, 50e6]
     # a record without its own copy is an error, not a fallback to its closure
     with pytest.raises(ValueError, match="record C has no copy of"):
         pm.forward(["sigma_p", "tau_d", "face_gap.gap_m@A"], ["A", "C"])
@@ -110,6 +108,27 @@ def test_the_adapter_uses_no_records_measured_closure_and_a_time_correlated_emul
         np.testing.assert_allclose(err[r].std, rms, rtol=1e-9)
 
 
+def test_each_record_reads_only_its_own_copy_of_a_per_record_parameter():
+    model = emulated()
+    names = ["sigma_p", "tau_d", "face_gap.gap_m@A", "face_gap.gap_m@B", "gauge_gain.g@A", "gauge_gain.g@B"]
+    x = np.array([40e6, 45e-6, 40e-6, 120e-6, 1.0, 1.1])
+    y = model.forward(names, ["A", "B"])(x)[0]
+    np.testing.assert_allclose(y[:OBS_T.size], curve(OBS_T, 40e6, 45e-6, 40e-6, K["A"])[0], atol=1e-6)
+    np.testing.assert_allclose(y[OBS_T.size:], 1.1 * curve(OBS_T, 40e6, 45e-6, 120e-6, K["B"])[0], atol=1e-6)
+    np.testing.assert_allclose(model.forward(names, ["A"])(x)[0], y[:OBS_T.size])
+    # a record with no copy reads the null (ForwardModel's contract); the protocol refuses it
+    np.testing.assert_allclose(model.forward(names, ["C"])(x)[0], curve(OBS_T, 40e6, 45e-6, 0.0, K["C"])[0], atol=1e-6)
+    with pytest.raises(ValueError, match="record C has no copy of"):
+        protocol_model(model).forward(names, ["C"])
+    # an FDEM run of one record: its own copies under their plain names, never another record's
+    point = dict(zip(names, x))
+    assert record_params(point, "A") == {"sigma_p": 40e6, "tau_d": 45e-6, "face_gap.gap_m": 40e-6, "gauge_gain.g": 1.0}
+    with pytest.raises(ValueError, match="has no value for record 'C'"):
+        record_params(point, "C")
+    with pytest.raises(ValueError, match="per record"):
+        record_params(point, None)
+
+
 def test_the_population_gap_predicts_the_heldout_record_and_its_closure_is_never_read(selected):
     obs, sel = selected
     assert [s.spec.effect_names for s in sel.steps] == [[], ["face_gap"]]
@@ -118,11 +137,10 @@ def test_the_population_gap_predicts_the_heldout_record_and_its_closure_is_never
     pred = sel.last.heldout["H"]
     lo, hi = pred.intervals()["face_gap.gap_m@H"]
     assert lo <= GAP["H"] <= hi and pred.point["face_gap.gap_m@H"] == pop.median()
-    # the loop of calibration.diagnose would have given H its closure (20 um); the protocol, the population
-    assert emulated().record_value("face_gap.gap_m", "H")[0] == CLOSURE["H"]
+    # the removed loop would have given H its measured closure (20 um); the protocol gives the population's
     assert abs(pred.point["face_gap.gap_m@H"] - CLOSURE["H"]) > 50e-6
-    # another closure for every record, another held-out curve: the same prediction, bit for bit
-    other = run(emulated({r: 250e-6 for r in K}), {**obs, "H": -obs["H"]})
+    # another held-out curve: the same prediction, bit for bit
+    other = run(emulated(), {**obs, "H": -obs["H"]})
     assert np.array_equal(other.last.heldout["H"].curve, pred.curve) and other.last.heldout["H"].point == pred.point
 
 

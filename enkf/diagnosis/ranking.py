@@ -1,5 +1,6 @@
 """Sensitivities (ensemble, finite-difference) and the score test that ranks candidate effects by the
-residual structure they explain beyond the base parameters (:mod:`enkf.diagnosis`, step 3)."""
+residual structure they explain beyond the base parameters (:mod:`enkf.diagnosis`, part 2; the protocol
+uses the ranking only to order the candidates it tries)."""
 from __future__ import annotations
 
 import json

@@ -1,5 +1,5 @@
 """Residual structure: the whitened residual, its tests (chi-square, runs, Ljung-Box, Durbin-Watson,
-per-window RMS) and trends across records (:mod:`enkf.diagnosis`, steps 1-2)."""
+per-window RMS) and trends across records (:mod:`enkf.diagnosis`, part 1)."""
 from __future__ import annotations
 
 import itertools
