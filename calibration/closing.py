@@ -240,7 +240,7 @@ def loro_table(folds: Mapping[str, Mapping], record_info: Mapping[str, Mapping] 
                    "verdict": rep["verdict"], "estimates": shared,
                    "heldout_values": ev["after"].get("point"), "heldout_intervals": ev["after"].get("intervals")}
             for w in ("before", "after"):
-                for key in ("rmse", "peak_error", "time_to_peak_error"):
+                for key in ("rmse", "peak_error", "peak_rel_error", "time_to_peak_error"):
                     row[f"{key}_{w}"] = ev[w].get(key)
             row["rmse_change"] = ev["after"]["rmse"] - ev["before"]["rmse"]
             info = (record_info or {}).get(h, {})

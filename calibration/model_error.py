@@ -40,7 +40,7 @@ import numpy as np
 
 from enkf import AR1Error, DenseError, ObservationError
 from enkf.diagnostics import member_misfit, mean_misfit
-from enkf.discrepancy import combined_error, estimate_discrepancy, inflated_noise_factor, record_loglik
+from enkf.discrepancy import combined_error, estimate_discrepancy, inflated_noise_factor, record_loglik, stored_term
 from enkf.predictive import predictive_coverage
 from enkf.variability import simulator_variability
 
@@ -141,7 +141,7 @@ def analysis_error(kind: str, obs: Observations, Y: np.ndarray, alive: np.ndarra
     Sd = np.zeros_like(Rd) if S_err is None else S_err.dense()
     if kind != "none":
         est = estimate_discrepancy(obs.values[None, :] - Y, _dense(Rd + 2.0 * Sd), obs.time, obs.groups, alive,
-                                   split_times=peak_times(obs))
+                                   split_times=phase_bounds(obs))
         block["discrepancy"] = est.to_dict(obs.records)
         best = obs.values - Y[est.member]
         # The simplest honest alternative, for comparison: R inflated until the same member's chi^2/m is 1.
@@ -149,6 +149,24 @@ def analysis_error(kind: str, obs: Observations, Y: np.ndarray, alive: np.ndarra
             rec: {"factor": inflated_noise_factor(best[obs.record_slice(rec)], obs.of_record(rec).error_model())}
             for rec in obs.records}
     return stored_error(obs, {"model_error": block}), block
+
+
+#: A record's onset: where its observed stress first passes this fraction of its peak.
+ONSET_FRACTION = 0.1
+
+
+def phase_bounds(obs: Observations) -> dict:
+    """``{group: (onset, peak)}``: where the discrepancy's amplitude may change (the foot before the
+    onset, the rise, the fracture after the peak), from each record's own observed curve (a calibration
+    record's data: the discrepancy is a property of the fit to them)."""
+    out = {}
+    for g, rec in enumerate(obs.records):
+        sl = obs.record_slice(rec)
+        t, y = obs.time[sl], np.abs(obs.values[sl])
+        k = int(np.argmax(y))
+        above = np.flatnonzero(y[:k + 1] >= ONSET_FRACTION * y[k])
+        out[g] = (float(t[above[0]]), float(t[k])) if above.size and above[0] > 0 else (float(t[k]),)
+    return out
 
 
 def peak_times(obs: Observations) -> dict:
@@ -175,9 +193,7 @@ def stored_error(obs: Observations, analysis: Mapping) -> ErrorModel:
     D = np.zeros_like(R)
     if disc:
         labels = {rec: i for i, rec in enumerate(obs.records)}
-        terms = {labels[rec]: (float(v["sigma_pre"]), float(v["sigma_post"]), float(v["corr_time_s"]),
-                               None if v.get("split_time_s") is None else float(v["split_time_s"]))
-                 for rec, v in disc["records"].items()}
+        terms = {labels[rec]: stored_term(v) for rec, v in disc["records"].items()}
         D = combined_error(_dense(R), obs.time, obs.groups, terms, as_matrix=True) - R
     return ErrorModel(R=R, S=S, D=D, mode=str(block.get("mesh_realizations") or "per_run"),
                       measured=bool(block.get("measured_data", True)))

@@ -1,0 +1,77 @@
+"""The README's leave-one-record-out table, generated from the series' committed ``loro/summary.json``
+(one source for the numbers).
+
+    python tools/loro_table.py benchmarks/results/loro_<date>/marble_loro.json [more series] [--readme]
+
+The block sits between ``<!-- loro-table:start -->`` and ``<!-- loro-table:end -->`` in README.md;
+``tests/test_docs_tables.py`` checks that it equals what this tool makes from the JSON files named in it.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+START, END = "<!-- loro-table:start -->", "<!-- loro-table:end -->"
+
+
+def _mpa(v) -> str:
+    return "-" if v is None else f"{v / 1e6:.1f}"
+
+
+def _pct(e) -> str:
+    return "-" if e is None else f"{100 * e:+.0f} %"
+
+
+def rows(series: dict) -> list[str]:
+    out = []
+    for r in series["rows"]:
+        rate = r.get("strain_rate_per_s")
+        out.append(
+            f"| {series['experiment']} | {r['heldout']}" + (f" ({rate:.0f} 1/s)" if rate else "")
+            + f" | {', '.join(r['effects']) or 'none (base kept)'} "
+            f"| {_mpa(r['rmse_before'])} -> {_mpa(r['rmse_after'])} "
+            f"| {_pct(r.get('peak_rel_error_before'))} -> {_pct(r.get('peak_rel_error_after'))} "
+            f"| {r['time_to_peak_error_before'] * 1e6:+.0f} -> {r['time_to_peak_error_after'] * 1e6:+.0f} |")
+    t = series["totals"]
+    sd = t.get("sd_rmse_change")
+    out.append(f"| {series['experiment']} | **mean over {t['folds']} folds** | "
+               + ", ".join(f"{e} {n}/{t['folds']}" for e, n in t["effects_kept"].items())
+               + f" | **{_mpa(t['mean_rmse_before'])} -> {_mpa(t['mean_rmse_after'])}** (change "
+               f"{t['mean_rmse_change'] / 1e6:+.1f}" + (f", sd {sd / 1e6:.1f}" if sd is not None else "")
+               + f"; {t['folds_worse']} fold(s) worse) | | |")
+    return out
+
+
+def block(paths) -> str:
+    lines = ["| series | held-out record | effects kept | held-out RMSE, real FDEM [MPa] | peak error | "
+             "time-to-peak error [us] |", "|---|---|---|---|---|---|"]
+    for p in paths:
+        lines += rows(json.loads((ROOT / p).read_text()))
+    head = "From " + ", ".join(f"`{p}`" for p in paths) + " (before: base model; after: the model the fold kept):"
+    return f"{START}\n{head}\n\n" + "\n".join(lines) + f"\n{END}"
+
+
+def readme_block_sources(text: str) -> list[str]:
+    inner = text.split(START, 1)[1].split(END, 1)[0]
+    head = inner.strip().split("\n", 1)[0]
+    return head.split("`")[1::2][: head.count("`") // 2]
+
+
+def main(argv) -> int:
+    paths = [a for a in argv[1:] if not a.startswith("--")]
+    text = block(paths)
+    if "--readme" in argv:
+        readme = ROOT / "README.md"
+        old = readme.read_text()
+        a, b = old.index(START), old.index(END) + len(END)
+        readme.write_text(old[:a] + text + old[b:])
+    else:
+        print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv))
