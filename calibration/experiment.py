@@ -38,8 +38,9 @@ from enkf import (BoxTransform, DenseError, EnsembleFailure, StopCriteria, check
 
 from enkf.ces import interval_summary
 
-from .model_error import (analysis_error, discrepancy_kind, mesh_mode, misfit_block, posterior_predictive,
-                          posterior_tempering, replicate_count)
+from .model_error import (MESH_PURPOSE, MESH_STAGES, analysis_error, discrepancy_kind, mesh_mode,  # noqa: F401
+                          mesh_seed, misfit_block, posterior_predictive, posterior_tempering, replicate_count,
+                          run_mesh_seed)
 from .identifiability import linear_sensitivity
 from .observations import Observations
 from .sensitivity import AUTO, selected_parameters
@@ -50,35 +51,13 @@ __all__ = ["PURPOSES", "MESH_STAGES", "rng_for", "mesh_seed", "run_mesh_seed", "
            "diagnosis_settings", "final_iteration", "final_verdict", "reported_ensemble", "linear_sensitivity", "record_misfits", "summary"]
 
 #: Independent random streams of an experiment (the ``spawn_key`` of :func:`rng_for`).
-PURPOSES = {"lhs": 1, "noise": 2, "analysis": 3, "posterior": 4, "predictive": 5, "mesh": 6}
-
-#: What a simulation's mesh realization is drawn for (:func:`mesh_seed`).
-MESH_STAGES = {"member": 1, "truth": 2, "replicate": 3, "design": 4, "check": 5}
+#: (``mesh``: the specimen-mesh realizations, :func:`calibration.model_error.mesh_seed`.)
+PURPOSES = {"lhs": 1, "noise": 2, "analysis": 3, "posterior": 4, "predictive": 5, "mesh": MESH_PURPOSE}
 
 
 def rng_for(seed: int, purpose: str, k: int = 0) -> np.random.Generator:
     """The generator of one random stream: ``SeedSequence(seed, spawn_key=(PURPOSES[purpose], k))``."""
     return np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(PURPOSES[purpose], int(k))))
-
-
-def mesh_seed(seed: int, stage: str, k: int = 0, index: int = 0, record: int = 0) -> int:
-    """The specimen-mesh realization (``python -m shpb simulate --mesh-seed``) of one simulation: a
-    31-bit integer from ``SeedSequence(seed, spawn_key=(mesh, stage, k, index, record))``, so that every
-    run of an experiment (iteration ``k``, member or replicate ``index``, record position ``record``)
-    has its own realization and a re-run has the same one."""
-    ss = np.random.SeedSequence(int(seed), spawn_key=(PURPOSES["mesh"], MESH_STAGES[stage], int(k), int(index),
-                                                      int(record)))
-    return int(ss.generate_state(1, np.uint32)[0] & 0x7FFFFFFF)
-
-
-def run_mesh_seed(exp: Mapping, stage: str, k: int = 0, index: int = 0, record: int = 0) -> int | None:
-    """:func:`mesh_seed` of a simulation of experiment ``exp`` (its config block), or None (the
-    unperturbed mesh) for the members, design and check runs of ``simulation.mesh_realizations:
-    shared``. A twin's reference run and the replicates always get a realization of their own: the data
-    of a real test never come from the model's mesh, and replicates measure what the mesh changes."""
-    if stage in ("member", "design", "check") and mesh_mode(exp) == "shared":
-        return None
-    return mesh_seed(int(exp["seed"]), stage, k, index, record)
 
 
 @dataclass(frozen=True)

@@ -46,7 +46,7 @@ from enkf.variability import simulator_variability
 
 from .observations import Observations
 
-__all__ = ["MESH_MODES", "ErrorModel", "discrepancy_kind", "mesh_mode", "replicate_count", "analysis_error",
+__all__ = ["MESH_MODES", "MESH_STAGES", "mesh_seed", "run_mesh_seed", "ErrorModel", "discrepancy_kind", "mesh_mode", "replicate_count", "analysis_error",
            "stored_error", "misfit_block", "posterior_predictive", "variability_from_replicates"]
 
 #: ``simulation.mesh_realizations``: every run its own mesh realization, or the members on one mesh.
@@ -67,6 +67,32 @@ def replicate_count(exp: Mapping) -> int:
 
 def mesh_mode(exp: Mapping) -> str:
     return str((exp.get("simulation") or {}).get("mesh_realizations") or "per_run")
+
+
+#: The spawn key of the mesh realizations' stream (``calibration.experiment.PURPOSES["mesh"]``) and what a
+#: simulation's realization is drawn for.
+MESH_PURPOSE = 6
+MESH_STAGES = {"member": 1, "truth": 2, "replicate": 3, "design": 4, "check": 5}
+
+
+def mesh_seed(seed: int, stage: str, k: int = 0, index: int = 0, record: int = 0) -> int:
+    """The specimen-mesh realization (``python -m shpb simulate --mesh-seed``) of one simulation: a
+    31-bit integer from ``SeedSequence(seed, spawn_key=(mesh, stage, k, index, record))``, so that every
+    run of an experiment (iteration ``k``, member or replicate ``index``, record position ``record``)
+    has its own realization and a re-run has the same one."""
+    ss = np.random.SeedSequence(int(seed), spawn_key=(MESH_PURPOSE, MESH_STAGES[stage], int(k), int(index),
+                                                      int(record)))
+    return int(ss.generate_state(1, np.uint32)[0] & 0x7FFFFFFF)
+
+
+def run_mesh_seed(exp: Mapping, stage: str, k: int = 0, index: int = 0, record: int = 0) -> int | None:
+    """:func:`mesh_seed` of a simulation of experiment ``exp`` (its config block), or None (the
+    unperturbed mesh) for the members, design and check runs of ``simulation.mesh_realizations:
+    shared``. A twin's reference run and the replicates always get a realization of their own: the data
+    of a real test never come from the model's mesh, and replicates measure what the mesh changes."""
+    if stage in ("member", "design", "check") and mesh_mode(exp) == "shared":
+        return None
+    return mesh_seed(int(exp["seed"]), stage, k, index, record)
 
 
 def _dense(C: np.ndarray) -> DenseError:
