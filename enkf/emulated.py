@@ -42,6 +42,7 @@ from .analysis import esmda_alphas
 from .covariance import AR1Error, DenseError, ObservationError
 from .diagnostics import default_names, jsonable, posterior_dict
 from .emulator import design_arrays, smoothed_emulator
+from .variability import lag1_correlation
 from .loop import assimilate
 from .sampling import latin_hypercube
 from .transforms import BoxTransform
@@ -65,8 +66,8 @@ class EmulatedAnalysis:
 def emulator_error_model(residuals: np.ndarray, times, groups=None) -> tuple[AR1Error | None, dict]:
     """The emulator's error from residual curves ``(k, m)``: per-time rms with AR(1) correlation.
 
-    The correlation time is ``-dt / ln(rho)`` with ``rho`` the lag-1 autocorrelation of the residuals
-    scaled by their per-time rms (pooled over curves, within each group), ``dt`` the median grid step.
+    The correlation time is ``-dt / ln(rho)`` with ``rho`` the residuals' lag-1 correlation per pair of
+    neighbouring times, averaged (:func:`enkf.variability.lag1_correlation`), ``dt`` the median grid step.
     Returns ``(None, info)`` when there are no residuals.
     """
     R = np.array(residuals, dtype=float, ndmin=2)
@@ -79,15 +80,7 @@ def emulator_error_model(residuals: np.ndarray, times, groups=None) -> tuple[AR1
     sd = np.sqrt(np.mean(R ** 2, axis=0))
     floor = 1e-9 * max(float(sd.max()), 1e-300)
     sd = np.maximum(sd, floor)
-    Rn = R / sd
-    same = g[1:] == g[:-1]
-    a, b = Rn[:, 1:][:, same], Rn[:, :-1][:, same]
-    den = math.sqrt(float(np.sum(a * a) * np.sum(b * b)))
-    rho = float(np.sum(a * b) / den) if den > 0 else 0.0
-    rho = min(max(rho, 0.0), 0.999)
-    steps = np.diff(t)[same]
-    dt = float(np.median(steps)) if steps.size else 1.0
-    corr_time = -dt / math.log(rho) if rho > 0 else 0.0
+    rho, corr_time = lag1_correlation(R, t, g)
     err = AR1Error(sd, t, corr_time, groups=g)
     return err, {"n_residuals": int(R.shape[0]), "rms": float(np.sqrt(np.mean(sd ** 2))),
                  "max": float(sd.max()), "lag1_correlation": rho, "corr_time": corr_time}
