@@ -13,8 +13,9 @@ The order is fixed before anything is fitted (docs/closing-the-loop.md):
 4. real FDEM runs at every step's cross-validation points and held-out prediction points
    (:func:`check_rows`, one Snakemake job each; every step of one record on the same mesh realization,
    so that the comparison of two steps is paired);
-5. :func:`assemble`: the confirmation walk on the real cross-validation runs, and only then the held-out
-   records' curves are read: their errors before (base model) and after (the confirmed model).
+5. :func:`assemble`: the confirmation walk on the real cross-validation runs (the data's noise and own
+   mesh departure, each run's departure), and only then the held-out records' curves are read: their
+   errors before (base model) and after (the confirmed model).
 
 With ``diagnosis: {validation: loro}`` an experiment's records are each held out once
 (:func:`loro_folds`): one experiment per fold, ``<experiment>__<record>``, and the folds' checks are
@@ -37,11 +38,22 @@ from .model_error import stored_error
 from .observations import Observations
 from .protocol import check_runs, confirm, real_curves, select
 
-__all__ = ["FOLD_SEPARATOR", "candidate_effects", "emulated_model", "protocol_errors", "select_effects",
+__all__ = ["FOLD_SEPARATOR", "blind", "candidate_effects", "emulated_model", "protocol_errors", "select_effects",
            "check_rows", "covariate_table", "assemble", "loro_folds", "loro_table"]
 
 #: Between an experiment's name and a held-out record's in a leave-one-record-out fold's name.
 FOLD_SEPARATOR = "__"
+
+
+def blind(heldout: Observations | None) -> Observations | None:
+    """The held-out records as the selection may see them: their times and noise level, their curves
+    replaced by NaN (so that any use of them before :func:`assemble` poisons the result instead of
+    leaking it)."""
+    if heldout is None:
+        return None
+    frame = heldout.frame.copy()
+    frame["stress_Pa"] = np.nan
+    return Observations(frame, heldout.error_kind, dict(heldout.corr_time), dict(heldout.meta))
 
 
 def candidate_effects(diagnosis: Mapping) -> list[str]:
@@ -98,9 +110,13 @@ def _jittered(S: np.ndarray) -> DenseError:
 
 def select_effects(model: EmulatedSHPB, *, base_names: Sequence[str], candidates: Sequence[str], obs: Observations,
                    noise: Mapping[str, ObservationError], simulator: Mapping[str, ObservationError],
-                   heldout_records: Sequence[str], settings: Mapping):
+                   heldout_records: Sequence[str], settings: Mapping, mesh_mode: str = "per_run"):
     """:func:`calibration.protocol.select` with the experiment's ``diagnosis`` settings; reads the
-    calibration records' observations only."""
+    calibration records' observations only. With ``per_run`` meshes the design runs each carry their
+    own realization, so the emulator's leave-one-out error already holds ``S``: it is not added again on
+    the emulator's side (only for a ``shared`` mesh)."""
+    if mesh_mode != "shared":
+        simulator = {}
     return select(model, base_names=list(base_names), candidates=[fx.get_effect(c) for c in candidates],
                   calib_records=list(obs.records), obs={r: obs.values[obs.record_slice(r)] for r in obs.records},
                   noise=noise, heldout_records=list(heldout_records), simulator=simulator,
@@ -160,8 +176,13 @@ def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: Emulated
     then (read here for the first time) the held-out records' errors before and after on the real
     held-out runs. ``runs[i]``: the FDEM curve (DataFrame, or None if it failed) of ``rows[i]``."""
     real = real_curves(rows, runs, model)
+    # the data carry their own realization (S on the data, common to every step) and each real run its
+    # own; the runs of two steps share a mesh, but their departures are taken as independent (no
+    # correlation is measured between them): conservative, a real gain is refuted rather than a null one kept
+    walk_noise = {r: DenseError(noise[r].dense() + (simulator[r].dense() if r in simulator else 0.0), _symmetric=True)
+                  for r in obs.records}
     conf = confirm(selection, real["cv"], {r: obs.values[obs.record_slice(r)] for r in obs.records},
-                   {r: noise[r] for r in obs.records}, simulator={r: simulator[r] for r in obs.records if r in simulator})
+                   walk_noise, simulator={r: simulator[r] for r in obs.records if r in simulator})
     k = int(conf["confirmed"])
     held = {}
     if heldout is not None and heldout.records:

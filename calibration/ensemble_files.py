@@ -13,7 +13,7 @@ import numpy as np
 
 from .contracts import atomic_write_csv
 
-__all__ = ["member_ids", "member_params", "ensemble_mean_params", "combine_member_runs", "write_responses", "read_responses"]
+__all__ = ["member_ids", "member_params", "combine_member_runs", "write_responses", "read_responses"]
 
 
 def member_ids(n_members: int) -> list[str]:
@@ -32,15 +32,6 @@ def member_params(params_csv: str | Path, member: str | int, fixed: Mapping[str,
         raise KeyError(f"{params_csv}: member {member} not found")
     values = {c: float(v) for c, v in rows[0].items() if c != "member"}
     return {**(fixed or {}), **values}
-
-
-def ensemble_mean_params(params_csv: str | Path) -> dict:
-    """The ensemble's mean parameters (every row of ``params.csv``): where an iteration's replicates run
-    (the members' outcomes are not known when they start, so failed members are not left out)."""
-    import pandas as pd
-
-    df = pd.read_csv(params_csv)
-    return {c: float(df[c].mean()) for c in df.columns if c != "member"}
 
 
 def combine_member_runs(runs: Mapping[str, Mapping]) -> dict:

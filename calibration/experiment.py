@@ -518,9 +518,11 @@ def final_verdict(spec: ExperimentSpec, analyses: Sequence[Mapping], params: Seq
 
 def diagnosis_settings(exp: Mapping | None) -> Mapping | None:
     """The experiment's ``diagnosis`` block if it runs the diagnosis (a measured experiment with the
-    block enabled), else None."""
+    block enabled), else None; its ``seed`` is the experiment's where the block gives none."""
     d = (exp or {}).get("diagnosis")
-    return d if (d and d.get("enabled", True) and (exp or {}).get("kind") == "measured") else None
+    if not (d and d.get("enabled", True) and (exp or {}).get("kind") == "measured"):
+        return None
+    return d if d.get("seed") is not None else {**d, "seed": int(exp["seed"])}
 
 
 def _diagnosed(exp: Mapping | None) -> bool:

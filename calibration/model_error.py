@@ -24,8 +24,9 @@ is a draw ``mu(theta_i) + eta_i``:
 * the posterior-predictive band of the members (each a realization) adds ``R + D``.
 
 With ``shared`` the members run on the unperturbed mesh: its departure is one fixed unknown draw, so
-``S`` is added once more where the members do not sample it (assimilation ``R + 2 S + D``, emulated and
-predictive ``+ S``).
+``S`` is added where the members do not sample it (assimilation and predictive band ``R + 2 S + D``: the
+members' common departure and the data's own; emulated ``R + D + S``: the emulator's leave-one-out
+error holds part of the one mesh's roughness).
 
 Each ``analysis.json`` stores the estimates (``model_error``), so the summary rebuilds the same terms
 from files alone (:func:`stored_error`).
@@ -141,8 +142,9 @@ class ErrorModel:
         return _dense(self.R + self.D + self._shared() * self.S)
 
     def predictive(self) -> DenseError:
-        """What the members' predictive band adds: ``R + D`` (``+ S`` for a shared mesh)."""
-        return _dense(self.R + self.D + self._shared() * self.S)
+        """What the members' predictive band adds: ``R + D`` (``+ 2 S`` for a shared mesh: the members'
+        common departure and the data's own, as in its assimilation)."""
+        return _dense(self.R + self.D + 2.0 * self._shared() * self.S)
 
 
 def variability_from_replicates(obs: Observations, replicates) -> tuple[AR1Error | None, dict | None]:

@@ -38,10 +38,12 @@ def sample_posterior(spec: ExperimentSpec, params: Sequence[pd.DataFrame], respo
                          f"and 2 in the last iteration; got {X.shape[0]} and {int(latest.sum())}")
     # R + D of the last analysis (+ S for a shared mesh); the emulator's leave-one-out error holds S
     # (calibration.model_error.ErrorModel.emulated)
-    error = stored_error(obs, last_analysis).emulated()
+    terms = stored_error(obs, last_analysis)
+    error = terms.emulated()
     return emulator_posterior(X, Y, latest, obs.values, error, lower=spec.lower, upper=spec.upper,
                               times=obs.time, groups=obs.frame["record"].to_numpy(str),
-                              rng=rng_for(spec.seed, "posterior"), start=X[latest], names=list(spec.names))
+                              rng=rng_for(spec.seed, "posterior"), start=X[latest], names=list(spec.names),
+                              smoothing=spec.smoothing, loo_scale=terms.likelihood().std)
 
 
 def samples_frame(post: EmulatorPosterior) -> pd.DataFrame:

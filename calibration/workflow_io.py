@@ -19,7 +19,7 @@ from .config_check import (ConfigError, apply_defaults, coerce_yaml_floats, conf
                            load_config_file, load_yaml, validate_config)
 from .contracts import (PARAM_NAMES, atomic_write_bytes, atomic_write_csv, atomic_write_json, atomic_write_text,  # noqa: F401
                         experiment_records, known_parameters, read_json, record_name)
-from .ensemble_files import (combine_member_runs, ensemble_mean_params, member_ids, member_params, read_responses,  # noqa: F401
+from .ensemble_files import (combine_member_runs, member_ids, member_params, read_responses,  # noqa: F401
                              write_responses)
 from .runner import (CURVE_COLUMNS, DEFAULT_SIMULATOR, SimulatorCrash, SimulatorRejected,  # noqa: F401
                      failed_curve_text, failure_card, run_member, simulate_argv, simulator_command)

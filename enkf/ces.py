@@ -75,7 +75,7 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
                        lower, upper, times, groups=None, rng: RngLike, start=None,
                        names: Sequence[str] | None = None, walkers: int = 32, min_steps: int = 2000,
                        max_steps: int = 40000, min_tau_multiple: float = 50.0, burn_tau: float = 5.0,
-                       emulator_error: bool = True, smoothing="loo") -> EmulatorPosterior:
+                       emulator_error: bool = True, smoothing="loo", loo_scale=None) -> EmulatorPosterior:
     """Sample ``p(theta | d)`` on the emulator of every run (module docstring).
 
     design_params, design_responses : (k, n) / (k, m) every successful run so far (finite curves).
@@ -84,8 +84,9 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
     lower, upper : the prior box. start : (N, n) points inside the box to start the walkers from
         (default: the latest runs); ``walkers`` of them are drawn with replacement and jittered.
     emulator_error : add ``C_em`` to ``R`` (False only to test the sampler on an exact emulator).
-    smoothing : the RBF smoothing, or ``"loo"``: the value of :data:`SMOOTHING_GRID` with the least
-        leave-one-out error at the latest runs.
+    smoothing : the RBF smoothing, or ``"loo"``: the value of ``enkf.emulator.SMOOTHING_GRID`` with the
+        least leave-one-out error at the latest runs, each time divided by ``loo_scale`` (m,) where given
+        (as the emulated ES-MDA does, :func:`enkf.emulator.smoothed_emulator`).
     """
     X, Y, latest, d = design_arrays(design_params, design_responses, latest, obs)
     lo, hi = np.asarray(lower, float), np.asarray(upper, float)
@@ -98,7 +99,7 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
     import emcee  # a heavy import, needed only here
 
     rng = as_generator(rng)
-    em, smoothing_info = smoothed_emulator(X, Y, lo, hi, names, latest, smoothing)
+    em, smoothing_info = smoothed_emulator(X, Y, lo, hi, names, latest, smoothing, loo_scale)
     emu_info = {"n_residuals": 0}
     C = DenseError(obs_error.dense(), _symmetric=True)
     if emulator_error:

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from calibration.closing import check_rows, covariate_table, emulated_model, protocol_errors, select_effects
+from calibration.closing import blind, check_rows, covariate_table, emulated_model, protocol_errors, select_effects
 from calibration.diagnose import model_grid
 from calibration.observations import read_curve, read_observations
 from calibration.workflow_io import atomic_write_bytes, atomic_write_csv, atomic_write_json, read_json
@@ -16,7 +16,8 @@ meta = read_json(inp.design_meta)
 names = meta["names"]
 X = pd.read_csv(inp.design)[names].to_numpy(float)
 obs = read_observations(inp.obs, inp.obs_meta)
-held = read_observations(inp.heldout, inp.heldout_meta) if "heldout" in inp.keys() else None
+# the held-out records' curves are not read here: their times and noise only (diagnosis_check reads them)
+held = blind(read_observations(inp.heldout, inp.heldout_meta)) if "heldout" in inp.keys() else None
 analysis = read_json(list(inp.analyses)[int(read_json(inp.summary)["posterior_iteration"])])
 
 root = Path(inp.design).parent
@@ -29,7 +30,7 @@ model, n_failed = emulated_model(X, names, meta["lower"], meta["upper"], curves,
 noise, simulator = protocol_errors(obs, analysis, held)
 selection = select_effects(model, base_names=meta["base_names"], candidates=snakemake.params.candidates, obs=obs,
                            noise=noise, simulator=simulator, heldout_records=held.records if held is not None else [],
-                           settings=d)
+                           settings=d, mesh_mode=e["simulation"].get("mesh_realizations") or "per_run")
 atomic_write_bytes(out.selection, pickle.dumps({"selection": selection, "model": model, "noise": noise,
                                                 "simulator": simulator, "design_failed_runs": n_failed}))
 # the calibration records' residual at the base model's calibration against every covariate their sheets

@@ -126,3 +126,16 @@ def test_the_series_table_reports_each_fold_and_the_mean_change_with_its_spread(
     assert tot["sd_rmse_change"] == pytest.approx(np.std([-4.0, 0.0, -5.0], ddof=1))
     assert tot["effects_kept"] == {"closure": 1, "face_gap": 2}
     assert t["rows"][0]["strain_rate_per_s"] == 100.0 and t["rows"][0]["estimates"] == {"k": {"mean": 0.3}}
+
+
+def test_the_selection_sees_a_held_out_record_blind():
+    """scripts/diagnosis.py hands the selection the held-out records blinded: their times and noise, their
+    curves NaN (a leak would poison the selection instead of informing it)."""
+    from calibration.closing import blind
+
+    t = np.arange(0.0, 40e-6, 2e-6)
+    held = _obs(np.linspace(0, 5e7, t.size), np.full(t.size, 2e5), ["H"], t)
+    b = blind(held)
+    assert np.all(np.isnan(b.values)) and np.array_equal(b.time, held.time)
+    assert np.array_equal(b.error_model().dense(), held.error_model().dense())
+    assert not np.any(np.isnan(held.values))  # the original is untouched
