@@ -7,11 +7,12 @@ import pandas as pd
 
 from calibration.closing import blind, check_rows, covariate_table, emulated_model, protocol_errors, select_effects
 from calibration.diagnose import model_grid
+from calibration.experiment import diagnosis_settings
 from calibration.observations import read_curve, read_observations
 from calibration.workflow_io import atomic_write_bytes, atomic_write_csv, atomic_write_json, read_json
 
 inp, out, e = snakemake.input, snakemake.output, snakemake.params.exp
-d = e["diagnosis"]
+d = diagnosis_settings(e)
 meta = read_json(inp.design_meta)
 names = meta["names"]
 X = pd.read_csv(inp.design)[names].to_numpy(float)

@@ -2,13 +2,13 @@
 import numpy as np
 import pandas as pd
 
-from calibration.experiment import ExperimentSpec
+from calibration.experiment import ExperimentSpec, diagnosis_settings
 from calibration.closing import candidate_effects
 from calibration.diagnose import base_design_box, design_points, physical_design_ranges
 from calibration.workflow_io import atomic_write_csv, atomic_write_json
 
 e, exp = snakemake.params.exp, snakemake.wildcards.exp
-d = e["diagnosis"]
+d = diagnosis_settings(e)
 spec = ExperimentSpec.from_config(exp, e)
 post = pd.read_csv(snakemake.input.posterior)
 blo, bhi = base_design_box(post, spec.names, spec.lower, spec.upper, width_sd=d["base_width_sd"],
