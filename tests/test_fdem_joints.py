@@ -230,3 +230,14 @@ def test_rate_dependent_strength_raises_the_peak_by_the_DIF_and_keeps_the_fractu
     model, res = _pull(jp, 0, speed=V)
     dissipated = res.energy["joint_dissipated"][-1] / (L * THICK)
     assert dissipated == pytest.approx(jp.E_n, rel=0.02)
+
+
+def test_the_stored_default_area_is_the_quadrature_bit_for_bit():
+    """A0 of the default curve is stored (importing scipy.integrate was half of a simulation's start-up):
+    it must be the very float the quadrature gives, so that no answer moves."""
+    from scipy.integrate import quad
+
+    from fdem.softening import A0_DEFAULT, DEFAULT_A, DEFAULT_B, DEFAULT_C
+
+    val, _ = quad(lambda x: float(z_numpy(x, DEFAULT_A, DEFAULT_B, DEFAULT_C)), 0.0, 1.0, epsabs=1e-13, epsrel=1e-12)
+    assert A0_DEFAULT == val and A0(DEFAULT_A, DEFAULT_B, DEFAULT_C) == val
