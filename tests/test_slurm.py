@@ -26,7 +26,9 @@ REPO = Path(__file__).resolve().parents[1]
 CLUSTER = REPO / "tools" / "slurm" / "slurm_local_cluster.sh"
 PROFILES = REPO / "profiles"
 #: Rules that run one FDEM simulation each: the only ones a cluster run submits as Slurm jobs.
-SIMULATION_RULES = {"member", "truth", "forecast", "diagnosis_member", "diagnosis_check_member", "sensitivity_member"}
+#: ``replicate``: the runs at an iteration's ensemble mean that measure the simulator's own variability.
+SIMULATION_RULES = {"member", "replicate", "truth", "forecast", "diagnosis_member", "diagnosis_check_member",
+                    "sensitivity_member"}
 
 sys.path.insert(0, str(REPO / "tools" / "slurm"))
 import slurm_compare  # noqa: E402

@@ -102,6 +102,8 @@ def sizes_per_iteration(groups) -> dict[tuple[str, str], list[int]]:
 # and small's iteration 0, so the plan holds member jobs of two iterations and two experiments.
 TARGETS = ["results/big/iter_1/responses.csv", "results/small/iter_0/responses.csv"]
 N_MEMBERS = 25 + 25 + 8
+#: observations.model_error.simulator_replicates (default 6) at the mean of each of those three iterations
+N_REPLICATES = 3 * 6
 
 
 @pytest.mark.parametrize("size, expected", [
@@ -120,12 +122,18 @@ def test_the_slurm_dry_run_groups_the_members_of_each_iteration_into_jobs_of_the
     members = [(w["exp"], w["it"], w["member"]) for _, jobs in groups for rule, w in jobs if rule == "member"]
     assert sorted(members) == sorted(set(members)) and len(members) == N_MEMBERS, \
         "every member job in exactly one group job"
-    for gid, jobs in groups:
-        assert {rule for rule, _ in jobs} == {"member"}, gid
+    # the replicates at an iteration's mean form group jobs of their own (one per iteration, 6 < 12)
+    replicate_groups = [(gid, jobs) for gid, jobs in groups if {rule for rule, _ in jobs} == {"replicate"}]
+    assert sum(len(jobs) for _, jobs in replicate_groups) == job_count(plan, "replicate") == N_REPLICATES
+    groups = [g for g in groups if g not in replicate_groups]
+    for gid, jobs in groups + replicate_groups:
+        assert len({rule for rule, _ in jobs}) == 1, f"{gid} mixes members and replicates"
         assert len({(w["exp"], w["it"]) for _, w in jobs}) == 1, f"{gid} mixes iterations or experiments"
         numbers = sorted(int(w["member"]) for _, w in jobs)
         assert numbers == list(range(numbers[0], numbers[-1] + 1)), f"{gid}: not a block of members"
+    assert {rule for _, jobs in groups for rule, _ in jobs} == {"member"}
     assert sizes_per_iteration(groups) == expected
+    assert sizes_per_iteration(replicate_groups) == {("big", "0"): [6], ("big", "1"): [6], ("small", "0"): [6]}
 
 
 def test_without_the_profiles_group_components_every_simulation_is_its_own_job(tmp_path):
@@ -136,7 +144,7 @@ def test_without_the_profiles_group_components_every_simulation_is_its_own_job(t
     plan = out.stdout + out.stderr
     assert out.returncode == 0, plan[-3000:]
     groups = group_jobs(plan)
-    assert len(groups) == N_MEMBERS and {len(jobs) for _, jobs in groups} == {1}
+    assert len(groups) == N_MEMBERS + N_REPLICATES and {len(jobs) for _, jobs in groups} == {1}
 
 
 FAKE_SLURM = """#!/bin/sh

@@ -139,6 +139,8 @@ def write_config(workdir: Path, cfg: dict) -> None:
 # config
 # --------------------------------------------------------------------------------------------------
 def test_shipped_configs_are_valid():
+    from calibration.closing import candidate_effects
+
     base = load_yaml(REPO / "config" / "config.yaml")
     cfg = validate_config(base, SCHEMA, base_dir=REPO)
     assert set(cfg["run"]) <= set(cfg["experiments"])
@@ -146,10 +148,11 @@ def test_shipped_configs_are_valid():
     assert cfg["experiments"]["twin_ref"]["ensemble_size"] == 25
     # the default run closes the loop on measured data: a calibration on two records, one held out, the
     # catalogue's measurement and physical candidates (issue 17)
+    # (the whole catalogue less what the config excludes, issue 32)
     loops = [cfg["experiments"][e] for e in cfg["run"] if cfg["experiments"][e].get("diagnosis")]
     assert loops and all(len(x["observations"]["records"]) == 2 and len(x["diagnosis"]["heldout_records"]) == 1
-                         and {"face_gap", "seating", "rate_strength", "gauge_gain"} <= set(x["diagnosis"]["candidates"])
-                         for x in loops)
+                         and {"face_gap", "closure", "rate_strength", "gauge_gain"}
+                         <= set(candidate_effects(x["diagnosis"])) for x in loops)
     twins = load_yaml(REPO / "config" / "paper_twins.yaml")
     merged = {**base, **twins, "experiments": {**base["experiments"], **twins["experiments"]}}
     cfg = validate_config(merged, SCHEMA, base_dir=REPO)
@@ -160,7 +163,9 @@ def test_shipped_configs_are_valid():
     cfg = validate_config(merged, SCHEMA, base_dir=REPO)
     for e in cfg["run"]:
         d = cfg["experiments"][e]["diagnosis"]
-        assert d["heldout_records"] and {"seating", "rate_strength", "gauge_gain"} <= set(d["candidates"])
+        # every record held out once (validation: loro), the catalogue's candidates incl. end friction
+        assert d["validation"] == "loro" and len(cfg["experiments"][e]["observations"]["records"]) >= 4
+        assert {"closure", "rate_strength", "gauge_gain", "interface_friction"} <= set(candidate_effects(d))
     sens = load_yaml(REPO / "config" / "sensitivity.yaml")
     merged = {**base, **sens, "experiments": {**base["experiments"], **sens["experiments"]}}
     cfg = validate_config(merged, SCHEMA, base_dir=REPO)
@@ -500,7 +505,8 @@ def test_a_measured_experiment_runs_from_a_fresh_clone_with_nothing_beside_it(tm
         "method": "esmda", "esmda": {"steps": 1}, "max_rank": 2,
         "parameters": {"sigma_t": [1.0e7, 1.2e8], "E_t": [100.0, 5000.0]},
         "simulation": {"t_end": 1.4e-4, "sample_dt": 1.0e-6},
-        "observations": {"t_end": 1.4e-4, "dt": 2.0e-6, "records": [record], "error": {"kind": "ar1"}}}}}
+        "observations": {"t_end": 1.4e-4, "dt": 2.0e-6, "records": [record], "error": {"kind": "ar1"},
+                         "model_error": {"simulator_replicates": 2}}}}}
     (clone / "fresh.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
     env = {k: v for k, v in os.environ.items() if k != "FDEM_DATA_DIR"}
     env["PYTHONPATH"] = str(clone)
@@ -511,7 +517,8 @@ def test_a_measured_experiment_runs_from_a_fresh_clone_with_nothing_beside_it(tm
     summary = json.loads((res / "summary.json").read_text())
     assert set(summary["posterior"]) == {"sigma_t", "E_t"}
     assert all(np.isfinite(v["mean"]) for v in summary["posterior"].values())
-    assert summary["n_simulations"] == 2 * 3 + 1 and not summary["failed_members"]
+    # two analyses' worth of 3 members and 2 replicates at the mean, one forecast
+    assert summary["n_simulations"] == 2 * (3 + 2) + 1 and not summary["failed_members"]
     run = json.loads((res / "forecast" / "CaMa_SHPB_005" / "run.json").read_text())
     assert run["status"] == "ok" and run["record"] == "CaMa_SHPB_005"
     assert (res / "forecast" / "CaMa_SHPB_005" / "snapshots" / "damage_peak.png").is_file()
