@@ -29,8 +29,16 @@ def _discrepancy(s: dict) -> str:
     disc = (s.get("discrepancy") or {}).get("records") or {}
     if not disc:
         return "none"
-    return "; ".join(f"{rec}: {v['sigma'] / 1e6:.3g} MPa ({v['sigma_over_noise']:.3g} x noise), "
-                     f"{v['corr_time_s'] * 1e6:.3g} us" for rec, v in disc.items())
+    return "; ".join(f"{rec}: {' / '.join(f'{x / 1e6:.3g}' for x in v.get('sigma_phases', [v['sigma']]))} MPa "
+                     f"(foot / rise / post-peak), {v['corr_time_s'] * 1e6:.3g} us" for rec, v in disc.items())
+
+
+def _variability(s: dict) -> str:
+    sv = (s.get("simulator_variability") or {}).get("groups") or {}
+    if not sv:
+        return "not measured"
+    return "; ".join(f"{rec}: {v['rms_pre_peak_Pa'] / 1e6:.2g} / {v['rms_post_peak_Pa'] / 1e6:.2g} MPa"
+                     for rec, v in sv.items())
 
 
 def _check(s: dict) -> str:
@@ -44,15 +52,33 @@ def row(s: dict) -> str:
     stop = f"{s['stop_reason']} after {s['iterations']} analyses"
     params = "<br>".join(_param(p, s["posterior"][p], s.get("truth")) for p in s["posterior"])
     return (f"| `{s['experiment']}` | {v['verdict']} ({', '.join(v['flags']) or 'no flags'}) | {stop} | {params} "
-            f"| {_discrepancy(s)} | {_check(s)} |")
+            f"| {_variability(s)} | {_discrepancy(s)} | {_check(s)} |")
 
 
 def table(folder: Path, names) -> str:
-    rows = ["| experiment | verdict (flags) | stop | posterior mean [90 % interval] | discrepancy (RMS, correlation time) "
-            "| 90 % predictive coverage per record |", "|---|---|---|---|---|---|"]
+    rows = ["| experiment | verdict (flags) | stop | posterior mean [90 % interval] | simulator variability "
+            "(rms before / after the peak) | discrepancy (amplitudes, correlation time) "
+            "| 90 % predictive coverage per record |", "|---|---|---|---|---|---|---|"]
     rows += [row(json.loads((folder / n / "summary.json").read_text())) for n in names]
     return "\n".join(rows)
 
 
+def diagnosis_table(folder: Path, name: str) -> str:
+    """The loop's real FDEM errors per record (``diagnosis/check.json``) and its verdict in one line."""
+    check = json.loads((folder / name / "diagnosis" / "check.json").read_text())
+    rows = [f"`{name}` closing the loop: {check['verdict']} ({', '.join(check['added']) or 'base kept'}); "
+            f"{check['fdem_confirmation']['text']}", "",
+            "| record | data | RMSE before -> after [MPa] | peak error before -> after |", "|---|---|---|---|"]
+    for rec, e in check["errors_per_record"].items():
+        b, a = e["before"], e["after"]
+        rows.append(f"| {rec} | {e['data']} | {b['rmse'] / 1e6:.1f} -> {a['rmse'] / 1e6:.1f} "
+                    f"| {100 * b['peak_rel_error']:+.0f} % -> {100 * a['peak_rel_error']:+.0f} % |")
+    return "\n".join(rows)
+
+
 if __name__ == "__main__":
-    print(table(Path(sys.argv[1]), sys.argv[2:]))
+    folder, names = Path(sys.argv[1]), sys.argv[2:]
+    print(table(folder, names))
+    for n in names:
+        if (folder / n / "diagnosis" / "check.json").is_file():
+            print("\n" + diagnosis_table(folder, n))
