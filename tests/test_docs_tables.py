@@ -24,3 +24,13 @@ def test_the_engine_speed_tables_are_generated_from_the_committed_benchmark_json
     assert (ROOT / bench).is_file() and (ROOT / prof).is_file(), (bench, prof)
     start, end = text.index(tool.START), text.index(tool.END) + len(tool.END)
     assert text[start:end] == tool.block(bench, prof)
+
+
+def test_the_readme_loro_table_is_generated_from_the_committed_loro_summaries():
+    from tools import loro_table as tool
+
+    text = (ROOT / "README.md").read_text()
+    sources = tool.readme_block_sources(text)
+    assert sources and all((ROOT / s).is_file() for s in sources), sources
+    start, end = text.index(tool.START), text.index(tool.END) + len(tool.END)
+    assert text[start:end] == tool.block(sources)
