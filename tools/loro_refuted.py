@@ -31,8 +31,12 @@ def fold_steps(folder: Path) -> dict:
     real = real_curves(rows, runs, state["model"])["heldout"]
     held = read_observations(d / "heldout" / "obs.csv", d / "heldout" / "obs.json")
     report = json.loads((d / "report.json").read_text())
-    confirmed = {s["step"]: s["confirmed"] for s in report["confirmation"]["steps"]}
-    out = {"fold": folder.name, "shipped_step": report["shipped_step"], "heldout": {}}
+    walk = report["confirmation"]["steps"]
+    confirmed = {s["step"]: s["confirmed"] for s in walk}
+    # the walk's own test per step (calibration records only): what decided, beside what it would have given
+    out = {"fold": folder.name, "shipped_step": report["shipped_step"], "why": report["why"],
+           "walk": [{k: s.get(k) for k in ("step", "effect", "confirmed", "z", "p", "level")} for s in walk],
+           "heldout": {}}
     for h in held.records:
         s = held.record_slice(h)
         steps = []
