@@ -11,11 +11,13 @@ The order is fixed before anything is fitted (docs/closing-the-loop.md):
    emulator, with the instrument noise and the simulator's variability the calibration measured beside
    the emulator's time-correlated error (:func:`protocol_errors`);
 4. real FDEM runs at every step's cross-validation points and held-out prediction points
-   (:func:`check_rows`, one Snakemake job each; every step of one record on the same mesh realization,
-   so that the comparison of two steps is paired);
-5. :func:`assemble`: the confirmation walk on the real cross-validation runs (the data's noise and own
-   mesh departure, each run's departure), and only then the held-out records' curves are read: their
-   errors before (base model) and after (the confirmed model).
+   (:func:`check_rows`, one Snakemake job each), each on ``diagnosis.check_replicates`` mesh
+   realizations of its record, realization k the same for every step, so that two steps are compared
+   on common meshes;
+5. :func:`assemble`: the confirmation walk on the real cross-validation runs (with replicates: the mean
+   difference of the steps' squared errors over the common meshes against its measured scatter and the
+   data's noise, :func:`enkf.diagnosis.compare_replicated`), and only then the held-out records' curves
+   are read: their errors before (base model) and after (the confirmed model), averaged over the meshes.
 
 With ``diagnosis: {validation: loro}`` an experiment's records are each held out once
 (:func:`loro_folds`): one experiment per fold, ``<experiment>__<record>``, and the folds' checks are
@@ -30,7 +32,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from enkf.covariance import DenseError, ObservationError
-from enkf.diagnosis import curve_errors, heldout_evaluation
+from enkf.diagnosis import heldout_evaluation, replicate_curve_errors
 from shpb import effects as fx
 
 from .diagnose import EmulatedSHPB, emulators_from_design
@@ -145,9 +147,10 @@ def covariate_table(selection, model: EmulatedSHPB, obs: Observations):
     return table, covariate_table_trends(table)
 
 
-def check_rows(selection) -> list[dict]:
-    """The real FDEM runs of the check (:func:`calibration.protocol.check_runs`), JSON-ready."""
-    rows = check_runs(selection)
+def check_rows(selection, replicates: int = 1) -> list[dict]:
+    """The real FDEM runs of the check (:func:`calibration.protocol.check_runs`, each point on
+    ``replicates`` mesh realizations), JSON-ready."""
+    rows = check_runs(selection, replicates)
     return [{k: (dict(v) if isinstance(v, Mapping) else v) for k, v in row.items()} for row in rows]
 
 
@@ -162,9 +165,9 @@ def _errors_table(selection, conf: dict, real: Mapping, obs: Observations, held:
         t, y = obs.time[s], obs.values[s]
         before, after = real["cv"].get(0, {}).get(r), real["cv"].get(k, {}).get(r)
         out[r] = {"data": "calibration (cross-validated)",
-                  "before": None if before is None else curve_errors(t, before, y),
-                  "after": None if after is None else curve_errors(t, after, y)}
-    keys = ("rmse", "nrmse", "peak_error", "peak_rel_error", "time_to_peak_error")
+                  "before": None if before is None else replicate_curve_errors(t, before, y),
+                  "after": None if after is None else replicate_curve_errors(t, after, y)}
+    keys = ("rmse", "nrmse", "peak_error", "peak_rel_error", "time_to_peak_error", "replicates", "rmse_per_replicate")
     for h, ev in held.items():
         out[h] = {"data": "heldout", **{w: {k2: ev[w][k2] for k2 in keys if k2 in ev[w]} for w in ("before", "after")}}
     return out
@@ -176,13 +179,19 @@ def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: Emulated
     then (read here for the first time) the held-out records' errors before and after on the real
     held-out runs. ``runs[i]``: the FDEM curve (DataFrame, or None if it failed) of ``rows[i]``."""
     real = real_curves(rows, runs, model)
-    # the data carry their own realization (S on the data, common to every step) and each real run its
-    # own; the runs of two steps share a mesh, but their departures are taken as independent (no
-    # correlation is measured between them): conservative, a real gain is refuted rather than a null one kept
-    walk_noise = {r: DenseError(noise[r].dense() + (simulator[r].dense() if r in simulator else 0.0), _symmetric=True)
-                  for r in obs.records}
-    conf = confirm(selection, real["cv"], {r: obs.values[obs.record_slice(r)] for r in obs.records},
-                   walk_noise, simulator={r: simulator[r] for r in obs.records if r in simulator})
+    y = {r: obs.values[obs.record_slice(r)] for r in obs.records}
+    if max(int(row.get("replicate", 0)) for row in rows) >= 1:
+        # replicated runs on common meshes: the walk measures the variability of the difference of two
+        # steps (enkf.diagnosis.compare_replicated); the data carry only their instrument noise
+        conf = confirm(selection, real["cv"], y, {r: noise[r] for r in obs.records})
+    else:
+        # one run per point: the data carry their own realization (S on the data, common to every step)
+        # and each run its own; the runs of two steps share a mesh, but their departures are taken as
+        # independent (nothing measures their correlation): cautious, a real gain can be refuted
+        walk_noise = {r: DenseError(noise[r].dense() + (simulator[r].dense() if r in simulator else 0.0),
+                                    _symmetric=True) for r in obs.records}
+        conf = confirm(selection, real["cv"], y, walk_noise,
+                       simulator={r: simulator[r] for r in obs.records if r in simulator})
     k = int(conf["confirmed"])
     held = {}
     if heldout is not None and heldout.records:

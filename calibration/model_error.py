@@ -47,7 +47,7 @@ from enkf.variability import simulator_variability
 
 from .observations import Observations
 
-__all__ = ["MESH_MODES", "MESH_STAGES", "mesh_seed", "run_mesh_seed", "ErrorModel", "discrepancy_kind", "mesh_mode", "replicate_count", "analysis_error",
+__all__ = ["MESH_MODES", "MESH_STAGES", "mesh_seed", "run_mesh_seed", "ErrorModel", "discrepancy_kind", "mesh_mode", "replicate_count", "check_replicate_count", "analysis_error",
            "stored_error", "misfit_block", "posterior_predictive", "variability_from_replicates"]
 
 #: ``simulation.mesh_realizations``: every run its own mesh realization, or the members on one mesh.
@@ -68,6 +68,15 @@ def replicate_count(exp: Mapping) -> int:
 
 def mesh_mode(exp: Mapping) -> str:
     return str((exp.get("simulation") or {}).get("mesh_realizations") or "per_run")
+
+
+def check_replicate_count(exp: Mapping) -> int:
+    """Mesh realizations per point of the loop's real-FDEM check (``diagnosis.check_replicates``); 1 with
+    ``simulation.mesh_realizations: shared``, where every run has the one mesh and replicates would be
+    copies (whose zero scatter would confirm anything)."""
+    if mesh_mode(exp) == "shared":
+        return 1
+    return int(exp["diagnosis"]["check_replicates"])  # the schema's default where the config gives none
 
 
 #: The spawn key of the mesh realizations' stream (``calibration.experiment.PURPOSES["mesh"]``) and what a

@@ -259,15 +259,19 @@ def plot_diagnosis_check(path, curves: Mapping[str, Mapping], errors: Mapping[st
                          added: Sequence[str], confirmation: str | None = None) -> Path:
     """The FDEM check of the frozen protocol's answer (:func:`calibration.closing.assemble`'s curves and
     errors): per record, the data and the real runs before (base model) and after (the confirmed model),
-    with their RMSE; ``confirmation`` (the confirmation's text) as the figure's title."""
+    every mesh realization of a replicated check drawn, with their RMSE; ``confirmation`` (the confirmation's text) as the figure's title."""
     fig, axes = plt.subplots(1, len(curves), figsize=(4.2 * len(curves), 3.6), squeeze=False)
     after_label = "with " + ", ".join(added) if added else "after (nothing added)"
     for ax, (r, c) in zip(axes[0], curves.items()):
         ax.plot(c["time"] * 1e6, c["obs"] / 1e6, ".", ms=2, color="0.5", label="data")
-        for which, name in (("before", "base model"), ("after", after_label)):
+        for which, name, color in (("before", "base model", "tab:blue"), ("after", after_label, "tab:orange")):
             if c[which] is not None:
                 rmse = errors[r][which]["rmse"] / 1e6
-                ax.plot(c["time"] * 1e6, c[which] / 1e6, label=f"FDEM, {name} (RMSE {rmse:.1f} MPa)")
+                runs = np.atleast_2d(c[which])  # replicated runs: one line per mesh realization
+                reps = f", {runs.shape[0]} meshes" if runs.shape[0] > 1 else ""
+                for k, run in enumerate(runs):
+                    ax.plot(c["time"] * 1e6, run / 1e6, color=color, lw=1.4 if runs.shape[0] == 1 else 0.9,
+                            label=f"FDEM, {name} (RMSE {rmse:.1f} MPa{reps})" if k == 0 else None)
         ax.set_title(f"{r} ({c['data']})", fontsize=9)
         ax.set_xlabel("time [us]")
         ax.legend(fontsize=7)

@@ -111,11 +111,15 @@ def select(model: EmulatedSHPB, *, base_names: Sequence[str], candidates: Sequen
                           heldout_records=heldout_records, obs=obs, errors=errors, scopes=scopes, **select_kw)
 
 
-def check_runs(selection: Selection) -> list[dict]:
+def check_runs(selection: Selection, replicates: int = 1) -> list[dict]:
     """The real FDEM runs the confirmation and the held-out evaluation need: per step and calibration
     record its cross-validation point (``role`` "cv"), per step and held-out record its prediction point
-    ("heldout"). ``simulator``: the parameters of the run (base and physical effects, the record's own
-    copies under their plain names); ``measurement``: the chain applied to the run's curve afterwards."""
+    ("heldout"), each ``replicates`` times (``replicate`` k: the record's k-th mesh realization, the same
+    for every step, so that two steps are compared on common meshes). ``simulator``: the parameters of
+    the run (base and physical effects, the record's own copies under their plain names);
+    ``measurement``: the chain applied to the run's curve afterwards."""
+    if int(replicates) < 1:
+        raise ValueError(f"check replicates must be >= 1, got {replicates}")
     rows = []
     for step in selection.steps:
         pts = step.check_points()
@@ -123,8 +127,10 @@ def check_runs(selection: Selection) -> list[dict]:
             for rec, point in pts[role].items():
                 plain = record_params(point, rec)
                 base, phys, meas = fx.split_params(plain)
-                rows.append({"step": step.index, "model": step.spec.label(), "role": role, "record": rec,
-                             "simulator": {**base, **phys}, "measurement": meas, "point": dict(point)})
+                for k in range(int(replicates)):
+                    rows.append({"step": step.index, "model": step.spec.label(), "role": role, "record": rec,
+                                 "replicate": k, "simulator": {**base, **phys}, "measurement": meas,
+                                 "point": dict(point)})
     return rows
 
 
@@ -132,12 +138,21 @@ def real_curves(rows: Sequence[Mapping], runs: Sequence, model: EmulatedSHPB) ->
     """``{"cv": {step: {record: curve}}, "heldout": {...}}`` from the FDEM runs of :func:`check_runs`'s rows
     (``runs[i]``: the run of ``rows[i]``, a DataFrame with ``time_s``, ``stress_Pa``, or None for a failed
     run): each run on the model grid, through its row's measurement chain, at the record's observation
-    times (:func:`calibration.diagnose.measured_curve`); None for a failed run."""
-    out: dict[str, dict[int, dict]] = {"cv": {}, "heldout": {}}
+    times (:func:`calibration.diagnose.measured_curve`). One run per point gives a curve; replicated
+    runs a ``(K, m)`` array, row k the k-th realization. None if a run of the point failed."""
+    runs_of: dict[tuple, dict[int, np.ndarray | None]] = {}
     for row, run in zip(rows, runs):
         post = {n: {"mean": v} for n, v in row["point"].items()}
         curve = measured_curve(run, model.model_times, post, model.obs_times[row["record"]], record=row["record"])
-        out[row["role"]].setdefault(row["step"], {})[row["record"]] = curve
+        runs_of.setdefault((row["role"], row["step"], row["record"]), {})[int(row.get("replicate", 0))] = curve
+    out: dict[str, dict[int, dict]] = {"cv": {}, "heldout": {}}
+    for (role, step, rec), reps in runs_of.items():
+        curves = [reps[k] for k in sorted(reps)]
+        if any(c is None for c in curves):
+            value = None
+        else:
+            value = curves[0] if len(curves) == 1 else np.vstack(curves)
+        out[role].setdefault(step, {})[rec] = value
     return out
 
 
@@ -145,6 +160,7 @@ def confirm(selection: Selection, real_cv: Mapping[int, Mapping[str, np.ndarray 
             obs: Mapping[str, np.ndarray], noise: Mapping[str, ObservationError], *,
             simulator: Mapping[str, ObservationError] | None = None, alpha: float | None = None) -> dict:
     """:func:`enkf.diagnosis.confirm_additions` on real FDEM curves at the cross-validation points
-    (:func:`real_curves`' ``"cv"``): uncertainty = instrument noise and the runs' variability."""
+    (:func:`real_curves`' ``"cv"``): uncertainty = instrument noise and the runs' variability (measured on
+    the paired replicates where there are several, else ``simulator`` on each run)."""
     errors = RecordErrors(dict(noise), {}, dict(simulator or {}))
     return confirm_additions(selection, real_cv, obs, errors, alpha=alpha)

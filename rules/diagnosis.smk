@@ -2,7 +2,8 @@
 # experiment's calibration, a design of FDEM runs around its posterior (one job per design point and
 # record, calibration and held-out records), the selection of effects by cross-validation within the
 # calibration records on the emulator of those runs (a checkpoint: it decides which real runs the check
-# needs), one real FDEM run per cross-validation point and held-out prediction point, then the
+# needs), real FDEM runs at each cross-validation point and held-out prediction point (on
+# diagnosis.check_replicates mesh realizations, common to every step), then the
 # confirmation walk and, last, the held-out records' errors. With `diagnosis: {validation: loro}` the
 # experiment's records are each held out once (one fold experiment `<exp>__<record>` each, added to the
 # config by the Snakefile) and rule loro tabulates the folds.
@@ -164,9 +165,10 @@ rule diagnosis_check_member:
     params:
         sim=lambda wc: sim_settings(wc.exp),
         record_file=lambda wc: design_records(wc.exp)[check_rows_of(wc.exp)[int(wc.row)]["record"]],
-        # every step of one record on the same mesh realization: two steps' runs differ by their
-        # parameters, not their meshes (a paired comparison)
-        mesh_seed=lambda wc: run_mesh_seed(EXPERIMENTS[wc.exp], "check", 0, 0,
+        # replicate k of every step of one record on the record's k-th mesh realization: two steps'
+        # runs differ by their parameters, not their meshes (a paired comparison)
+        mesh_seed=lambda wc: run_mesh_seed(EXPERIMENTS[wc.exp], "check", 0,
+                                           int(check_rows_of(wc.exp)[int(wc.row)].get("replicate", 0)),
                                            list(design_records(wc.exp)).index(check_rows_of(wc.exp)[int(wc.row)]["record"])),
         max_attempts=config["member_retries"] + 1,
     threads: 1

@@ -8,6 +8,7 @@ import pandas as pd
 from calibration.closing import blind, check_rows, covariate_table, emulated_model, protocol_errors, select_effects
 from calibration.diagnose import model_grid
 from calibration.experiment import diagnosis_settings
+from calibration.model_error import check_replicate_count
 from calibration.observations import read_curve, read_observations
 from calibration.workflow_io import atomic_write_bytes, atomic_write_csv, atomic_write_json, read_json
 
@@ -38,5 +39,5 @@ atomic_write_bytes(out.selection, pickle.dumps({"selection": selection, "model":
 # give (strain rate, length-to-diameter ratio, gas pressure): what a rate or geometry effect leaves
 table, trends = covariate_table(selection, model, obs)
 atomic_write_csv(table, out.covariates)
-atomic_write_json(out.rows, {"rows": check_rows(selection), "design_failed_runs": n_failed,
+atomic_write_json(out.rows, {"rows": check_rows(selection, check_replicate_count(e)), "design_failed_runs": n_failed,
                              "covariate_trends": None if trends is None else trends.to_dict(orient="records")})

@@ -256,3 +256,11 @@ def test_measured_curve_applies_the_measurement_chain_on_the_model_grid_and_the_
     assert errors["r1"]["after"]["rmse"] < 1e-3
     png = plot_diagnosis_check(tmp_path / "check.png", curves, errors, ["face_gap"], "face_gap: confirmed")
     assert png.stat().st_size > 1000
+    # a replicated check: three mesh realizations per point, one line each, the errors their means
+    from enkf.diagnosis import replicate_curve_errors
+    reps = np.vstack([y, y + 2e6, y - 2e6])
+    e = replicate_curve_errors(obs_t, reps, obs)
+    assert e["replicates"] == 3 and e["rmse"] == pytest.approx(np.sqrt(8e12 / 3), rel=1e-6)
+    curves["r1"]["after"], errors["r1"]["after"] = reps, e
+    png = plot_diagnosis_check(tmp_path / "check3.png", curves, errors, ["face_gap"], "face_gap: confirmed")
+    assert png.stat().st_size > 1000

@@ -167,3 +167,37 @@ def test_check_runs_real_curves_confirmation_and_heldout_evaluation(selected):
     ev = heldout_evaluation(sel, obs, {r: OBS_T for r in K}, final=out["confirmed"],
                             real={"before": curves["heldout"][0], "after": curves["heldout"][1]})["H"]
     assert ev["after"]["rmse"] < 0.5 * ev["before"]["rmse"] and ev["final_model"] == "base + face_gap"
+
+
+def test_replicated_check_runs_pair_the_steps_on_common_meshes(selected):
+    """Three mesh realizations per check point: rows per (step, record) x 3, replicate k common to every
+    step; real_curves stacks them (K, m); the walk compares the steps in pairs (a mesh departure of 1 MPa,
+    the same on a record's mesh k whatever the step), and the held-out errors are the replicates' means."""
+    obs, sel = selected
+    rows = check_runs(sel, 3)
+    assert len(rows) == 3 * 2 * (len(CALIB) + 1)
+    assert sorted({r["replicate"] for r in rows}) == [0, 1, 2]
+    with pytest.raises(ValueError, match="replicates must be >= 1"):
+        check_runs(sel, 0)
+    departure = AR1Error(1e6, MODEL_T, 10e-6)
+    mesh = {(rec, k): departure.sample(np.random.default_rng(100 * ord(rec) + k), 1)[0] for rec in K for k in range(3)}
+
+    def fdem(row):
+        p = {**{"face_gap.gap_m": 0.0}, **row["simulator"]}
+        y = curve(MODEL_T, p["sigma_p"], p["tau_d"], p["face_gap.gap_m"], K[row["record"]])[0]
+        return pd.DataFrame({"time_s": MODEL_T, "stress_Pa": y + mesh[(row["record"], row["replicate"])]})
+    runs = [fdem(r) for r in rows]
+    curves = real_curves(rows, runs, emulated())
+    assert curves["cv"][1]["B"].shape == (3, OBS_T.size)
+    # a failed run of one replicate fails the point
+    i = next(i for i, r in enumerate(rows) if r["step"] == 1 and r["record"] == "B" and r["replicate"] == 2)
+    assert real_curves(rows, runs[:i] + [None] + runs[i + 1:], emulated())["cv"][1]["B"] is None
+    out = confirm(sel, curves["cv"], obs, NOISE)
+    s = out["steps"][0]
+    assert out["confirmed"] == 1 and s["test"].startswith("paired replicates") and s["sd_realizations"] > 0
+    assert 2.0 <= s["dof"] <= 10.0  # between one record's K - 1 and five records' 5 (K - 1)
+    ev = heldout_evaluation(sel, obs, {r: OBS_T for r in K}, final=1,
+                            real={"before": curves["heldout"][0], "after": curves["heldout"][1]})["H"]
+    assert ev["after"]["replicates"] == 3 and len(ev["after"]["rmse_per_replicate"]) == 3
+    assert ev["after"]["rmse"] == pytest.approx(np.sqrt(np.mean(np.square(ev["after"]["rmse_per_replicate"]))))
+    assert ev["after"]["rmse"] < 0.5 * ev["before"]["rmse"]

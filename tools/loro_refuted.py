@@ -19,7 +19,7 @@ from pathlib import Path
 
 from calibration.observations import read_curve, read_observations
 from calibration.protocol import real_curves
-from enkf.diagnosis import curve_errors
+from enkf.diagnosis import replicate_curve_errors
 
 
 def fold_steps(folder: Path) -> dict:
@@ -44,7 +44,7 @@ def fold_steps(folder: Path) -> dict:
             curve = real.get(k, {}).get(h)
             if curve is None:
                 continue
-            e = curve_errors(held.time[s], curve, held.values[s])
+            e = replicate_curve_errors(held.time[s], curve, held.values[s])  # replicated: their mean errors
             # None: the walk stopped before this step (never tested)
             steps.append({"step": k, "model": step.spec.label(), "confirmed": True if k == 0 else confirmed.get(k),
                           "rmse_Pa": e["rmse"], "peak_rel_error": e["peak_rel_error"]})

@@ -42,7 +42,7 @@ Three parts:
    end: :mod:`.population` (the population of a per-record effect, :func:`fit_population`: how an unseen
    record's value is predicted), :mod:`.crossval` (leave-one-calibration-record-out cross-validation,
    :func:`cross_validate`, and the test of a difference of cross-validated errors, :func:`compare_cv`,
-   :func:`squared_error_difference`), :mod:`.protocol` (:func:`select_effects`, :func:`confirm_additions`,
+   :func:`squared_error_difference`; on replicated real runs :func:`compare_replicated`), :mod:`.protocol` (:func:`select_effects`, :func:`confirm_additions`,
    :func:`heldout_evaluation`, :func:`leave_one_record_out`), and the errors it reports,
    :func:`curve_errors` (:mod:`.acceptance`).
 """
@@ -51,19 +51,19 @@ Three parts:
 from __future__ import annotations
 
 from .crossval import (CVResult, Fit, ForwardModel, ModelSpec, Prediction, RecordErrors, calibrate, compare_cv,
-                       cross_validate, fit_populations, holm, predict_record, squared_error_difference)
+                       compare_replicated, cross_validate, fit_populations, holm, predict_record, squared_error_difference)
 from .population import Population, fit_population, record_name, split_name
 from .protocol import ModelStep, Selection, confirm_additions, heldout_evaluation, leave_one_record_out, select_effects
-from .acceptance import curve_errors
+from .acceptance import curve_errors, replicate_curve_errors
 from .ranking import chi2_log10_sf, ensemble_sensitivity, finite_difference_sensitivity, rank_candidates, score_test
 from .structure import (autocorrelation, covariate_trends, default_windows, durbin_watson, ljung_box, runs_test,
                         spearman_exact, structure_tests, whitened_residual)
 
 __all__ = ["autocorrelation", "chi2_log10_sf", "covariate_trends", "curve_errors", "default_windows", "durbin_watson",
-           "ensemble_sensitivity", "finite_difference_sensitivity", "ljung_box", "rank_candidates", "runs_test",
-           "score_test", "spearman_exact", "structure_tests", "whitened_residual"]
+           "ensemble_sensitivity", "finite_difference_sensitivity", "ljung_box", "rank_candidates",
+           "replicate_curve_errors", "runs_test", "score_test", "spearman_exact", "structure_tests", "whitened_residual"]
 # the frozen protocol (issue 32): population of per-record effects, cross-validated selection, confirmation
 __all__ += ["CVResult", "Fit", "ForwardModel", "ModelSpec", "ModelStep", "Population", "Prediction", "RecordErrors",
-            "Selection", "calibrate", "compare_cv", "confirm_additions", "cross_validate", "fit_population",
+            "Selection", "calibrate", "compare_cv", "compare_replicated", "confirm_additions", "cross_validate", "fit_population",
             "fit_populations", "heldout_evaluation", "holm", "leave_one_record_out", "predict_record",
             "record_name", "select_effects", "split_name", "squared_error_difference"]

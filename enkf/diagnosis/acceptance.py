@@ -22,3 +22,20 @@ def curve_errors(times, sim, obs) -> dict:
             "peak_error": float(y.max()) - peak_d,
             "peak_rel_error": (float(y.max()) - peak_d) / abs(peak_d) if peak_d != 0 else math.nan,
             "time_to_peak_error": float(t[int(np.argmax(y))] - t[int(np.argmax(d))])}
+
+
+def replicate_curve_errors(times, sims, obs) -> dict:
+    """:func:`curve_errors` of one curve, or of ``(K, m)`` replicated runs (one per realization of the
+    simulator): then ``rmse`` is the root of the mean squared error over all of them (the expected error
+    of one run), the other errors their means, with ``replicates`` and ``rmse_per_replicate``."""
+    s = np.asarray(sims, dtype=float)
+    if s.ndim == 1:
+        return curve_errors(times, s, obs)
+    each = [curve_errors(times, row, obs) for row in s]
+    out = {k: float(np.mean([e[k] for e in each])) for k in each[0]}
+    out["rmse"] = float(np.sqrt(np.mean([e["rmse"] ** 2 for e in each])))
+    span = float(np.ptp(np.asarray(obs, dtype=float)))
+    out["nrmse"] = out["rmse"] / span if span > 0 else math.nan
+    out["replicates"] = int(s.shape[0])
+    out["rmse_per_replicate"] = [e["rmse"] for e in each]
+    return out

@@ -80,8 +80,8 @@ from ..transforms import BoxTransform
 from .population import Population, fit_population, record_name
 
 __all__ = ["CVResult", "Fit", "ForwardModel", "ModelSpec", "Prediction", "RecordErrors", "calibrate",
-           "compare_cv", "cross_validate", "fit_populations", "holm", "predict_record", "scope_of",
-           "seed_for", "squared_error_difference"]
+           "compare_cv", "compare_replicated", "cross_validate", "fit_populations", "holm", "predict_record",
+           "scope_of", "seed_for", "squared_error_difference"]
 
 SCOPES = ("per_record", "shared")
 
@@ -409,6 +409,46 @@ def compare_cv(y: Mapping[str, np.ndarray], current: Mapping[str, np.ndarray], c
     sd = math.sqrt(var)
     z = tot / sd if sd > 0 else (math.inf if tot > 0 else -math.inf if tot < 0 else 0.0)
     return {"delta": tot, "sd": sd, "z": z, "p": float(stats.norm.sf(z)), "records": per}
+
+
+def compare_replicated(y: Mapping[str, np.ndarray], current: Mapping[str, np.ndarray],
+                       candidate: Mapping[str, np.ndarray], noise: Mapping[str, ObservationError]) -> dict:
+    """:func:`compare_cv` for replicated real-simulator runs on common realizations: ``current[j]`` and
+    ``candidate[j]`` are ``(K, m)`` arrays, row ``k`` of both run on record ``j``'s realization ``k`` (its
+    mesh), so the simulator's variability of the *difference* is measured, not assumed.
+
+    Per record ``Delta_k = |y - a_k|^2 - |y - b_k|^2`` and ``delta = mean_k Delta_k`` (> 0: the candidate
+    is better, on average over realizations). Two independent parts of its variance: the realizations',
+    ``s^2 / K`` (``s^2`` the sample variance of ``Delta_k``: whatever the two models' mesh departures share
+    cancels in it, whatever they do not is in it), and the instrument noise on ``y``, common to every
+    ``k``, ``4 dbar' R dbar`` with ``dbar = mean_k (b_k - a_k)`` (exact: ``Delta`` is linear in the noise).
+    Records are independent; ``z = delta / sd`` is referred to Student's t with Welch-Satterthwaite's
+    degrees of freedom (the noise part known, each record's realization part on ``K - 1``)."""
+    per, tot, v_mesh, v_noise, dof_den = {}, 0.0, 0.0, 0.0, 0.0
+    for j in current:
+        a, b = np.atleast_2d(np.asarray(current[j], float)), np.atleast_2d(np.asarray(candidate[j], float))
+        if a.shape != b.shape or a.shape[0] < 2:
+            raise ValueError(f"record {j}: replicated comparison needs two (K, m) arrays with K >= 2 on common "
+                             f"realizations, got {a.shape} and {b.shape}")
+        K = a.shape[0]
+        yj = np.asarray(y[j], float)
+        deltas = np.sum((yj - a) ** 2, axis=1) - np.sum((yj - b) ** 2, axis=1)
+        dbar = np.mean(b - a, axis=0)
+        vm = float(np.var(deltas, ddof=1)) / K
+        vn = float(4.0 * dbar @ noise[j].dense() @ dbar)
+        per[j] = {"delta": float(deltas.mean()), "sd": math.sqrt(vm + vn), "sd_realizations": math.sqrt(vm),
+                  "sd_noise": math.sqrt(vn), "replicates": K, "delta_per_replicate": deltas.tolist()}
+        tot += float(deltas.mean())
+        v_mesh += vm
+        v_noise += vn
+        dof_den += vm ** 2 / (K - 1)
+    var = v_mesh + v_noise
+    sd = math.sqrt(var)
+    dof = math.inf if dof_den == 0.0 else var ** 2 / dof_den
+    z = tot / sd if sd > 0 else (math.inf if tot > 0 else -math.inf if tot < 0 else 0.0)
+    p = float(stats.norm.sf(z) if math.isinf(dof) else stats.t.sf(z, dof))
+    return {"delta": tot, "sd": sd, "sd_realizations": math.sqrt(v_mesh), "sd_noise": math.sqrt(v_noise),
+            "dof": dof, "z": z, "p": p, "test": "paired replicates, Student t (Welch-Satterthwaite)", "records": per}
 
 
 def holm(p_values: Sequence[float], alpha: float) -> tuple[list[bool], list[float]]:

@@ -45,9 +45,9 @@ import pandas as pd
 
 from ..diagnostics import jsonable
 from ..predictive import predictive_band
-from .acceptance import curve_errors
+from .acceptance import replicate_curve_errors
 from .crossval import (CVResult, Fit, ForwardModel, ModelSpec, Prediction, RecordErrors, calibrate, compare_cv,
-                       cross_validate, fit_populations, holm, predict_record, scope_of)
+                       compare_replicated, cross_validate, fit_populations, holm, predict_record, scope_of)
 from .population import Population, record_name
 from .ranking import finite_difference_sensitivity, rank_candidates
 from .structure import structure_tests
@@ -274,7 +274,11 @@ def confirm_additions(selection: Selection, real: Mapping[int, Mapping[str, np.n
 
     real : ``real[r][j]``: the real simulator's curve (on record ``j``'s observation times, through the
         same measurement chain) at step ``r``'s cross-validation point of calibration record ``j``
-        (:meth:`ModelStep.check_points`); None for a failed run.
+        (:meth:`ModelStep.check_points`); None for a failed run. A ``(K, m)`` array holds ``K >= 2``
+        replicated runs, row ``k`` of every step on record ``j``'s realization ``k``: the steps are then
+        compared by :func:`~.crossval.compare_replicated` (the simulator's variability of the difference
+        measured, ``simulator`` unused); one run per point is compared by :func:`~.crossval.compare_cv`
+        with ``simulator`` on each run, taken independent (cautious: a real gain can be refuted).
     obs : the calibration records' observations.
     errors : noise and the simulator's variability at those points (``simulator``); the model error is
         left out unless ``use_model_error`` (the curves are real runs, not the emulator).
@@ -291,7 +295,9 @@ def confirm_additions(selection: Selection, real: Mapping[int, Mapping[str, np.n
         curves = real.get(r, {})
         if any(curves.get(j) is None for j in calib):
             return None
-        return math.sqrt(sum(float(np.sum((y[j] - curves[j]) ** 2)) for j in calib) / sum(y[j].size for j in calib))
+        # a (K, m) array of replicates broadcasts: the mean squared error over every run
+        return math.sqrt(sum(float(np.mean((y[j] - np.asarray(curves[j], float)) ** 2)) * y[j].size for j in calib)
+                         / sum(y[j].size for j in calib))
 
     confirmed, out = 0, []
     base_rmse = rmse_of(0)
@@ -307,14 +313,21 @@ def confirm_additions(selection: Selection, real: Mapping[int, Mapping[str, np.n
             out.append({"step": r, "effect": name, "confirmed": False,
                         "text": f"{name}: refuted, a real run at its cross-validation points failed; the walk stops"})
             break
-        cmp = compare_cv(y, real[confirmed], real[r], errors, use_model_error=use_model_error)
+        if _replicated(real[confirmed], calib) and _replicated(real[r], calib):
+            cmp = compare_replicated(y, {j: real[confirmed][j] for j in calib}, {j: real[r][j] for j in calib},
+                                     errors.noise)
+            how = f"; paired over {_replicates(real[r], calib)} mesh realizations, t on {cmp['dof']:.1f} dof"
+        else:
+            cmp = compare_cv(y, real[confirmed], real[r], errors, use_model_error=use_model_error)
+            how = ""
         ok = cmp["p"] <= level
         out.append({"step": r, "effect": name, "confirmed": bool(ok), "real_cv_rmse_before": rmses[confirmed],
                     "real_cv_rmse_after": rmses[r], "delta_sq_error": cmp["delta"], "sd": cmp["sd"], "z": cmp["z"],
                     "p": cmp["p"], "level": level,
+                    **{k: cmp[k] for k in ("sd_realizations", "sd_noise", "dof", "test") if k in cmp},
                     "text": (f"{name} over {prev.spec.label()}: real cross-validated RMSE {rmses[confirmed]:.4g} -> "
                              f"{rmses[r]:.4g}; the squared-error sum falls by {cmp['delta']:.4g} with sd "
-                             f"{cmp['sd']:.4g} (z = {cmp['z']:.2f}, p = {cmp['p']:.3g}, level {level:.3g} = "
+                             f"{cmp['sd']:.4g} (z = {cmp['z']:.2f}, p = {cmp['p']:.3g}{how}, level {level:.3g} = "
                              f"{alpha:g} / {step.in_play}): " + ("confirmed" if ok else
                                                                  "refuted, dropped; the walk stops (the additions "
                                                                  "after it were chosen given it)"))})
@@ -329,6 +342,14 @@ def confirm_additions(selection: Selection, real: Mapping[int, Mapping[str, np.n
             "text": (f"shipped: {spec.label()} (real cross-validated RMSE {base_rmse:.4g} -> {rmses[confirmed]:.4g})")}
 
 
+def _replicated(curves: Mapping, records: Sequence[str]) -> bool:
+    return all(np.ndim(curves[j]) == 2 and np.shape(curves[j])[0] >= 2 for j in records)
+
+
+def _replicates(curves: Mapping, records: Sequence[str]) -> int:
+    return min(int(np.shape(curves[j])[0]) for j in records)
+
+
 def heldout_evaluation(selection: Selection, obs: Mapping[str, np.ndarray], times: Mapping[str, np.ndarray], *,
                        final: int | None = None, errors: RecordErrors | None = None,
                        real: Mapping[str, Mapping[str, np.ndarray]] | None = None, seed: int = 0) -> dict:
@@ -337,7 +358,8 @@ def heldout_evaluation(selection: Selection, obs: Mapping[str, np.ndarray], time
     error, time-to-peak error), the fraction of the observed curve inside the model band (posterior
     members x population draws) and, with ``errors``, inside the predictive band (the band plus a draw of
     the error model); per-record values predicted and their intervals. ``real={"before": {h: curve},
-    "after": {h: curve}}`` scores real-simulator runs at the held-out points instead of the model's."""
+    "after": {h: curve}}`` scores real-simulator runs at the held-out points instead of the model's (a
+    ``(K, m)`` curve: replicated runs, :func:`~.acceptance.replicate_curve_errors`)."""
     final = len(selection.steps) - 1 if final is None else int(final)
     out = {}
     for h in selection.heldout_records:
@@ -347,7 +369,7 @@ def heldout_evaluation(selection: Selection, obs: Mapping[str, np.ndarray], time
             pred = step.heldout[h]
             curve = pred.curve if real is None else np.asarray(real[when][h], dtype=float)
             lo, hi = pred.band
-            e = curve_errors(t, curve, y)
+            e = replicate_curve_errors(t, curve, y)  # (K, m) replicated runs: their mean errors
             e["band_coverage"] = float(np.mean((y >= lo) & (y <= hi)))
             if errors is not None:
                 plo, phi = predictive_band(pred.draws, errors.total(h), seed, level=pred.band_level)
