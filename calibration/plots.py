@@ -16,6 +16,7 @@ Axes show MPa and microseconds; files hold SI units. Matplotlib runs headless (A
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -195,8 +196,6 @@ def plot_misfit(path, misfit: Sequence[Mapping], per_record: Sequence[Mapping[st
     a2.legend(fontsize=8)
     fig.suptitle(title)
     if verdict is not None:
-        import textwrap
-
         ratio = c.get("final_over_prior")
         head = f"verdict: {verdict['verdict']}" + (f" (chi^2 final / prior = {ratio:.3g})" if ratio is not None else "")
         body = textwrap.fill("next: " + verdict["next_step"], 130)
@@ -265,6 +264,8 @@ def plot_diagnosis_check(path, curves: Mapping[str, Mapping], errors: Mapping[st
     for ax, (r, c) in zip(axes[0], curves.items()):
         ax.plot(c["time"] * 1e6, c["obs"] / 1e6, ".", ms=2, color="0.5", label="data")
         for which, name, color in (("before", "base model", "tab:blue"), ("after", after_label, "tab:orange")):
+            if which == "after" and not added:
+                continue  # the base model kept: its runs are already drawn
             if c[which] is not None:
                 rmse = errors[r][which]["rmse"] / 1e6
                 runs = np.atleast_2d(c[which])  # replicated runs: one line per mesh realization
@@ -277,7 +278,7 @@ def plot_diagnosis_check(path, curves: Mapping[str, Mapping], errors: Mapping[st
         ax.legend(fontsize=7)
     axes[0][0].set_ylabel("stress [MPa]")
     if confirmation:
-        fig.suptitle(confirmation, fontsize=9)
+        fig.suptitle(textwrap.fill(confirmation, width=int(55 * len(curves))), fontsize=9)
     fig.tight_layout()
     return _save(fig, path)
 
