@@ -1,6 +1,7 @@
 """tools/coverage_misses.py counts the misses, their side and their place in the box right, and its
 direction test tells misses that all lie on one side from misses on both."""
 import pytest
+from scipy import stats
 
 from tools import coverage_misses
 
@@ -42,8 +43,12 @@ def test_misses_all_above_the_interval_give_a_small_direction_p_and_the_right_co
     assert s["medians_misses_vs_covers"]["truth_box_fraction"]["mann_whitney_p"] < 0.001
     assert s["bias"]["fraction_positive"] == pytest.approx(0.5)
     assert out["params"]["sigma_t"]["summary"]["misses"] == 0
-    # 25 members' sample 5-95 % quantiles: 0.9 * 24 / 26 expected coverage, not 0.9
-    assert s["expected_coverage_of_sample_quantiles"]["expected"] == pytest.approx(0.9 * 24 / 26)
+    # the prediction intervals reported now: 0.9 expected; 25 members' sample 5-95 % quantiles (until
+    # 2026-11-25): 0.9 * 24 / 26
+    assert s["expected_coverage"] == {"intervals": "prediction", "n_members": 25, "expected": 0.9,
+                                      "p": pytest.approx(stats.binomtest(10, 20, 0.9).pvalue)}
+    old = tool.analyse(covers + misses, intervals="sample_quantiles")["params"]["E_t"]["summary"]
+    assert old["expected_coverage"]["expected"] == pytest.approx(0.9 * 24 / 26)
 
 
 def test_misses_on_both_sides_give_no_direction_and_the_interval_ends_count_as_covered():

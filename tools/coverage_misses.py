@@ -3,12 +3,14 @@
     python tools/coverage_misses.py > benchmarks/results/coverage_misses_<date>.json
 
 Reads the cached well-specified twin records of ``benchmarks/bench_coverage.py``
-(``benchmarks/cache/coverage/well_specified_30_*.json``) and prints one JSON object: per parameter,
+(default ``benchmarks/cache/coverage_v2/well_specified_40_*.json``) and prints one JSON object: per parameter,
 every miss (truth, its place in the prior box, the 90 % interval, the side the truth is on, the
 interval's relative half-width, the stop, the chi^2 and the estimated discrepancy) and misses against
 covers (medians with Mann-Whitney p, Fisher exact tests, a binomial test of the side, the posterior
-mean's error). It also states the coverage that 25 exact posterior draws would give: the interval is
-the members' sample 5-95 % quantiles, whose expected coverage is (0.90 (n - 1) / (n + 1)), not 0.90.
+mean's error) and the coverage a calibrated posterior would give to the intervals: 0.90 for the
+prediction intervals of one more draw the workflow reports now (``--intervals prediction``), 0.90 (n - 1)
+/ (n + 1) for the members' sample 5-95 % quantiles it reported until 2026-11-25 (``--intervals
+sample_quantiles``, the ``coverage`` cache).
 """
 
 from __future__ import annotations
@@ -22,7 +24,9 @@ import pandas as pd
 from scipy import stats
 
 ROOT = Path(__file__).resolve().parents[1]
-CACHE = ROOT / "benchmarks" / "cache" / "coverage"
+CACHE = ROOT / "benchmarks" / "cache" / "coverage_v2"
+#: What a calibrated posterior's interval covers: ``--intervals``.
+INTERVALS = ("prediction", "sample_quantiles")
 
 def _benchmark():
     """benchmarks/bench_coverage.py, whose twins these are (imported from the checkout)."""
@@ -45,7 +49,7 @@ NUMERIC = ("truth_box_fraction", "distance_to_bound", "other_truth_box_fraction"
            "disc_sigma_over_noise", "disc_sigma_pre_over_noise", "disc_sigma_post_over_noise", "disc_corr_time_us")
 
 
-def load_records(cache: Path = CACHE, pattern: str = "well_specified_30_*.json") -> list:
+def load_records(cache: Path = CACHE, pattern: str = "well_specified_40_*.json") -> list:
     return [json.loads(f.read_text()) for f in sorted(Path(cache).glob(pattern))]
 
 
@@ -101,16 +105,16 @@ def _fisher(flag: pd.Series, miss: pd.Series) -> dict:
             "odds_ratio": _f(res.statistic), "p": _f(res.pvalue)}
 
 
-def compare(df: pd.DataFrame) -> dict:
+def compare(df: pd.DataFrame, intervals: str = "prediction") -> dict:
     """Misses against covers for one parameter's table."""
     m, c = df[df["miss"]], df[~df["miss"]]
     n, k, n_mem = len(df), int(df["miss"].sum()), int(df["n_members"].median())
     above, below = int((df["side"] == "above").sum()), int((df["side"] == "below").sum())
-    expected = _benchmark().reference_coverage(df["n_members"], 0.05, 0.95)
+    expected = 0.90 if intervals == "prediction" else _benchmark().reference_coverage(df["n_members"], 0.05, 0.95)
     out = {"n": n, "misses": k, "covers": n - k, "coverage_90": (n - k) / n,
            "coverage_vs_nominal_0.90_p": _f(stats.binomtest(n - k, n, 0.9).pvalue),
-           "expected_coverage_of_sample_quantiles": {"n_members": n_mem, "expected": expected,
-                                                     "p": _f(stats.binomtest(n - k, n, expected).pvalue)},
+           "expected_coverage": {"intervals": intervals, "n_members": n_mem, "expected": expected,
+                                 "p": _f(stats.binomtest(n - k, n, expected).pvalue)},
            "direction": {"above": above, "below": below,
                          "binomial_p": _f(stats.binomtest(above, k).pvalue) if k else None},
            "misses_mean_toward_box_centre": int(m["toward_centre"].sum()),
@@ -164,13 +168,14 @@ def coverage_by_fifth(df: pd.DataFrame) -> dict:
     return {f"{k / 5:.1f}-{(k + 1) / 5:.1f}": {"n": int(n), "covers": int(n - g.sum()[k])} for k, n in g.size().items()}
 
 
-def analyse(records: list, bounds: dict | None = None) -> dict:
+def analyse(records: list, bounds: dict | None = None, intervals: str = "prediction") -> dict:
     """The analysis of each parameter; bounds default to the twins' prior box (_box)."""
     bounds = _box() if bounds is None else bounds
-    out = {"n_twins": len(records), "bounds": {p: list(b) for p, b in bounds.items()}, "params": {}}
+    out = {"n_twins": len(records), "intervals": intervals, "bounds": {p: list(b) for p, b in bounds.items()},
+           "params": {}}
     for p in bounds:
         df = twin_table(records, p, bounds)
-        out["params"][p] = {"summary": compare(df), "coverage_by_box_fifth": coverage_by_fifth(df),
+        out["params"][p] = {"summary": compare(df, intervals), "coverage_by_box_fifth": coverage_by_fifth(df),
                             "misses": miss_rows(df)}
     return out
 
@@ -178,11 +183,12 @@ def analyse(records: list, bounds: dict | None = None) -> dict:
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--cache", default=str(CACHE))
-    ap.add_argument("--pattern", default="well_specified_30_*.json")
+    ap.add_argument("--pattern", default="well_specified_40_*.json")
+    ap.add_argument("--intervals", choices=INTERVALS, default="prediction")
     args = ap.parse_args(argv)
     records = load_records(Path(args.cache), args.pattern)
     out = {"source": f"{Path(args.cache).relative_to(ROOT) if Path(args.cache).is_relative_to(ROOT) else args.cache}"
-                     f"/{args.pattern}", **analyse(records)}
+                     f"/{args.pattern}", **analyse(records, intervals=args.intervals)}
     print(json.dumps(out, indent=1))
     return out
 
