@@ -32,7 +32,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from enkf.covariance import DenseError, ObservationError
-from enkf.diagnosis import heldout_evaluation, replicate_curve_errors
+from enkf.diagnosis import heldout_evaluation, replicate_curve_errors, replicated
 from shpb import effects as fx
 
 from .diagnose import EmulatedSHPB, emulators_from_design
@@ -86,8 +86,8 @@ def protocol_errors(obs: Observations, analysis: Mapping, heldout: Observations 
 
     The discrepancy the calibration estimated is left out on purpose: it was fitted to the base model's
     residual, which holds the very effects the selection is looking for, so with it in the gate every
-    effect's gain would read as chance (measured on the default run's marble: ``face_gap`` lowered the
-    cross-validated RMSE from 20.9 to 15.1 MPa at z = 0.31 against a 12.7 MPa discrepancy correlated over
+    effect's gain would read as chance (measured on an earlier default run's marble, 2026-11-25 code:
+    ``face_gap`` lowered the cross-validated RMSE from 20.9 to 15.1 MPa at z = 0.31 against a 12.7 MPa discrepancy correlated over
     the whole window). A held-out record takes its own instrument noise and the calibration records'
     average variability (the same grid), never anything estimated from its own curve."""
     S = _per_record(stored_error(obs, analysis).S, obs)
@@ -180,7 +180,8 @@ def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: Emulated
     held-out runs. ``runs[i]``: the FDEM curve (DataFrame, or None if it failed) of ``rows[i]``."""
     real = real_curves(rows, runs, model)
     y = {r: obs.values[obs.record_slice(r)] for r in obs.records}
-    if max(int(row.get("replicate", 0)) for row in rows) >= 1:
+    # the walk's own rule (enkf.diagnosis.replicated), so the error terms given and the test it picks agree
+    if replicated(real["cv"].get(0, {}), list(obs.records)):
         # replicated runs on common meshes: the walk measures the variability of the difference of two
         # steps (enkf.diagnosis.compare_replicated); the data carry only their instrument noise
         conf = confirm(selection, real["cv"], y, {r: noise[r] for r in obs.records})

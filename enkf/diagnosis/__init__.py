@@ -53,7 +53,8 @@ from __future__ import annotations
 from .crossval import (CVResult, Fit, ForwardModel, ModelSpec, Prediction, RecordErrors, calibrate, compare_cv,
                        compare_replicated, cross_validate, fit_populations, holm, predict_record, squared_error_difference)
 from .population import Population, fit_population, record_name, split_name
-from .protocol import ModelStep, Selection, confirm_additions, heldout_evaluation, leave_one_record_out, select_effects
+from .protocol import (ModelStep, Selection, confirm_additions, heldout_evaluation, leave_one_record_out, replicated,
+                       select_effects)
 from .acceptance import curve_errors, replicate_curve_errors
 from .ranking import chi2_log10_sf, ensemble_sensitivity, finite_difference_sensitivity, rank_candidates, score_test
 from .structure import (autocorrelation, covariate_trends, default_windows, durbin_watson, ljung_box, runs_test,
@@ -66,4 +67,4 @@ __all__ = ["autocorrelation", "chi2_log10_sf", "covariate_trends", "curve_errors
 __all__ += ["CVResult", "Fit", "ForwardModel", "ModelSpec", "ModelStep", "Population", "Prediction", "RecordErrors",
             "Selection", "calibrate", "compare_cv", "compare_replicated", "confirm_additions", "cross_validate", "fit_population",
             "fit_populations", "heldout_evaluation", "holm", "leave_one_record_out", "predict_record",
-            "record_name", "select_effects", "split_name", "squared_error_difference"]
+            "record_name", "replicated", "select_effects", "split_name", "squared_error_difference"]

@@ -53,7 +53,7 @@ from .ranking import finite_difference_sensitivity, rank_candidates
 from .structure import structure_tests
 
 __all__ = ["ModelStep", "Selection", "confirm_additions", "heldout_evaluation", "leave_one_record_out",
-           "select_effects"]
+           "replicated", "select_effects"]
 
 
 @dataclass
@@ -313,7 +313,7 @@ def confirm_additions(selection: Selection, real: Mapping[int, Mapping[str, np.n
             out.append({"step": r, "effect": name, "confirmed": False,
                         "text": f"{name}: refuted, a real run at its cross-validation points failed; the walk stops"})
             break
-        if _replicated(real[confirmed], calib) and _replicated(real[r], calib):
+        if replicated(real[confirmed], calib) and replicated(real[r], calib):
             cmp = compare_replicated(y, {j: real[confirmed][j] for j in calib}, {j: real[r][j] for j in calib},
                                      errors.noise)
             how = f"; paired over {_replicates(real[r], calib)} mesh realizations, t on {cmp['dof']:.1f} dof"
@@ -342,7 +342,9 @@ def confirm_additions(selection: Selection, real: Mapping[int, Mapping[str, np.n
             "text": (f"shipped: {spec.label()} (real cross-validated RMSE {base_rmse:.4g} -> {rmses[confirmed]:.4g})")}
 
 
-def _replicated(curves: Mapping, records: Sequence[str]) -> bool:
+def replicated(curves: Mapping, records: Sequence[str]) -> bool:
+    """Whether ``curves[j]`` of every record is a ``(K, m)`` array of ``K >= 2`` replicated runs (the
+    walk then compares steps in pairs, :func:`~.crossval.compare_replicated`)."""
     return all(np.ndim(curves[j]) == 2 and np.shape(curves[j])[0] >= 2 for j in records)
 
 
