@@ -25,7 +25,10 @@ simulation-based-calibration ranks (the fraction of posterior members below the 
 over ties), with a chi-square test of uniformity on 5 bins and a Kolmogorov-Smirnov test; the 90 %
 width relative to the prior's 90 % width; the restated accuracy bar (mean within 2 % / 10 % of the
 truth, or a 90 % interval wider than that bar which contains the truth) and the median 90 %
-half-widths relative to the truth; the stop reasons.
+half-widths relative to the truth; the stop reasons. The same scores for each twin's
+``posterior: emulator_mcmc`` (the emcee sample on the emulator of the same runs, seconds per twin;
+``summary_emulator_mcmc``, a failed sampler counted as a miss), so that the two reported posteriors are
+compared on the same twins.
 
 Each twin's result is cached as JSON under ``--cache`` (default ``benchmarks/cache/coverage``, committed),
 so an interrupted run resumes where it stopped; ``--score-only`` scores what is cached (``complete``
@@ -59,6 +62,7 @@ from scipy.stats import qmc
 from calibration.experiment import (ExperimentSpec, analysis_step, initial_ensemble, mesh_seed, params_frame,
                                     reported_ensemble, rng_for, run_mesh_seed)
 from enkf import prediction_interval_dict
+from calibration.posterior import sample_posterior
 from calibration.observations import curve_on_grid, observation_grid, twin_observations
 from calibration.workflow_io import load_yaml, validate_config
 
@@ -123,7 +127,30 @@ def run_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: str) ->
             break
         params.append(params_frame(np.array(a["next_params"]["values"]), names))
     R, P, alive = reported_ensemble(spec, analyses, params)
-    return _twin_record(spec, truth, seed, data_preset, P[names].to_numpy(float)[alive], analyses, R)
+    rec = _twin_record(spec, truth, seed, data_preset, P[names].to_numpy(float)[alive], analyses, R)
+    rec["emulator_mcmc"] = _mcmc_record(spec, truth, seed, params, responses, analyses, obs)
+    return rec
+
+
+def _mcmc_record(spec, truth, seed, params, responses, analyses, obs) -> dict:
+    """The same twin's ``posterior: emulator_mcmc`` (calibration.posterior.sample_posterior on the same
+    runs, seconds): its intervals are the sample's quantiles, scored beside the ensemble's."""
+    K = len(analyses) - 1
+    try:
+        post = sample_posterior(spec, params[:K + 1], responses[:K + 1], analyses[K], obs)
+    except (ValueError, RuntimeError) as exc:  # recorded, never silently dropped: the score counts them
+        return {"error": f"{type(exc).__name__}: {exc}"}
+    rng = np.random.default_rng(seed + 7)
+    summ, out = post.summary, {"params": {}}
+    for j, p in enumerate(spec.names):
+        x = post.samples[:, j]
+        below, ties = int(np.sum(x < truth[j])), int(np.sum(x == truth[j]))
+        out["params"][p] = {"mean": summ[p]["mean"], **{k: summ[p][k] for k in ("q05", "q25", "q75", "q95")},
+                            "n": int(x.size), "sbc_u": float((below + rng.uniform(0, ties + 1)) / (x.size + 1))}
+    d = post.diagnostics
+    out["sampler"] = {k: d.get(k) for k in ("converged_chain", "effective_samples", "acceptance_fraction",
+                                            "emulated_mean_chi2_per_obs", "steps")}
+    return out
 
 
 def _twin_record(spec, truth, seed, data_preset, post: np.ndarray, analyses, R) -> dict:
@@ -204,6 +231,29 @@ def score(records: list, lower, upper, names) -> dict:
     return out
 
 
+def score_mcmc(records: list, lower, upper, names) -> dict | None:
+    """:func:`score` of the twins' ``posterior: emulator_mcmc`` intervals (records made before it was
+    recorded are left out and counted; a sampler that failed counts as a miss of every interval)."""
+    have = [r for r in records if "emulator_mcmc" in r]
+    if not have:
+        return None
+    failed = [r for r in have if "error" in r["emulator_mcmc"]]
+    rows = [{**r, "params": r["emulator_mcmc"]["params"]} for r in have if "error" not in r["emulator_mcmc"]]
+    out = score(rows, lower, upper, names) if rows else {"n_twins": 0, "params": {}}
+    out["twins_without_it"] = len(records) - len(have)
+    out["sampler_failed"] = len(failed)
+    n = len(have)
+    for p, res in out["params"].items():
+        for level in LEVELS:
+            c = res[f"coverage_{level}"]
+            k = round((c["fraction"] or 0.0) * len(rows))
+            c["fraction_counting_failures_as_misses"] = k / n
+            c["ci95_counting_failures_as_misses"] = _ci(k, n)
+    out["chains_converged"] = sum(bool(r["emulator_mcmc"]["sampler"]["converged_chain"]) for r in have
+                                  if "error" not in r["emulator_mcmc"])
+    return out
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--twins", type=int, default=50)
@@ -259,6 +309,7 @@ def main(argv=None) -> dict:
                 print(f"{name} {i + 1}/{n}: {rec['stop_reason']}", file=__import__("sys").stderr, flush=True)
             result[name] = {"planned": n, "complete": len(records) == n,
                             "summary": score(records, spec.lower, spec.upper, spec.names) if records else None,
+                            "summary_emulator_mcmc": score_mcmc(records, spec.lower, spec.upper, spec.names),
                             "twins": records}
     out = {"benchmark": "bench_coverage", "experiment": EXPERIMENT, "method": exp["method"],
            "ensemble_size": exp["ensemble_size"], "window_s": [exp["observations"]["t_start"],

@@ -71,3 +71,30 @@ def test_a_calibrated_posterior_of_25_members_covers_its_sample_interval_83_perc
         assert c["p_vs_reference"] > 0.001
         assert c["ci95"][1] < 0.9
         assert s["params"][p]["coverage_50"]["reference_for_members"] == pytest.approx(0.5 * 24 / 26)
+
+
+def test_the_emulator_mcmc_intervals_are_scored_with_failed_samplers_counted_as_misses():
+    """score_mcmc scores each twin's ``emulator_mcmc`` intervals like the ensemble's; a twin whose sampler
+    failed cannot raise the coverage (it counts as a miss in ``fraction_counting_failures_as_misses``),
+    and twins recorded before the MCMC was are counted, not scored."""
+    from benchmarks.bench_coverage import score_mcmc
+
+    # one seed: the two kinds draw the same truths
+    cal, over = _records("calibrated", n=60, seed=5), _records("overconfident", n=60, seed=5)
+    records = []
+    for i, (a, b) in enumerate(zip(cal, over)):
+        assert a["truth"] == b["truth"]
+        rec = dict(b)  # the ensemble's intervals overconfident, the MCMC's calibrated
+        if i < 50:
+            rec["emulator_mcmc"] = {"params": a["params"], "sampler": {"converged_chain": i % 2 == 0}}
+        elif i < 55:
+            rec["emulator_mcmc"] = {"error": "RuntimeError: chain shorter than its burn-in"}
+        records.append(rec)
+    ens, mc = score(records, LOWER, UPPER, NAMES), score_mcmc(records, LOWER, UPPER, NAMES)
+    assert mc["n_twins"] == 50 and mc["sampler_failed"] == 5 and mc["twins_without_it"] == 5
+    assert mc["chains_converged"] == 25
+    for p in NAMES:
+        c = mc["params"][p]["coverage_90"]
+        assert c["fraction_counting_failures_as_misses"] == pytest.approx(c["fraction"] * 50 / 55)
+        assert c["fraction"] > ens["params"][p]["coverage_90"]["fraction"] + 0.3
+    assert score_mcmc(over, LOWER, UPPER, NAMES) is None
