@@ -161,11 +161,15 @@ def miss_rows(df: pd.DataFrame) -> list:
     return [{k: (v.item() if hasattr(v, "item") else v) for k, v in r.items()} for r in rows]
 
 
-def coverage_by_fifth(df: pd.DataFrame) -> dict:
-    """Covers per fifth of the prior box that the truth falls in (the truths are a Latin hypercube)."""
-    fifth = np.clip((df["truth_box_fraction"] * 5).astype(int), 0, 4)
-    g = df.groupby(fifth)["miss"]
-    return {f"{k / 5:.1f}-{(k + 1) / 5:.1f}": {"n": int(n), "covers": int(n - g.sum()[k])} for k, n in g.size().items()}
+def coverage_by_fifth(df: pd.DataFrame, column: str = "truth_box_fraction") -> dict:
+    """Covers per fifth of the prior box that the truth falls in (the truths are a Latin hypercube), of
+    this parameter (``truth_box_fraction``) or of the other one (``other_truth_box_fraction``), with the
+    median over those twins of the median member's chi^2 per observation against ``R``."""
+    fifth = np.clip((df[column] * 5).astype(int), 0, 4)
+    g = df.groupby(fifth)
+    return {f"{k / 5:.1f}-{(k + 1) / 5:.1f}": {"n": int(len(x)), "covers": int(len(x) - x["miss"].sum()),
+                                             "median_member_chi2_per_obs": _f(float(np.median(x["median_chi2_per_obs"])))}
+            for k, x in g}
 
 
 def analyse(records: list, bounds: dict | None = None, intervals: str = "prediction") -> dict:
@@ -176,6 +180,7 @@ def analyse(records: list, bounds: dict | None = None, intervals: str = "predict
     for p in bounds:
         df = twin_table(records, p, bounds)
         out["params"][p] = {"summary": compare(df, intervals), "coverage_by_box_fifth": coverage_by_fifth(df),
+                            "coverage_by_other_parameter_fifth": coverage_by_fifth(df, "other_truth_box_fraction"),
                             "misses": miss_rows(df)}
     return out
 
