@@ -39,10 +39,12 @@ from enkf.emulated import esmda_alphas  # noqa: E402
 from enkf.loop import assimilate  # noqa: E402
 from enkf.sampling import latin_hypercube  # noqa: E402
 from enkf.transforms import BoxTransform  # noqa: E402
+from shpb.atomic import atomic_write_text  # noqa: E402
 
 NAMES = ("sigma_t", "E_t")
 LOWER, UPPER = np.array([4e6, 200.0]), np.array([6e7, 2400.0])   # the Table 2 box
 TIME = np.linspace(0.0, 160e-6, 161)                              # the default twin's window and grid
+MEMBERS, STEPS = 400, 8                                           # enkf.emulated's inner ES-MDA defaults
 
 
 def forward(P: np.ndarray) -> np.ndarray:
@@ -95,7 +97,7 @@ def _cover(flags: np.ndarray) -> dict:
             "p_vs_0.90": float(stats.binomtest(k, n, 0.9).pvalue)}
 
 
-def run(twins: int, noise: float, transform: str, seed: int, members: int = 400, steps: int = 8,
+def run(twins: int, noise: float, transform: str, seed: int, members: int = MEMBERS, steps: int = STEPS,
         grid: int = 281) -> dict:
     rng = np.random.default_rng(seed)
     G = _grid(LOWER, UPPER, grid)
@@ -140,14 +142,12 @@ def main(argv=None) -> dict:
     args = ap.parse_args(argv)
     started = time.time()
     result = {"benchmark": "bench_box_end_coverage", "twins": args.twins, "noise_rel_peak": args.noise,
-              "transform": args.transform, "seed": args.seed, "inner_members": 400, "inner_steps": 8,
+              "transform": args.transform, "seed": args.seed, "inner_members": MEMBERS, "inner_steps": STEPS,
               "params": run(args.twins, args.noise, args.transform, args.seed),
               "wall_s": time.time() - started, "cores": os.cpu_count()}
     text = json.dumps(result, indent=1)
     if args.out:
-        tmp = Path(args.out).with_suffix(".tmp")
-        tmp.write_text(text)
-        tmp.replace(args.out)
+        atomic_write_text(args.out, text)
     print(text)
     return result
 

@@ -63,6 +63,7 @@ from calibration.experiment import (ExperimentSpec, analysis_step, initial_ensem
                                     reported_ensemble, rng_for, run_mesh_seed)
 from enkf import prediction_interval_dict
 from calibration.posterior import sample_posterior
+from shpb.atomic import atomic_write_text
 from calibration.observations import curve_on_grid, observation_grid, twin_observations
 from calibration.workflow_io import load_yaml, validate_config
 
@@ -301,9 +302,7 @@ def main(argv=None) -> dict:
                 if args.score_only:
                     continue
                 rec = run_twin(pool, exp, truth, 1000 * seed + i, data_preset)
-                tmp = path.with_suffix(".tmp")
-                tmp.write_text(json.dumps(rec, default=float))
-                tmp.replace(path)
+                atomic_write_text(path, json.dumps(rec, default=float))
                 records.append(rec)
                 simulated += 1
                 print(f"{name} {i + 1}/{n}: {rec['stop_reason']}", file=__import__("sys").stderr, flush=True)
@@ -321,9 +320,7 @@ def main(argv=None) -> dict:
            "wall_s_this_call": time.time() - started, **result}
     text = json.dumps(out, indent=1, default=lambda v: v.item() if hasattr(v, "item") else str(v))
     if args.out:
-        tmp = Path(args.out).with_suffix(".tmp")
-        tmp.write_text(text)
-        tmp.replace(args.out)
+        atomic_write_text(args.out, text)
     print(text)
     return out
 
