@@ -173,6 +173,27 @@ def _errors_table(selection, conf: dict, real: Mapping, obs: Observations, held:
     return out
 
 
+def cv_risk(errors: Mapping, shipped_step: int, level: float = 0.90) -> dict:
+    """How often the shipped model predicts a record worse than the base model, read on the calibration
+    records' real cross-validation runs (each predicted by a calibration without it, as a new record is):
+    ``worse`` of ``records`` with the exact binomial ``level`` interval. This is the chance, for one new
+    record, that the shipped prediction is worse than the base's: the walk confirms a lower error on
+    average, which a per-record effect with a wide population spread can give while some records' own
+    values lie in the tail. With the base kept nothing can be worse (``records`` 0)."""
+    from scipy import stats
+
+    pairs = [(e["before"]["rmse"], e["after"]["rmse"]) for e in errors.values()
+             if str(e.get("data", "")).startswith("calibration") and e.get("before") and e.get("after")]
+    if int(shipped_step) == 0 or not pairs:
+        return {"worse": 0, "records": 0, "fraction": None, f"ci{round(100 * level)}": None,
+                "note": "base model kept: its predictions are the base's"}
+    k = int(sum(a > b for b, a in pairs))
+    ci = stats.binomtest(k, len(pairs)).proportion_ci(level, method="exact")
+    return {"worse": k, "records": len(pairs), "fraction": k / len(pairs),
+            f"ci{round(100 * level)}": [float(ci.low), float(ci.high)],
+            "note": "calibration records whose real cross-validated RMSE under the shipped model exceeds the base's"}
+
+
 def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: EmulatedSHPB, obs: Observations,
              heldout: Observations | None, noise: Mapping, simulator: Mapping) -> tuple[dict, dict, dict]:
     """``(report, check, curves)`` of the loop: the confirmation walk on the real cross-validation runs,
@@ -211,6 +232,7 @@ def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: Emulated
         verdict = "confirmed"
         why = conf["text"]
     errors = _errors_table(selection, conf, real, obs, held)
+    risk = cv_risk(errors, k)
     report = {"protocol": "frozen (docs/closing-the-loop.md): effects chosen by cross-validation within the "
                           "calibration records on the emulator, confirmed on real FDEM runs at the "
                           "cross-validation points, the held-out records read last",
@@ -218,11 +240,11 @@ def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: Emulated
               "heldout_records": [] if heldout is None else list(heldout.records),
               "added": list(shipped.spec.effect_names), "shipped_step": k,
               "selection": selection.to_dict(), "confirmation": conf, "heldout": held,
-              "errors_per_record": errors}
+              "errors_per_record": errors, "cv_risk_worse_than_base": risk}
     check = {"added": list(shipped.spec.effect_names), "verdict": verdict,
              "fdem_confirmation": {"status": verdict, "text": why, "steps": conf["steps"],
                                    "real_cv_rmse_Pa": conf["real_cv_rmse"]},
-             "errors_per_record": errors, "heldout": held,
+             "errors_per_record": errors, "heldout": held, "cv_risk_worse_than_base": risk,
              "note": "real FDEM runs: calibration records at their cross-validation points (each predicted by a "
                      "calibration without it), held-out records at their prediction points; before = base "
                      "model, after = the confirmed model"}
@@ -279,12 +301,35 @@ def loro_table(folds: Mapping[str, Mapping], record_info: Mapping[str, Mapping] 
             rows.append(row)
     ch = np.array([r["rmse_change"] for r in rows], float)
     n = ch.size
+    risks = [cv_risk(rep.get("errors_per_record") or {}, int(rep["shipped_step"])) for rep in folds.values()]
     totals = {"folds": n, "mean_rmse_before": float(np.mean([r["rmse_before"] for r in rows])) if n else None,
               "mean_rmse_after": float(np.mean([r["rmse_after"] for r in rows])) if n else None,
               "mean_rmse_change": float(ch.mean()) if n else None,
               "sd_rmse_change": float(ch.std(ddof=1)) if n > 1 else None,
               "se_mean_rmse_change": float(ch.std(ddof=1) / math.sqrt(n)) if n > 1 else None,
               "folds_worse": int(np.sum(ch > 0)), "folds_better": int(np.sum(ch < 0)),
-              "effects_kept": {e: sum(e in r["effects"] for r in rows) for e in sorted({e for r in rows for e in r["effects"]})}}
+              "effects_kept": {e: sum(e in r["effects"] for r in rows) for e in sorted({e for r in rows for e in r["effects"]})},
+              "cv_risk_worse_than_base": _pooled_risk(risks, n)}
     return {"rows": rows, "totals": totals}
+
+
+def _pooled_risk(risks: Sequence[Mapping], folds: int, level: float = 0.90) -> dict:
+    """The folds' :func:`cv_risk` pooled: calibration records predicted worse than the base over all folds
+    that shipped an addition, and what that rate says of a series: the chance that none of ``folds``
+    held-out records is worse, ``(1 - p)^folds``, at the rate and at its interval's ends. The folds reuse
+    records (each record is a calibration record in all folds but its own), so the pooled count is not
+    of independent trials: its interval is a guide, not a test."""
+    from scipy import stats
+
+    k, m = sum(r["worse"] for r in risks), sum(r["records"] for r in risks)
+    if m == 0:
+        return {"worse": 0, "records": 0, "fraction": None, "p_no_fold_worse": None,
+                "note": "no fold shipped an addition"}
+    ci = stats.binomtest(k, m).proportion_ci(level, method="exact")
+    p = k / m
+    return {"worse": k, "records": m, "fraction": p, f"ci{round(100 * level)}": [float(ci.low), float(ci.high)],
+            "p_no_fold_worse": (1.0 - p) ** folds,
+            f"p_no_fold_worse_ci{round(100 * level)}": [(1.0 - float(ci.high)) ** folds, (1.0 - float(ci.low)) ** folds],
+            "note": ("calibration records predicted worse than the base on real cross-validation runs, over the folds "
+                     "that shipped an addition (records reused across folds: not independent trials)")}
 

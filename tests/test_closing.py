@@ -111,13 +111,16 @@ def test_a_held_out_record_takes_its_noise_and_the_calibration_records_average_v
 
 
 def test_the_series_table_reports_each_fold_and_the_mean_change_with_its_spread():
-    def rep(h, before, after, added):
+    def rep(h, before, after, added, cv=((5.0, 4.0), (5.0, 6.0))):
+        cal = {f"c{i}": {"data": "calibration (cross-validated)", "before": {"rmse": b},
+                         "after": {"rmse": a if added else b}} for i, (b, a) in enumerate(cv)}
         return {"heldout": {h: {"before": {"rmse": before, "peak_error": 1.0, "time_to_peak_error": 0.0},
                                 "after": {"rmse": after, "peak_error": 0.5, "time_to_peak_error": 0.0,
                                           "point": {}, "intervals": {}}}},
                 "selection": {"steps": [{"posterior": {}}, {"posterior": {"k": {"mean": 0.3}}}]},
                 "shipped_step": 1 if added else 0, "calib_records": ["x"], "added": added,
-                "verdict": "confirmed" if added else "base_kept"}
+                "verdict": "confirmed" if added else "base_kept",
+                "errors_per_record": {**cal, h: {"data": "heldout", "before": {"rmse": before}, "after": {"rmse": after}}}}
     t = loro_table({"s__A": rep("A", 10.0, 6.0, ["face_gap"]), "s__B": rep("B", 8.0, 8.0, []),
                     "s__C": rep("C", 12.0, 7.0, ["face_gap", "closure"])}, {"A": {"strain_rate_at_peak_per_s": 100.0}})
     tot = t["totals"]
@@ -126,6 +129,22 @@ def test_the_series_table_reports_each_fold_and_the_mean_change_with_its_spread(
     assert tot["sd_rmse_change"] == pytest.approx(np.std([-4.0, 0.0, -5.0], ddof=1))
     assert tot["effects_kept"] == {"closure": 1, "face_gap": 2}
     assert t["rows"][0]["strain_rate_per_s"] == 100.0 and t["rows"][0]["estimates"] == {"k": {"mean": 0.3}}
+    # the risk of a worse prediction, from the calibration records' real CV runs of the two folds that
+    # shipped an addition (the held-out records are not counted; the base-kept fold has none)
+    risk = tot["cv_risk_worse_than_base"]
+    assert (risk["worse"], risk["records"]) == (2, 4) and risk["fraction"] == 0.5
+    assert risk["p_no_fold_worse"] == pytest.approx(0.5 ** 3)
+    lo, hi = risk["ci90"]
+    assert lo == pytest.approx(0.0976, abs=1e-3) and hi == pytest.approx(0.9024, abs=1e-3)  # exact binomial, 2 of 4
+
+
+def test_the_risk_of_a_worse_prediction_is_zero_records_when_the_base_is_kept():
+    from calibration.closing import cv_risk
+
+    errs = {"a": {"data": "calibration (cross-validated)", "before": {"rmse": 1.0}, "after": {"rmse": 2.0}}}
+    assert cv_risk(errs, 0)["records"] == 0 and cv_risk(errs, 0)["fraction"] is None
+    r = cv_risk(errs, 1)
+    assert (r["worse"], r["records"]) == (1, 1) and r["ci90"][0] == pytest.approx(0.05 ** 1, abs=1e-12)
 
 
 def test_the_selection_sees_a_held_out_record_blind():

@@ -2,6 +2,7 @@
 (one source for the numbers).
 
     python tools/loro_table.py benchmarks/results/loro_<date>/marble_loro.json [more series] [--readme]
+    python tools/loro_table.py --add-risk <series summary.json> <its folds' report.json ...>
 
 The block sits between ``<!-- loro-table:start -->`` and ``<!-- loro-table:end -->`` in README.md;
 ``tests/test_docs_tables.py`` checks that it equals what this tool makes from the JSON files named in it.
@@ -41,8 +42,35 @@ def rows(series: dict) -> list[str]:
                + ", ".join(f"{e} {n}/{t['folds']}" for e, n in t["effects_kept"].items())
                + f" | **{_mpa(t['mean_rmse_before'])} -> {_mpa(t['mean_rmse_after'])}** (change "
                f"{t['mean_rmse_change'] / 1e6:+.1f}" + (f", sd {sd / 1e6:.1f}" if sd is not None else "")
-               + f"; {t['folds_worse']} fold(s) worse) | | |")
+               + f"; {t['folds_worse']} fold(s) worse)" + _risk(t.get("cv_risk_worse_than_base")) + " | | |")
     return out
+
+
+def _risk(r) -> str:
+    """The calibration records' real cross-validation runs predicted worse than the base (the chance that a
+    new record is), and what that rate gives for 'no fold worse' in a series of this length."""
+    if not r or not r.get("records"):
+        return ""
+    lo, hi = r["ci90"]
+    plo, phi = r["p_no_fold_worse_ci90"]
+    return (f"; CV records worse than base {r['worse']}/{r['records']} (90 % [{lo:.2f}, {hi:.2f}]), "
+            f"P(no fold worse) {r['p_no_fold_worse']:.2f} [{plo:.2f}, {phi:.2f}]")
+
+
+def add_risk(summary_path: Path, reports) -> None:
+    """Add ``totals.cv_risk_worse_than_base`` to a series' committed summary from its folds' committed
+    ``report.json`` files, with the function the workflow's loro rule uses (for summaries written before
+    the rule reported it; the rows are left as the run wrote them)."""
+    from calibration.closing import _pooled_risk, cv_risk
+    from calibration.contracts import atomic_write_json
+
+    summary = json.loads(summary_path.read_text())
+    reps = [json.loads(Path(p).read_text()) for p in reports]
+    if len(reps) != summary["totals"]["folds"]:
+        raise SystemExit(f"{summary_path}: {summary['totals']['folds']} folds, {len(reps)} report(s) given")
+    summary["totals"]["cv_risk_worse_than_base"] = _pooled_risk(
+        [cv_risk(r.get("errors_per_record") or {}, int(r["shipped_step"])) for r in reps], len(reps))
+    atomic_write_json(summary_path, summary)
 
 
 def block(paths) -> str:
@@ -62,6 +90,9 @@ def readme_block_sources(text: str) -> list[str]:
 
 def main(argv) -> int:
     paths = [a for a in argv[1:] if not a.startswith("--")]
+    if "--add-risk" in argv:  # tools/loro_table.py --add-risk <summary.json> <fold report.json>...
+        add_risk(ROOT / paths[0], paths[1:])
+        return 0
     text = block(paths)
     if "--readme" in argv:
         readme = ROOT / "README.md"
