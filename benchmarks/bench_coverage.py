@@ -97,14 +97,31 @@ def run_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: str) ->
     """One twin through the workflow's analysis steps, with the workflow's mesh realizations (the
     truth on its own, the members per ``simulation.mesh_realizations``) and replicates at each
     iteration's ensemble mean; the reported posterior's numbers."""
+    spec, params, responses, analyses, obs = simulate_twin(pool, exp, truth, seed, data_preset)
+    names = list(spec.names)
+    R, P, alive = reported_ensemble(spec, analyses, params)
+    rec = _twin_record(spec, truth, seed, data_preset, P[names].to_numpy(float)[alive], analyses, R)
+    rec["emulator_mcmc"] = _mcmc_record(spec, truth, seed, params, responses, analyses, obs)
+    return rec
+
+
+def twin_task(exp: dict, names, p, preset: str, ms) -> tuple:
+    """The pool's task of one run of the twin's disc at parameters ``p`` on mesh realization ``ms``."""
+    o, sim = exp["observations"], exp["simulation"]
+    grid = observation_grid(o["t_start"], o["t_end"], o["dt"])
+    return (preset, dict(zip(names, map(float, p))), sim["t_end"], sim["sample_dt"], grid, ms)
+
+
+def simulate_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: str):
+    """The twin's loop: ``(spec, params, responses, analyses, obs)`` as the workflow would leave them."""
     exp = {**exp, "seed": seed}
     spec = ExperimentSpec.from_config(EXPERIMENT, exp)
-    o, sim = exp["observations"], exp["simulation"]
+    o = exp["observations"]
     grid = observation_grid(o["t_start"], o["t_end"], o["dt"])
     names = list(spec.names)
 
     def task(p, preset, ms):
-        return (preset, dict(zip(names, map(float, p))), sim["t_end"], sim["sample_dt"], grid, ms)
+        return twin_task(exp, names, p, preset, ms)
 
     ref = pool.map(_simulate, [task(truth, data_preset, mesh_seed(seed, "truth"))])[0]
     obs = twin_observations(pd.DataFrame({"time_s": grid, "stress_Pa": ref}), grid, rng=rng_for(seed, "noise"),
@@ -127,10 +144,7 @@ def run_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: str) ->
         if a["decision"]["stop"] or a["next_params"] is None:
             break
         params.append(params_frame(np.array(a["next_params"]["values"]), names))
-    R, P, alive = reported_ensemble(spec, analyses, params)
-    rec = _twin_record(spec, truth, seed, data_preset, P[names].to_numpy(float)[alive], analyses, R)
-    rec["emulator_mcmc"] = _mcmc_record(spec, truth, seed, params, responses, analyses, obs)
-    return rec
+    return spec, params, responses, analyses, obs
 
 
 def _mcmc_record(spec, truth, seed, params, responses, analyses, obs) -> dict:

@@ -1,0 +1,243 @@
+"""Where does the emulated likelihood put a twin's truth? A development check of issue 30's E_t
+under-coverage (run on development seeds, never the coverage benchmark's 40 and 41).
+
+For each twin (``bench_coverage``'s twin, seed ``1000 * seed + i`` with the ``i``-th truth of the
+seed's Latin hypercube, so a twin here is the same run as that seed's ``bench_coverage`` twin) the loop
+runs as the workflow's; then, on the emulator of every run with the last analysis's error terms
+(``R + D`` and the emulator's leave-one-out AR(1) error ``C_em``, which holds the runs' variability
+``S``: what the emulated analysis and ``posterior: emulator_mcmc`` use):
+
+* the emulated posterior on a grid of the box (uniform prior; exact for the emulated likelihood, no
+  sampler): its 90 % marginal intervals and whether they hold the truth, and ``delta_chi2_truth``,
+  ``chi2(truth) - min chi2`` (for a right likelihood a chi-square with 2 degrees of freedom: above 4.6 in
+  10 % of twins);
+* ``replicates_at_truth`` runs at the truth, each on its own mesh: their mean estimates the simulator's
+  mean curve there, so the emulator's own error at the truth, ``em(truth) - mean``, can be set against
+  ``C_em`` (``emulator_error_chi2_per_obs``; about 1 if ``C_em`` holds it, below 1 if ``C_em`` is too wide
+  where the truth is, well above 1 if too narrow), and the data's departure from that mean against
+  ``R + S`` (``data_chi2_per_obs``, ``S`` from those replicates).
+
+Run: ``python benchmarks/bench_emulated_likelihood.py --seed 50 --twins 40 --which 3,12,14,22,25,27,0,1,2,5
+--out benchmarks/results/bench_emulated_likelihood_<date>.json`` (about 2 min per twin on 2 cores).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import pickle
+import time
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+from multiprocessing import get_context
+from pathlib import Path
+
+import numpy as np
+from scipy import linalg
+
+from calibration.experiment import all_runs, mesh_seed, reported_ensemble
+from calibration.model_error import stored_error
+from enkf import prediction_interval_dict
+from enkf.emulated import emulator_error_model
+from enkf.emulator import smoothed_emulator
+from shpb.atomic import atomic_write_text
+
+# run as a script from benchmarks/, as bench_coverage is
+from bench_coverage import _simulate, simulate_twin, truths, twin_experiment, twin_task
+
+GRID = 121          # per parameter: 121 x 121 points of the box
+REPLICATES = 8      # runs at the truth
+
+
+def _marginal_interval(x: np.ndarray, w: np.ndarray, level: float = 0.90) -> list[float]:
+    c = np.cumsum(w) / w.sum()
+    q = 0.5 * (1 - level)
+    return [float(np.interp(q, c, x)), float(np.interp(1 - q, c, x))]
+
+
+def self_calibration(X, Y, latest, lo, hi, names, smoothing, terms, obs, axes, G, out, truth, rng) -> dict:
+    """A candidate fix that needs no truth: the last iteration's runs as pseudo-data. Run ``i`` plus a draw
+    of ``R`` is data whose parameters are known; on the emulator without run ``i`` (its ``C_em`` from
+    that emulator's leave-one-out residuals) ``delta_i = chi2(theta_i) - min chi2`` is, for a right
+    likelihood, chi-square with ``n`` degrees of freedom. ``lambda`` = the 90th percentile of
+    ``delta_i`` over that of the chi-square (at least 1) is the factor the likelihood's covariance needs
+    for the runs' own parameters to sit inside their 90 % regions at the nominal rate; the grid
+    posterior with ``lambda (R + D + C_em)`` is then scored on the truth."""
+    from scipy import stats
+
+    from enkf.emulator import CurveEmulator
+
+    idx = np.flatnonzero(latest)
+    Rd = terms.emulated().dense()
+    Lr = linalg.cholesky(terms.R, lower=True)
+    deltas = []
+    for i in idx:
+        keep = np.arange(X.shape[0]) != i
+        em_i = CurveEmulator(X[keep], Y[keep], lo, hi, names=names, smoothing=smoothing)
+        c_i, _ = emulator_error_model(em_i.loo_residuals()[latest[keep]], obs.time, obs.frame["record"].to_numpy(str))
+        L_i = linalg.cholesky(Rd + c_i.dense(), lower=True)
+        y = Y[i] + Lr @ rng.standard_normal(Y.shape[1])
+
+        def chi2(P):
+            w = linalg.solve_triangular(L_i, (em_i(np.atleast_2d(P)) - y).T, lower=True)
+            return np.sum(w * w, axis=0)
+
+        c2 = np.concatenate([chi2(G[a:a + 2000]) for a in range(0, G.shape[0], 2000)])
+        deltas.append(float(chi2(X[i])[0] - c2.min()))
+    deltas = np.array(deltas)
+    n = len(names)
+    lam = max(1.0, float(np.quantile(deltas, 0.90) / stats.chi2.ppf(0.90, n)))
+    res = {"runs": int(idx.size), "delta_chi2": deltas.tolist(),
+           "fraction_inside_90": float(np.mean(deltas <= stats.chi2.ppf(0.90, n))), "lambda": lam,
+           "truth_inside_90_at_lambda": bool(out["delta_chi2_truth"] / lam <= stats.chi2.ppf(0.90, n)), "grid": {}}
+    return res
+
+
+def replicates_at_truth(pool, exp, names, truth, seed) -> np.ndarray:
+    tasks = [twin_task(exp, names, truth, exp["preset"], mesh_seed(seed, "replicate", 99, r))  # k = 99: no loop's
+             for r in range(REPLICATES)]
+    return np.array(pool.map(_simulate, tasks))
+
+
+def emulated_check(reps, spec, params, responses, analyses, obs, truth, seed) -> dict:
+    names = list(spec.names)
+    K = len(analyses) - 1
+    X, Y, latest = all_runs(spec, params[:K + 1], responses[:K + 1], np.asarray(analyses[K]["alive"], bool))
+    terms = stored_error(obs, analyses[K])
+    lo, hi = np.asarray(spec.lower, float), np.asarray(spec.upper, float)
+    em, info = smoothed_emulator(X, Y, lo, hi, names, latest, spec.smoothing, terms.likelihood().std)
+    c_em, _ = emulator_error_model(em.loo_residuals()[latest], obs.time, obs.frame["record"].to_numpy(str))
+    C = terms.emulated().dense() + c_em.dense()
+    L = linalg.cholesky(C, lower=True)
+    d = obs.values
+
+    def chi2(P):
+        w = linalg.solve_triangular(L, (em(np.atleast_2d(P)) - d).T, lower=True)
+        return np.sum(w * w, axis=0)
+
+    axes = [np.linspace(lo[j], hi[j], GRID) for j in range(len(names))]
+    G = np.array(np.meshgrid(*axes, indexing="ij")).reshape(len(names), -1).T
+    c2 = np.concatenate([chi2(G[i:i + 2000]) for i in range(0, G.shape[0], 2000)])
+    w = np.exp(-0.5 * (c2 - c2.min())).reshape([GRID] * len(names))
+    c_truth = float(chi2(truth)[0])
+    best = G[int(np.argmin(c2))]
+    # where the truth loses: the whitened residual's squares (sequential innovations of the Cholesky
+    # factor, so a time's term depends on the past only) summed before and after the observed peak
+    wt = linalg.solve_triangular(L, em(truth[None, :])[0] - d, lower=True)
+    wb = linalg.solve_triangular(L, em(best[None, :])[0] - d, lower=True)
+    peak = int(np.argmax(d))
+    scale = max(1.0, float(c2.min()) / d.size)  # the variance inflated until the best fit's chi2/obs is 1
+    out = {"smoothing": info["smoothing"], "runs": int(X.shape[0]), "min_chi2_per_obs": float(c2.min() / d.size),
+           "chi2_truth_per_obs": c_truth / d.size, "delta_chi2_truth": c_truth - float(c2.min()),
+           "best_fit": dict(zip(names, map(float, best))),
+           "delta_chi2_truth_before_peak": float(np.sum(wt[:peak + 1] ** 2) - np.sum(wb[:peak + 1] ** 2)),
+           "delta_chi2_truth_after_peak": float(np.sum(wt[peak + 1:] ** 2) - np.sum(wb[peak + 1:] ** 2)),
+           "inflation": scale, "grid": {}, "grid_inflated": {}}
+    for key, ww in (("grid", w), ("grid_inflated", np.exp(-0.5 * (c2 - c2.min()) / scale).reshape(w.shape))):
+        for j, p in enumerate(names):
+            marg = ww.sum(axis=tuple(k for k in range(len(names)) if k != j))
+            a, b = _marginal_interval(axes[j], marg)
+            out[key][p] = {"q05": a, "q95": b, "covers": bool(a <= truth[j] <= b),
+                           "mean": float(np.sum(axes[j] * marg) / marg.sum())}
+    out["self_calibration"] = self_calibration(X, Y, latest, lo, hi, names, info["smoothing"], terms, obs, axes, G,
+                                               out, truth, rng=np.random.default_rng(seed))
+    lam = out["self_calibration"]["lambda"]
+    wl = np.exp(-0.5 * (c2 - c2.min()) / lam).reshape(w.shape)
+    for j, p in enumerate(names):
+        marg = wl.sum(axis=tuple(k for k in range(len(names)) if k != j))
+        a, b = _marginal_interval(axes[j], marg)
+        out["self_calibration"]["grid"][p] = {"q05": a, "q95": b, "covers": bool(a <= truth[j] <= b)}
+    # the simulator's mean curve at the truth, from replicates on meshes of their own
+    reps = reps[np.all(np.isfinite(reps), axis=1)]
+    mean = reps.mean(axis=0)
+    S = np.cov(reps.T) if reps.shape[0] > 1 else np.zeros((d.size, d.size))
+    e = em(truth[None, :])[0] - mean
+    # the emulator's error at the truth against C_em, the replicate mean's own scatter S/n beside it
+    Ce = c_em.dense() + S / reps.shape[0] + 1e-12 * np.eye(d.size) * np.trace(c_em.dense()) / d.size
+    out["emulator_error_chi2_per_obs"] = float(e @ linalg.solve(Ce, e, assume_a="pos")) / d.size
+    out["emulator_error_rms_Pa"] = float(np.sqrt(np.mean(e ** 2)))
+    out["c_em_rms_Pa"] = float(np.sqrt(np.mean(np.diag(c_em.dense()))))
+    out["s_rms_Pa"] = float(np.sqrt(np.mean(np.diag(S))))
+    # the data against the mean at the truth, R and the replicates' S (diagonal: a guide, S is rank n-1)
+    Rd = np.diag(terms.R) + np.diag(S)
+    out["data_chi2_per_obs_diag"] = float(np.mean((d - mean) ** 2 / Rd))
+    out["replicates"] = int(reps.shape[0])
+    return out
+
+
+def summarise(rows: list) -> dict:
+    """Coverage of the 90 % intervals per parameter (reported ensemble; emulated posterior on the grid; the
+    same with the variance inflated to the best fit's chi2/obs; with the runs' self-calibrated lambda), and
+    the medians of what locates the truth's loss."""
+    from scipy import stats
+
+    names = list(rows[0]["truth"]) if rows else []
+    cov = {k: {p: int(sum(r[k][p]["covers"] if k != "self_calibrated" else r["self_calibration"]["grid"][p]["covers"]
+                          for r in rows)) for p in names}
+           for k in ("ensemble", "grid", "grid_inflated", "self_calibrated")}
+    med = lambda key: float(np.median([r[key] for r in rows]))  # noqa: E731
+    return {"twins": len(rows), "covered_90": cov,
+            "truth_outside_emulated_90_region": int(sum(r["delta_chi2_truth"] > stats.chi2.ppf(0.9, len(names)) for r in rows)),
+            "median": {k: med(k) for k in ("delta_chi2_truth", "delta_chi2_truth_before_peak", "delta_chi2_truth_after_peak",
+                                           "min_chi2_per_obs", "emulator_error_chi2_per_obs", "data_chi2_per_obs_diag")},
+            "self_calibration": {"median_lambda": float(np.median([r["self_calibration"]["lambda"] for r in rows])),
+                                 "median_fraction_of_runs_inside_90": float(np.median(
+                                     [r["self_calibration"]["fraction_inside_90"] for r in rows])),
+                                 "truth_inside_90_at_lambda": int(sum(r["self_calibration"]["truth_inside_90_at_lambda"]
+                                                                      for r in rows))}}
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seed", type=int, default=50)
+    ap.add_argument("--twins", type=int, default=40, help="size of the seed's Latin hypercube of truths")
+    ap.add_argument("--which", default="0,1,2,3", help="comma-separated twin indices")
+    ap.add_argument("--cores", type=int, default=2)
+    ap.add_argument("--out", default=None)
+    ap.add_argument("--keep", default=None, help="folder to keep each twin's runs in (re-analysis without simulating)")
+    args = ap.parse_args(argv)
+    if args.seed in (40, 41):
+        raise SystemExit("seeds 40 and 41 are the coverage benchmark's: use a development seed")
+    exp = twin_experiment()
+    from calibration.experiment import ExperimentSpec
+    spec0 = ExperimentSpec.from_config("twin_ref", exp)
+    T = truths(args.twins, spec0.lower, spec0.upper, args.seed)
+    started, rows = time.time(), []
+    with get_context("spawn").Pool(max(1, args.cores)) as pool:
+        for i in (int(v) for v in args.which.split(",")):
+            seed = 1000 * args.seed + i
+            saved = Path(args.keep) / f"twin_{seed}.pkl" if args.keep else None
+            if saved is not None and saved.is_file():  # a development re-analysis without re-simulating
+                spec, params, responses, analyses, obs, reps = pickle.loads(saved.read_bytes())
+            else:
+                spec, params, responses, analyses, obs = simulate_twin(pool, exp, T[i], seed, "fast")
+                reps = replicates_at_truth(pool, exp, list(spec.names), T[i], seed)
+                if saved is not None:
+                    saved.parent.mkdir(parents=True, exist_ok=True)
+                    saved.write_bytes(pickle.dumps((spec, params, responses, analyses, obs, reps)))
+            Rr, P, alive = reported_ensemble(spec, analyses, params)
+            ints = prediction_interval_dict(P[list(spec.names)].to_numpy(float)[alive], list(spec.names),
+                                            transform=spec.transform)
+            row = {"twin": i, "seed": seed, "truth": dict(zip(spec.names, map(float, T[i]))),
+                   "ensemble": {p: {"q05": ints[p]["q05"], "q95": ints[p]["q95"],
+                                    "covers": bool(ints[p]["q05"] <= T[i][j] <= ints[p]["q95"])}
+                                for j, p in enumerate(spec.names)},
+                   "stop_reason": analyses[-1]["decision"]["reason"],
+                   **emulated_check(reps, spec, params, responses, analyses, obs, T[i], seed)}
+            rows.append(row)
+            print(json.dumps({k: row[k] for k in ("twin", "delta_chi2_truth", "emulator_error_chi2_per_obs",
+                                                    "data_chi2_per_obs_diag")}), flush=True)
+    out = {"benchmark": "bench_emulated_likelihood", "seed": args.seed, "cores": os.cpu_count(),
+           "wall_s": time.time() - started, "grid": GRID, "replicates_at_truth": REPLICATES,
+           "summary": summarise(rows), "twins": rows}
+    text = json.dumps(out, indent=1, default=float)
+    if args.out:
+        atomic_write_text(args.out, text)
+    print(text)
+    return out
+
+
+if __name__ == "__main__":
+    main()
