@@ -18,7 +18,9 @@ Two sets:
   which the default twin estimates).
 
 ``--mesh``, ``--replicates`` and ``--smoothing`` override the twin's settings for development runs on
-other seeds (``--seed``); the committed JSON is the default twin's, seeds 40 and 41.
+other seeds (``--seed``); the committed JSON is the default twin's, seeds 40 and 41. ``--self-calibrate``
+turns on ``emulated.self_calibrate`` (:mod:`enkf.selfcal`), the candidate measured here before it
+becomes a default (its own cache folder, ``.../selfcal-on``).
 
 Per set: coverage of the 50 % and 90 % intervals per parameter with Clopper-Pearson 95 % intervals;
 simulation-based-calibration ranks (the fraction of posterior members below the truth, randomised
@@ -281,6 +283,8 @@ def main(argv=None) -> dict:
                     help="override simulation.mesh_realizations (development comparisons)")
     ap.add_argument("--replicates", type=int, default=None, help="override simulator_replicates")
     ap.add_argument("--smoothing", default=None, help="override emulated.smoothing (loo or a number)")
+    ap.add_argument("--self-calibrate", action="store_true",
+                    help="emulated.self_calibrate: true (the emulated likelihood scaled by its runs' self-calibration)")
     ap.add_argument("--score-only", action="store_true",
                     help="score the cached twins without simulating the missing ones (a partial result says so)")
     args = ap.parse_args(argv)
@@ -293,10 +297,13 @@ def main(argv=None) -> dict:
     if args.smoothing is not None:
         exp["emulated"] = {**exp.get("emulated", {}),
                            "smoothing": "loo" if args.smoothing == "loo" else float(args.smoothing)}
+    if args.self_calibrate:
+        exp["emulated"] = {**exp.get("emulated", {}), "self_calibrate": True}
     spec = ExperimentSpec.from_config(EXPERIMENT, exp)
     # a development run's overrides name its own cache folder, so that it never mixes with the default's
     tag = "_".join(f"{k}-{v}" for k, v in (("mesh", args.mesh), ("replicates", args.replicates),
-                                            ("smoothing", args.smoothing)) if v is not None)
+                                            ("smoothing", args.smoothing),
+                                            ("selfcal", "on" if args.self_calibrate else None)) if v is not None)
     cache = Path(args.cache) / tag if tag else Path(args.cache)
     cache.mkdir(parents=True, exist_ok=True)
     # the small misspecified set first, so that a run cut short has both
@@ -329,7 +336,8 @@ def main(argv=None) -> dict:
                                                                exp["observations"]["t_end"]],
            "model_error": exp["observations"].get("model_error"),
            "mesh_realizations": exp["simulation"].get("mesh_realizations"),
-           "emulator_smoothing": (exp.get("emulated") or {}).get("smoothing", "loo"), "cores": os.cpu_count(),
+           "emulator_smoothing": (exp.get("emulated") or {}).get("smoothing", "loo"),
+           "self_calibrate": bool((exp.get("emulated") or {}).get("self_calibrate", False)), "cores": os.cpu_count(),
            "pool_workers": args.cores, "twins_simulated_this_call": simulated,
            "wall_s_this_call": time.time() - started, **result}
     text = json.dumps(out, indent=1, default=lambda v: v.item() if hasattr(v, "item") else str(v))

@@ -89,6 +89,7 @@ class ExperimentSpec:
     mesh_mode: str = "per_run"
     replicates: int = 0
     smoothing: object = "loo"
+    self_calibrate: bool = False
 
     @classmethod
     def from_config(cls, name: str, exp: Mapping, sensitivity_report: Mapping | str | None = None) -> "ExperimentSpec":
@@ -125,7 +126,8 @@ class ExperimentSpec:
                    temper_base=float(emulated.get("temper_base", cls.temper_base)),
                    posterior=str(exp.get("posterior", cls.posterior)), discrepancy=discrepancy_kind(exp),
                    mesh_mode=mesh_mode(exp), replicates=replicate_count(exp),
-                   smoothing=emulated.get("smoothing", cls.smoothing))
+                   smoothing=emulated.get("smoothing", cls.smoothing),
+                   self_calibrate=bool(emulated.get("self_calibrate", cls.self_calibrate)))
 
     @property
     def transform(self) -> BoxTransform:
@@ -321,7 +323,8 @@ def _emulated_analysis(spec: ExperimentSpec, k: int, P: np.ndarray, Y: np.ndarra
                                  inner_steps=spec.inner_steps,
                                  temper=spec.temper_base ** max(0, spec.max_iterations - 1 - k),
                                  smoothing=spec.smoothing, loo_scale=loo_scale,
-                                 transform_kind=spec.transform_kind, names=names)
+                                 transform_kind=spec.transform_kind, names=names,
+                                 self_calibrate=spec.self_calibrate)
 
 
 def all_runs(spec: ExperimentSpec, params: Sequence[pd.DataFrame], responses: Sequence[np.ndarray], last_alive):

@@ -43,7 +43,8 @@ def sample_posterior(spec: ExperimentSpec, params: Sequence[pd.DataFrame], respo
     return emulator_posterior(X, Y, latest, obs.values, error, lower=spec.lower, upper=spec.upper,
                               times=obs.time, groups=obs.frame["record"].to_numpy(str),
                               rng=rng_for(spec.seed, "posterior"), start=X[latest], names=list(spec.names),
-                              smoothing=spec.smoothing, loo_scale=terms.likelihood().std)
+                              smoothing=spec.smoothing, loo_scale=terms.likelihood().std,
+                              self_calibrate=spec.self_calibrate)
 
 
 def samples_frame(post: EmulatorPosterior) -> pd.DataFrame:

@@ -37,6 +37,7 @@ from .covariance import DenseError, ObservationError
 from .diagnostics import default_names, jsonable
 from .emulated import emulator_error_model
 from .emulator import design_arrays, smoothed_emulator
+from .selfcal import self_calibration
 
 __all__ = ["EmulatorPosterior", "emulator_posterior", "interval_summary", "QUANTILES"]
 
@@ -75,7 +76,8 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
                        lower, upper, times, groups=None, rng: RngLike, start=None,
                        names: Sequence[str] | None = None, walkers: int = 32, min_steps: int = 2000,
                        max_steps: int = 40000, min_tau_multiple: float = 50.0, burn_tau: float = 5.0,
-                       emulator_error: bool = True, smoothing="loo", loo_scale=None) -> EmulatorPosterior:
+                       emulator_error: bool = True, smoothing="loo", loo_scale=None,
+                       self_calibrate: bool = False) -> EmulatorPosterior:
     """Sample ``p(theta | d)`` on the emulator of every run (module docstring).
 
     design_params, design_responses : (k, n) / (k, m) every successful run so far (finite curves).
@@ -87,6 +89,8 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
     smoothing : the RBF smoothing, or ``"loo"``: the value of ``enkf.emulator.SMOOTHING_GRID`` with the
         least leave-one-out error at the latest runs, each time divided by ``loo_scale`` (m,) where given
         (as the emulated ES-MDA does, :func:`enkf.emulator.smoothed_emulator`).
+    self_calibrate : scale ``R + C_em`` by the factor the latest runs ask for as pseudo-data of known
+        parameters (:func:`enkf.selfcal.self_calibration`; needs ``emulator_error``).
     """
     X, Y, latest, d = design_arrays(design_params, design_responses, latest, obs)
     lo, hi = np.asarray(lower, float), np.asarray(upper, float)
@@ -104,7 +108,13 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
     C = DenseError(obs_error.dense(), _symmetric=True)
     if emulator_error:
         emu_err, emu_info = emulator_error_model(em.loo_residuals()[latest], times, groups)
-        C = DenseError(obs_error.dense() + emu_err.dense(), _symmetric=True)
+        lam = 1.0
+        if self_calibrate:
+            emu_info["self_calibration"] = self_calibration(
+                X, Y, latest, obs_error, lower=lo, upper=hi, smoothing=smoothing_info["smoothing"],
+                error_model=lambda r: emulator_error_model(r, times, groups)[0], rng=rng)
+            lam = emu_info["self_calibration"]["lambda"]
+        C = DenseError(lam * (obs_error.dense() + emu_err.dense()), _symmetric=True)
     # L^-1 once: the likelihood is then one matrix product per batch of walkers (a triangular solve per
     # call costs more in SciPy's wrapper than the product)
     Linv_T = linalg.solve_triangular(C.cholesky, np.eye(C.m), lower=True).T

@@ -1,0 +1,92 @@
+"""Self-calibration of an emulated likelihood on the runs themselves (issue 30).
+
+The emulated analyses and ``posterior: emulator_mcmc`` assimilate with ``N(d; em(theta), R + D + C_em)``,
+``C_em`` the AR(1) model of the emulator's leave-one-out residuals (per-time rms, one correlation
+time). It is only as honest as that covariance: a departure correlated otherwise (a mesh realization's
+stiffness moves a whole rise, a crack path a whole post-peak) is counted as more independent
+information than it holds, and the posterior is too sure. Nothing in the data can show that; the runs
+can. Run ``i`` of the iteration being analysed, plus a draw of the instrument noise ``R``, is a data set
+whose parameters ``theta_i`` are known. On the emulator of the other runs (its ``C_em`` from that
+emulator's own leave-one-out residuals),
+
+    delta_i = chi2_i(theta_i) - min_theta chi2_i(theta)
+
+is chi-square with ``n`` degrees of freedom when the likelihood is right (``n`` parameters, the profile
+likelihood ratio). ``lambda = median(delta) / median(chi2_n)``, at least 1, is the factor by which the
+covariance must grow for the runs' own parameters to sit inside their posterior regions at the nominal
+rate; the analysis then uses ``lambda (R + D + C_em)``. This is the calibration of a generalized
+posterior's learning rate ``1 / lambda`` so that its credible regions cover (Syring & Martin 2019),
+with the simulator's own runs as the replicates of known truth. The median, not the mean or a high
+quantile: 25 runs give it to about +-30 % and a run at the box's edge (a truncated region) does not move
+it. ``lambda`` is never below 1: a likelihood that looks too wide on 25 runs is left as it is.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+from scipy import linalg, optimize, stats
+
+from ._rng import RngLike, as_generator
+from .covariance import ObservationError
+from .emulator import CurveEmulator
+from .sampling import latin_hypercube
+
+__all__ = ["self_calibration"]
+
+
+def _min_chi2(chi2: Callable[[np.ndarray], np.ndarray], lo, hi, starts: np.ndarray) -> float:
+    """The least ``chi2`` over the box: the best of ``starts``, polished by L-BFGS-B in the unit box."""
+    values = chi2(starts)
+    x0 = (starts[int(np.argmin(values))] - lo) / (hi - lo)
+    res = optimize.minimize(lambda u: float(chi2(lo + u[None, :] * (hi - lo))[0]), x0, method="L-BFGS-B",
+                            bounds=[(0.0, 1.0)] * lo.size)
+    return float(min(values.min(), res.fun))
+
+
+def self_calibration(X, Y, latest, obs_error: ObservationError, *, lower, upper, smoothing: float,
+                     error_model: Callable[[np.ndarray], ObservationError], rng: RngLike,
+                     search_points: int = 1000) -> dict:
+    """``lambda`` and its evidence (module docstring).
+
+    X, Y : (k, n) / (k, m) every run of the emulator's design; ``latest`` (k,) bool: the runs used as
+        pseudo-data (and where each left-out emulator measures its error, as the analysis does).
+    obs_error : the likelihood's covariance besides ``C_em`` (``R``, and ``D`` for measured data), drawn
+        onto each run: the pseudo-data follow the analysis' own data model.
+    smoothing : the analysis' RBF smoothing (kept fixed: choosing it anew per run would be another fit).
+    error_model : ``residuals (j, m) -> C_em``, the analysis' model of the emulator's error.
+    search_points : size of the Latin hypercube each minimum is searched from.
+    """
+    X, Y = np.asarray(X, float), np.asarray(Y, float)
+    latest = np.asarray(latest, bool)
+    lo, hi = np.asarray(lower, float), np.asarray(upper, float)
+    n = lo.size
+    rng = as_generator(rng)
+    idx = np.flatnonzero(latest)
+    if idx.size < 3 or X.shape[0] - 1 < n + 2:
+        raise ValueError(f"self-calibration needs at least 3 latest runs and {n + 3} runs; got {idx.size} "
+                         f"and {X.shape[0]}")
+    R = obs_error.dense()
+    L_R = linalg.cholesky(R, lower=True)
+    starts = np.vstack([latin_hypercube(lo, hi, search_points, rng), X[latest]])
+    deltas = []
+    for i in idx:
+        keep = np.arange(X.shape[0]) != i
+        em = CurveEmulator(X[keep], Y[keep], lo, hi, smoothing=smoothing)
+        C = R + error_model(em.loo_residuals()[latest[keep]]).dense()
+        L = linalg.cholesky(C, lower=True)
+        y = Y[i] + L_R @ rng.standard_normal(Y.shape[1])
+
+        def chi2(P, em=em, L=L, y=y):
+            w = linalg.solve_triangular(L, (em(np.atleast_2d(P)) - y).T, lower=True)
+            return np.sum(w * w, axis=0)
+
+        deltas.append(max(0.0, float(chi2(X[i])[0]) - _min_chi2(chi2, lo, hi, starts)))
+    deltas = np.array(deltas)
+    lam = max(1.0, float(np.median(deltas) / stats.chi2.median(n)))
+    return {"lambda": lam, "runs": int(idx.size), "median_delta_chi2": float(np.median(deltas)),
+            "reference_median": float(stats.chi2.median(n)),
+            "fraction_inside_90": float(np.mean(deltas <= stats.chi2.ppf(0.90, n))),
+            "fraction_inside_90_at_lambda": float(np.mean(deltas / lam <= stats.chi2.ppf(0.90, n))),
+            "delta_chi2": deltas.tolist()}
