@@ -11,6 +11,8 @@ runs as the workflow's; then, on the emulator of every run with the last analysi
   sampler): its 90 % marginal intervals and whether they hold the truth, and ``delta_chi2_truth``,
   ``chi2(truth) - min chi2`` (for a right likelihood a chi-square with 2 degrees of freedom: above 4.6 in
   10 % of twins);
+* the candidate fix as the workflow runs it (:func:`enkf.selfcal.self_calibration`: no truth, the last
+  runs as pseudo-data of known parameters), its ``lambda`` and the grid posterior at ``lambda``;
 * ``replicates_at_truth`` runs at the truth, each on its own mesh: their mean estimates the simulator's
   mean curve there, so the emulator's own error at the truth, ``em(truth) - mean``, can be set against
   ``C_em`` (``emulator_error_chi2_per_obs``; about 1 if ``C_em`` holds it, below 1 if ``C_em`` is too wide
@@ -35,13 +37,14 @@ from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
-from scipy import linalg
+from scipy import linalg, stats
 
 from calibration.experiment import all_runs, mesh_seed, reported_ensemble
 from calibration.model_error import stored_error
 from enkf import prediction_interval_dict
 from enkf.emulated import emulator_error_model
 from enkf.emulator import smoothed_emulator
+from enkf.selfcal import self_calibration
 from shpb.atomic import atomic_write_text
 
 # run as a script from benchmarks/, as bench_coverage is
@@ -55,44 +58,6 @@ def _marginal_interval(x: np.ndarray, w: np.ndarray, level: float = 0.90) -> lis
     c = np.cumsum(w) / w.sum()
     q = 0.5 * (1 - level)
     return [float(np.interp(q, c, x)), float(np.interp(1 - q, c, x))]
-
-
-def self_calibration(X, Y, latest, lo, hi, names, smoothing, terms, obs, axes, G, out, truth, rng) -> dict:
-    """A candidate fix that needs no truth: the last iteration's runs as pseudo-data. Run ``i`` plus a draw
-    of ``R`` is data whose parameters are known; on the emulator without run ``i`` (its ``C_em`` from
-    that emulator's leave-one-out residuals) ``delta_i = chi2(theta_i) - min chi2`` is, for a right
-    likelihood, chi-square with ``n`` degrees of freedom. ``lambda`` = the 90th percentile of
-    ``delta_i`` over that of the chi-square (at least 1) is the factor the likelihood's covariance needs
-    for the runs' own parameters to sit inside their 90 % regions at the nominal rate; the grid
-    posterior with ``lambda (R + D + C_em)`` is then scored on the truth."""
-    from scipy import stats
-
-    from enkf.emulator import CurveEmulator
-
-    idx = np.flatnonzero(latest)
-    Rd = terms.emulated().dense()
-    Lr = linalg.cholesky(terms.R, lower=True)
-    deltas = []
-    for i in idx:
-        keep = np.arange(X.shape[0]) != i
-        em_i = CurveEmulator(X[keep], Y[keep], lo, hi, names=names, smoothing=smoothing)
-        c_i, _ = emulator_error_model(em_i.loo_residuals()[latest[keep]], obs.time, obs.frame["record"].to_numpy(str))
-        L_i = linalg.cholesky(Rd + c_i.dense(), lower=True)
-        y = Y[i] + Lr @ rng.standard_normal(Y.shape[1])
-
-        def chi2(P):
-            w = linalg.solve_triangular(L_i, (em_i(np.atleast_2d(P)) - y).T, lower=True)
-            return np.sum(w * w, axis=0)
-
-        c2 = np.concatenate([chi2(G[a:a + 2000]) for a in range(0, G.shape[0], 2000)])
-        deltas.append(float(chi2(X[i])[0] - c2.min()))
-    deltas = np.array(deltas)
-    n = len(names)
-    lam = max(1.0, float(np.quantile(deltas, 0.90) / stats.chi2.ppf(0.90, n)))
-    res = {"runs": int(idx.size), "delta_chi2": deltas.tolist(),
-           "fraction_inside_90": float(np.mean(deltas <= stats.chi2.ppf(0.90, n))), "lambda": lam,
-           "truth_inside_90_at_lambda": bool(out["delta_chi2_truth"] / lam <= stats.chi2.ppf(0.90, n)), "grid": {}}
-    return res
 
 
 def replicates_at_truth(pool, exp, names, truth, seed) -> np.ndarray:
@@ -141,8 +106,14 @@ def emulated_check(reps, spec, params, responses, analyses, obs, truth, seed) ->
             a, b = _marginal_interval(axes[j], marg)
             out[key][p] = {"q05": a, "q95": b, "covers": bool(a <= truth[j] <= b),
                            "mean": float(np.sum(axes[j] * marg) / marg.sum())}
-    out["self_calibration"] = self_calibration(X, Y, latest, lo, hi, names, info["smoothing"], terms, obs, axes, G,
-                                               out, truth, rng=np.random.default_rng(seed))
+    # the candidate fix, as the workflow would run it (enkf.selfcal: no truth, the last runs as pseudo-data)
+    groups = obs.frame["record"].to_numpy(str)
+    out["self_calibration"] = self_calibration(X, Y, latest, terms.emulated(), lower=lo, upper=hi,
+                                               smoothing=info["smoothing"], rng=np.random.default_rng(seed),
+                                               error_model=lambda r: emulator_error_model(r, obs.time, groups)[0])
+    out["self_calibration"]["truth_inside_90_at_lambda"] = bool(
+        out["delta_chi2_truth"] / out["self_calibration"]["lambda"] <= stats.chi2.ppf(0.90, len(names)))
+    out["self_calibration"]["grid"] = {}
     lam = out["self_calibration"]["lambda"]
     wl = np.exp(-0.5 * (c2 - c2.min()) / lam).reshape(w.shape)
     for j, p in enumerate(names):
