@@ -94,3 +94,21 @@ def test_the_emulated_analysis_widens_by_the_factor_it_reports():
     s_cal = cal.diagnostics["inner"]["posterior"]["p0"]["std"]
     # a Gaussian-linear posterior's sd grows as sqrt(lambda) (exactly so for a linear model with a wide prior)
     assert s_cal / s_plain == pytest.approx(np.sqrt(lam), rel=0.35)
+
+
+def test_the_config_switch_reaches_the_analysis_and_is_off_by_default():
+    from pathlib import Path
+
+    from calibration.experiment import ExperimentSpec
+    from calibration.workflow_io import load_yaml, validate_config
+
+    root = Path(__file__).resolve().parents[1]
+    cfg = load_yaml(root / "config" / "config.yaml")
+    exp = validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)["experiments"]["twin_ref"]
+    assert ExperimentSpec.from_config("twin_ref", exp).self_calibrate is False
+    cfg["experiments"]["twin_ref"]["emulated"] = {"self_calibrate": True}
+    exp = validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)["experiments"]["twin_ref"]
+    assert ExperimentSpec.from_config("twin_ref", exp).self_calibrate is True
+    cfg["experiments"]["twin_ref"]["emulated"] = {"self_calibrate": "yes"}
+    with pytest.raises(Exception, match="self_calibrate"):
+        validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)
