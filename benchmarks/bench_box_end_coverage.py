@@ -22,7 +22,6 @@ Prints one JSON object (``--out`` writes it). Seconds to minutes on one core.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
@@ -39,7 +38,7 @@ from enkf.emulated import esmda_alphas  # noqa: E402
 from enkf.loop import assimilate  # noqa: E402
 from enkf.sampling import latin_hypercube  # noqa: E402
 from enkf.transforms import BoxTransform  # noqa: E402
-from shpb.atomic import atomic_write_text  # noqa: E402
+from shpb.atomic import emit_json  # noqa: E402
 
 NAMES = ("sigma_t", "E_t")
 LOWER, UPPER = np.array([4e6, 200.0]), np.array([6e7, 2400.0])   # the Table 2 box
@@ -145,11 +144,7 @@ def main(argv=None) -> dict:
               "transform": args.transform, "seed": args.seed, "inner_members": MEMBERS, "inner_steps": STEPS,
               "params": run(args.twins, args.noise, args.transform, args.seed),
               "wall_s": time.time() - started, "cores": os.cpu_count()}
-    text = json.dumps(result, indent=1)
-    if args.out:
-        atomic_write_text(args.out, text)
-    print(text)
-    return result
+    return emit_json(result, args.out)
 
 
 if __name__ == "__main__":

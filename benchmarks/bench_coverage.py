@@ -65,7 +65,7 @@ from calibration.experiment import (ExperimentSpec, analysis_step, initial_ensem
                                     reported_ensemble, rng_for, run_mesh_seed)
 from enkf import prediction_interval_dict
 from calibration.posterior import sample_posterior
-from shpb.atomic import atomic_write_text
+from shpb.atomic import atomic_write_text, emit_json
 from calibration.observations import curve_on_grid, observation_grid, twin_observations
 from calibration.workflow_io import load_yaml, validate_config
 
@@ -340,11 +340,7 @@ def main(argv=None) -> dict:
            "self_calibrate": bool((exp.get("emulated") or {}).get("self_calibrate", False)), "cores": os.cpu_count(),
            "pool_workers": args.cores, "twins_simulated_this_call": simulated,
            "wall_s_this_call": time.time() - started, **result}
-    text = json.dumps(out, indent=1, default=lambda v: v.item() if hasattr(v, "item") else str(v))
-    if args.out:
-        atomic_write_text(args.out, text)
-    print(text)
-    return out
+    return emit_json(out, args.out)
 
 
 if __name__ == "__main__":

@@ -45,7 +45,7 @@ from enkf import prediction_interval_dict
 from enkf.emulated import emulator_error_model
 from enkf.emulator import smoothed_emulator
 from enkf.selfcal import self_calibration
-from shpb.atomic import atomic_write_text
+from shpb.atomic import emit_json
 
 # run as a script from benchmarks/, as bench_coverage is
 from bench_coverage import _simulate, simulate_twin, truths, twin_experiment, twin_task
@@ -54,10 +54,19 @@ GRID = 121          # per parameter: 121 x 121 points of the box
 REPLICATES = 8      # runs at the truth
 
 
-def _marginal_interval(x: np.ndarray, w: np.ndarray, level: float = 0.90) -> list[float]:
-    c = np.cumsum(w) / w.sum()
+def _marginals(axes, c2: np.ndarray, scale: float, truth, names, level: float = 0.90) -> dict:
+    """Per parameter, the central ``level`` interval of the grid posterior ``exp(-(chi2 - min) / 2 scale)``
+    (uniform prior), its mean, and whether it holds the truth."""
+    w = np.exp(-0.5 * (c2 - c2.min()) / scale).reshape([len(a) for a in axes])
     q = 0.5 * (1 - level)
-    return [float(np.interp(q, c, x)), float(np.interp(1 - q, c, x))]
+    out = {}
+    for j, p in enumerate(names):
+        marg = w.sum(axis=tuple(k for k in range(len(names)) if k != j))
+        c = np.cumsum(marg) / marg.sum()
+        a, b = float(np.interp(q, c, axes[j])), float(np.interp(1 - q, c, axes[j]))
+        out[p] = {"q05": a, "q95": b, "covers": bool(a <= truth[j] <= b),
+                  "mean": float(np.sum(axes[j] * marg) / marg.sum())}
+    return out
 
 
 def replicates_at_truth(pool, exp, names, truth, seed) -> np.ndarray:
@@ -85,7 +94,6 @@ def emulated_check(reps, spec, params, responses, analyses, obs, truth, seed) ->
     axes = [np.linspace(lo[j], hi[j], GRID) for j in range(len(names))]
     G = np.array(np.meshgrid(*axes, indexing="ij")).reshape(len(names), -1).T
     c2 = np.concatenate([chi2(G[i:i + 2000]) for i in range(0, G.shape[0], 2000)])
-    w = np.exp(-0.5 * (c2 - c2.min())).reshape([GRID] * len(names))
     c_truth = float(chi2(truth)[0])
     best = G[int(np.argmin(c2))]
     # where the truth loses: the whitened residual's squares (sequential innovations of the Cholesky
@@ -99,13 +107,8 @@ def emulated_check(reps, spec, params, responses, analyses, obs, truth, seed) ->
            "best_fit": dict(zip(names, map(float, best))),
            "delta_chi2_truth_before_peak": float(np.sum(wt[:peak + 1] ** 2) - np.sum(wb[:peak + 1] ** 2)),
            "delta_chi2_truth_after_peak": float(np.sum(wt[peak + 1:] ** 2) - np.sum(wb[peak + 1:] ** 2)),
-           "inflation": scale, "grid": {}, "grid_inflated": {}}
-    for key, ww in (("grid", w), ("grid_inflated", np.exp(-0.5 * (c2 - c2.min()) / scale).reshape(w.shape))):
-        for j, p in enumerate(names):
-            marg = ww.sum(axis=tuple(k for k in range(len(names)) if k != j))
-            a, b = _marginal_interval(axes[j], marg)
-            out[key][p] = {"q05": a, "q95": b, "covers": bool(a <= truth[j] <= b),
-                           "mean": float(np.sum(axes[j] * marg) / marg.sum())}
+           "inflation": scale, "grid": _marginals(axes, c2, 1.0, truth, names),
+           "grid_inflated": _marginals(axes, c2, scale, truth, names)}
     # the candidate fix, as the workflow would run it (enkf.selfcal: no truth, the last runs as pseudo-data)
     groups = obs.frame["record"].to_numpy(str)
     out["self_calibration"] = self_calibration(X, Y, latest, terms.emulated(), lower=lo, upper=hi,
@@ -113,13 +116,7 @@ def emulated_check(reps, spec, params, responses, analyses, obs, truth, seed) ->
                                                error_model=lambda r: emulator_error_model(r, obs.time, groups)[0])
     out["self_calibration"]["truth_inside_90_at_lambda"] = bool(
         out["delta_chi2_truth"] / out["self_calibration"]["lambda"] <= stats.chi2.ppf(0.90, len(names)))
-    out["self_calibration"]["grid"] = {}
-    lam = out["self_calibration"]["lambda"]
-    wl = np.exp(-0.5 * (c2 - c2.min()) / lam).reshape(w.shape)
-    for j, p in enumerate(names):
-        marg = wl.sum(axis=tuple(k for k in range(len(names)) if k != j))
-        a, b = _marginal_interval(axes[j], marg)
-        out["self_calibration"]["grid"][p] = {"q05": a, "q95": b, "covers": bool(a <= truth[j] <= b)}
+    out["self_calibration"]["grid"] = _marginals(axes, c2, out["self_calibration"]["lambda"], truth, names)
     # the simulator's mean curve at the truth, from replicates on meshes of their own
     reps = reps[np.all(np.isfinite(reps), axis=1)]
     mean = reps.mean(axis=0)
@@ -138,7 +135,7 @@ def emulated_check(reps, spec, params, responses, analyses, obs, truth, seed) ->
     return out
 
 
-def summarise(rows: list) -> dict:
+def summarise(rows: list, lower, upper) -> dict:
     """Coverage of the 90 % intervals per parameter (reported ensemble; emulated posterior on the grid; the
     same with the variance inflated to the best fit's chi2/obs; with the runs' self-calibrated lambda), and
     the medians of what locates the truth's loss."""
@@ -150,6 +147,11 @@ def summarise(rows: list) -> dict:
            for k in ("ensemble", "grid", "grid_inflated", "self_calibrated")}
     med = lambda key: float(np.median([r[key] for r in rows]))  # noqa: E731
     return {"twins": len(rows), "covered_90": cov,
+            "median_width_90_over_box": {
+                k: {p: float(np.median([(g[p]["q95"] - g[p]["q05"]) / (upper[j] - lower[j]) for g in
+                                        (r[k] if k != "self_calibrated" else r["self_calibration"]["grid"] for r in rows)]))
+                    for j, p in enumerate(names)}
+                for k in ("ensemble", "grid", "self_calibrated")},
             "truth_outside_emulated_90_region": int(sum(r["delta_chi2_truth"] > stats.chi2.ppf(0.9, len(names)) for r in rows)),
             "median": {k: med(k) for k in ("delta_chi2_truth", "delta_chi2_truth_before_peak", "delta_chi2_truth_after_peak",
                                            "min_chi2_per_obs", "emulator_error_chi2_per_obs", "data_chi2_per_obs_diag")},
@@ -202,12 +204,8 @@ def main(argv=None) -> dict:
                                                     "data_chi2_per_obs_diag")}), flush=True)
     out = {"benchmark": "bench_emulated_likelihood", "seed": args.seed, "cores": os.cpu_count(),
            "wall_s": time.time() - started, "grid": GRID, "replicates_at_truth": REPLICATES,
-           "summary": summarise(rows), "twins": rows}
-    text = json.dumps(out, indent=1, default=float)
-    if args.out:
-        atomic_write_text(args.out, text)
-    print(text)
-    return out
+           "summary": summarise(rows, spec0.lower, spec0.upper), "twins": rows}
+    return emit_json(out, args.out)
 
 
 if __name__ == "__main__":

@@ -309,11 +309,11 @@ def loro_table(folds: Mapping[str, Mapping], record_info: Mapping[str, Mapping] 
               "se_mean_rmse_change": float(ch.std(ddof=1) / math.sqrt(n)) if n > 1 else None,
               "folds_worse": int(np.sum(ch > 0)), "folds_better": int(np.sum(ch < 0)),
               "effects_kept": {e: sum(e in r["effects"] for r in rows) for e in sorted({e for r in rows for e in r["effects"]})},
-              "cv_risk_worse_than_base": _pooled_risk(risks, n)}
+              "cv_risk_worse_than_base": pooled_risk(risks, n)}
     return {"rows": rows, "totals": totals}
 
 
-def _pooled_risk(risks: Sequence[Mapping], folds: int, level: float = 0.90) -> dict:
+def pooled_risk(risks: Sequence[Mapping], folds: int, level: float = 0.90) -> dict:
     """The folds' :func:`cv_risk` pooled: calibration records predicted worse than the base over all folds
     that shipped an addition, and what that rate says of a series: the chance that none of ``folds``
     held-out records is worse, ``(1 - p)^folds``, at the rate and at its interval's ends. The folds reuse

@@ -50,3 +50,15 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
             os.unlink(tmp)
         raise
     return path
+
+
+def emit_json(obj, path: str | Path | None = None):
+    """A benchmark's ending: ``obj`` printed as indented JSON (NumPy scalars as Python numbers) and, with
+    ``path``, written there atomically; returns ``obj``."""
+    import json
+
+    text = json.dumps(obj, indent=1, default=lambda v: v.item() if hasattr(v, "item") else str(v))
+    if path:
+        atomic_write_text(path, text)
+    print(text)
+    return obj

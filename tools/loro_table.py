@@ -61,14 +61,14 @@ def add_risk(summary_path: Path, reports) -> None:
     """Add ``totals.cv_risk_worse_than_base`` to a series' committed summary from its folds' committed
     ``report.json`` files, with the function the workflow's loro rule uses (for summaries written before
     the rule reported it; the rows are left as the run wrote them)."""
-    from calibration.closing import _pooled_risk, cv_risk
+    from calibration.closing import pooled_risk, cv_risk
     from calibration.contracts import atomic_write_json
 
     summary = json.loads(summary_path.read_text())
     reps = [json.loads(Path(p).read_text()) for p in reports]
     if len(reps) != summary["totals"]["folds"]:
         raise SystemExit(f"{summary_path}: {summary['totals']['folds']} folds, {len(reps)} report(s) given")
-    summary["totals"]["cv_risk_worse_than_base"] = _pooled_risk(
+    summary["totals"]["cv_risk_worse_than_base"] = pooled_risk(
         [cv_risk(r.get("errors_per_record") or {}, int(r["shipped_step"])) for r in reps], len(reps))
     atomic_write_json(summary_path, summary)
 
