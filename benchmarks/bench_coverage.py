@@ -18,9 +18,11 @@ Two sets:
   which the default twin estimates).
 
 ``--mesh``, ``--replicates`` and ``--smoothing`` override the twin's settings for development runs on
-other seeds (``--seed``); the committed JSON is the default twin's, seeds 40 and 41. ``--self-calibrate``
-turns on ``emulated.self_calibrate`` (:mod:`enkf.selfcal`), the candidate measured here before it
-becomes a default (its own cache folder, ``.../selfcal-on``).
+other seeds (``--seed``); the committed JSON is the default twin's, seeds 40 and 41. The twin reports
+``posterior: emulator_mcmc`` with ``emulated.self_calibrate`` (:mod:`enkf.selfcal`); ``reported_posterior``
+in the JSON names it, and the table in the README is of that posterior (``summary_emulator_mcmc``), the
+last simulated ensemble scored beside it (``summary``). ``--no-self-calibrate`` scores the emulator
+posterior without the scaling (its own cache folder).
 
 Per set: coverage of the 50 % and 90 % intervals per parameter with Clopper-Pearson 95 % intervals;
 simulation-based-calibration ranks (the fraction of posterior members below the truth, randomised
@@ -29,15 +31,16 @@ width relative to the prior's 90 % width; the restated accuracy bar (mean within
 truth, or a 90 % interval wider than that bar which contains the truth) and the median 90 %
 half-widths relative to the truth; the stop reasons. The same scores for each twin's
 ``posterior: emulator_mcmc`` (the emcee sample on the emulator of the same runs, seconds per twin;
-``summary_emulator_mcmc``, a failed sampler counted as a miss), so that the two reported posteriors are
-compared on the same twins.
+``summary_emulator_mcmc``, a failed sampler counted as a miss), so that the ensemble and the reported
+posterior are compared on the same twins.
 
-Each twin's result is cached as JSON under ``--cache`` (default ``benchmarks/cache/coverage``, committed),
+Each twin's result is cached as JSON under ``--cache`` (default ``benchmarks/cache/coverage_v3``, committed;
+``coverage_v2`` holds the records of the ensemble-reported twin of 7d38e03),
 so an interrupted run resumes where it stopped; ``--score-only`` scores what is cached (``complete``
 says whether every planned twin is in). Prints one JSON object (and writes it with ``--out``), with
 the wall time of the twins simulated in this call and the machine's core count.
 
-Run: ``python benchmarks/bench_coverage.py --cores 2 --seed 40 --cache benchmarks/cache/coverage_v2 --out
+Run: ``python benchmarks/bench_coverage.py --cores 2 --seed 40 --out
 benchmarks/results/bench_coverage_<date>.json`` (about 1.5 min per twin on 2 cores: up to 125 fast
 simulations each).
 """
@@ -167,6 +170,7 @@ def _mcmc_record(spec, truth, seed, params, responses, analyses, obs) -> dict:
     d = post.diagnostics
     out["sampler"] = {k: d.get(k) for k in ("converged_chain", "effective_samples", "acceptance_fraction",
                                             "emulated_mean_chi2_per_obs", "steps")}
+    out["self_calibration_lambda"] = ((d.get("emulator_error") or {}).get("self_calibration") or {}).get("lambda")
     return out
 
 
@@ -277,14 +281,14 @@ def main(argv=None) -> dict:
     ap.add_argument("--misspecified", type=int, default=10)
     ap.add_argument("--cores", type=int, default=2)
     ap.add_argument("--seed", type=int, default=40)
-    ap.add_argument("--cache", default=str(ROOT / "benchmarks" / "cache" / "coverage_v2"))
+    ap.add_argument("--cache", default=str(ROOT / "benchmarks" / "cache" / "coverage_v3"))
     ap.add_argument("--out", default=None)
     ap.add_argument("--mesh", choices=["per_run", "shared"], default=None,
                     help="override simulation.mesh_realizations (development comparisons)")
     ap.add_argument("--replicates", type=int, default=None, help="override simulator_replicates")
     ap.add_argument("--smoothing", default=None, help="override emulated.smoothing (loo or a number)")
-    ap.add_argument("--self-calibrate", action="store_true",
-                    help="emulated.self_calibrate: true (the emulated likelihood scaled by its runs' self-calibration)")
+    ap.add_argument("--no-self-calibrate", action="store_true",
+                    help="emulated.self_calibrate: false (the reported emulator posterior without its scaling)")
     ap.add_argument("--score-only", action="store_true",
                     help="score the cached twins without simulating the missing ones (a partial result says so)")
     args = ap.parse_args(argv)
@@ -297,13 +301,13 @@ def main(argv=None) -> dict:
     if args.smoothing is not None:
         exp["emulated"] = {**exp.get("emulated", {}),
                            "smoothing": "loo" if args.smoothing == "loo" else float(args.smoothing)}
-    if args.self_calibrate:
-        exp["emulated"] = {**exp.get("emulated", {}), "self_calibrate": True}
+    if args.no_self_calibrate:
+        exp["emulated"] = {**exp.get("emulated", {}), "self_calibrate": False}
     spec = ExperimentSpec.from_config(EXPERIMENT, exp)
     # a development run's overrides name its own cache folder, so that it never mixes with the default's
     tag = "_".join(f"{k}-{v}" for k, v in (("mesh", args.mesh), ("replicates", args.replicates),
                                             ("smoothing", args.smoothing),
-                                            ("selfcal", "on" if args.self_calibrate else None)) if v is not None)
+                                            ("selfcal", "off" if args.no_self_calibrate else None)) if v is not None)
     cache = Path(args.cache) / tag if tag else Path(args.cache)
     cache.mkdir(parents=True, exist_ok=True)
     # the small misspecified set first, so that a run cut short has both
@@ -337,7 +341,8 @@ def main(argv=None) -> dict:
            "model_error": exp["observations"].get("model_error"),
            "mesh_realizations": exp["simulation"].get("mesh_realizations"),
            "emulator_smoothing": (exp.get("emulated") or {}).get("smoothing", "loo"),
-           "self_calibrate": bool((exp.get("emulated") or {}).get("self_calibrate", False)), "cores": os.cpu_count(),
+           "self_calibrate": bool((exp.get("emulated") or {}).get("self_calibrate", False)),
+           "reported_posterior": exp.get("posterior", "ensemble"), "cores": os.cpu_count(),
            "pool_workers": args.cores, "twins_simulated_this_call": simulated,
            "wall_s_this_call": time.time() - started, **result}
     return emit_json(out, args.out)

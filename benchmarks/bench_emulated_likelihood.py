@@ -30,6 +30,7 @@ import json
 import os
 import pickle
 import time
+from dataclasses import replace
 
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
@@ -41,6 +42,7 @@ from scipy import linalg, stats
 
 from calibration.experiment import all_runs, mesh_seed, reported_ensemble
 from calibration.model_error import stored_error
+from calibration.posterior import sample_posterior
 from enkf import prediction_interval_dict
 from enkf.emulated import emulator_error_model
 from enkf.emulator import smoothed_emulator
@@ -66,6 +68,20 @@ def _marginals(axes, c2: np.ndarray, scale: float, truth, names, level: float = 
         a, b = float(np.interp(q, c, axes[j])), float(np.interp(1 - q, c, axes[j]))
         out[p] = {"q05": a, "q95": b, "covers": bool(a <= truth[j] <= b),
                   "mean": float(np.sum(axes[j] * marg) / marg.sum())}
+    return out
+
+
+def _mcmc_marginals(spec, params, responses, analyses, obs, truth) -> dict:
+    """The 90 % intervals of ``posterior: emulator_mcmc`` with ``emulated.self_calibrate`` on the twin's
+    runs (:func:`calibration.posterior.sample_posterior`, the workflow's sampler and seed)."""
+    K = len(analyses) - 1
+    post = sample_posterior(replace(spec, self_calibrate=True), params[:K + 1], responses[:K + 1], analyses[K], obs)
+    s = post.summary
+    out = {p: {"q05": s[p]["q05"], "q95": s[p]["q95"], "mean": s[p]["mean"],
+               "covers": bool(s[p]["q05"] <= truth[j] <= s[p]["q95"])} for j, p in enumerate(spec.names)}
+    out["converged_chain"] = bool(post.diagnostics.get("converged_chain"))
+    out["lambda"] = post.diagnostics["emulator_error"]["self_calibration"]["lambda"] \
+        if "emulator_error" in post.diagnostics else None
     return out
 
 
@@ -117,6 +133,8 @@ def emulated_check(reps, spec, params, responses, analyses, obs, truth, seed) ->
     out["self_calibration"]["truth_inside_90_at_lambda"] = bool(
         out["delta_chi2_truth"] / out["self_calibration"]["lambda"] <= stats.chi2.ppf(0.90, len(names)))
     out["self_calibration"]["grid"] = _marginals(axes, c2, out["self_calibration"]["lambda"], truth, names)
+    # the same fix as the workflow reports it: posterior: emulator_mcmc with emulated.self_calibrate
+    out["self_calibration"]["mcmc"] = _mcmc_marginals(spec, params, responses, analyses, obs, truth)
     # the simulator's mean curve at the truth, from replicates on meshes of their own
     reps = reps[np.all(np.isfinite(reps), axis=1)]
     mean = reps.mean(axis=0)
@@ -142,16 +160,18 @@ def summarise(rows: list, lower, upper) -> dict:
     from scipy import stats
 
     names = list(rows[0]["truth"]) if rows else []
-    cov = {k: {p: int(sum(r[k][p]["covers"] if k != "self_calibrated" else r["self_calibration"]["grid"][p]["covers"]
-                          for r in rows)) for p in names}
-           for k in ("ensemble", "grid", "grid_inflated", "self_calibrated")}
+    kinds = {"ensemble": lambda r: r["ensemble"], "grid": lambda r: r["grid"],
+             "grid_inflated": lambda r: r["grid_inflated"], "self_calibrated": lambda r: r["self_calibration"]["grid"],
+             "self_calibrated_mcmc": lambda r: r["self_calibration"]["mcmc"]}
+    cov = {k: {p: int(sum(get(r)[p]["covers"] for r in rows)) for p in names} for k, get in kinds.items()}
     med = lambda key: float(np.median([r[key] for r in rows]))  # noqa: E731
     return {"twins": len(rows), "covered_90": cov,
             "median_width_90_over_box": {
-                k: {p: float(np.median([(g[p]["q95"] - g[p]["q05"]) / (upper[j] - lower[j]) for g in
-                                        (r[k] if k != "self_calibrated" else r["self_calibration"]["grid"] for r in rows)]))
-                    for j, p in enumerate(names)}
-                for k in ("ensemble", "grid", "self_calibrated")},
+                k: {p: float(np.median([(kinds[k](r)[p]["q95"] - kinds[k](r)[p]["q05"]) / (upper[j] - lower[j])
+                                        for r in rows])) for j, p in enumerate(names)}
+                for k in ("ensemble", "grid", "self_calibrated", "self_calibrated_mcmc")},
+            "self_calibrated_mcmc_chains_converged": int(sum(r["self_calibration"]["mcmc"]["converged_chain"]
+                                                             for r in rows)),
             "truth_outside_emulated_90_region": int(sum(r["delta_chi2_truth"] > stats.chi2.ppf(0.9, len(names)) for r in rows)),
             "median": {k: med(k) for k in ("delta_chi2_truth", "delta_chi2_truth_before_peak", "delta_chi2_truth_after_peak",
                                            "min_chi2_per_obs", "emulator_error_chi2_per_obs", "data_chi2_per_obs_diag")},

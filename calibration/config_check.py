@@ -112,6 +112,9 @@ def _semantic_errors(config: Mapping, base: Path) -> list[str]:
         if params and n_members <= len(params) and not auto:
             errors.append(f"{where}.ensemble_size: {n_members} members cannot span {len(params)} parameters; "
                           f"use more than {len(params)}")
+        if (exp.get("emulated") or {}).get("self_calibrate") and exp.get("posterior") != "emulator_mcmc":
+            errors.append(f"{where}.emulated.self_calibrate: true scales the reported emulator posterior's "
+                          f"likelihood and needs posterior: emulator_mcmc (got {exp.get('posterior', 'ensemble')})")
         obs = exp.get("observations", {})
         sim = exp.get("simulation", {})
         t0, t1 = obs.get("t_start", 0.0), obs.get("t_end")

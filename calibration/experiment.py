@@ -323,8 +323,7 @@ def _emulated_analysis(spec: ExperimentSpec, k: int, P: np.ndarray, Y: np.ndarra
                                  inner_steps=spec.inner_steps,
                                  temper=spec.temper_base ** max(0, spec.max_iterations - 1 - k),
                                  smoothing=spec.smoothing, loo_scale=loo_scale,
-                                 transform_kind=spec.transform_kind, names=names,
-                                 self_calibrate=spec.self_calibrate)
+                                 transform_kind=spec.transform_kind, names=names)
 
 
 def all_runs(spec: ExperimentSpec, params: Sequence[pd.DataFrame], responses: Sequence[np.ndarray], last_alive):

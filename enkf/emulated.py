@@ -45,7 +45,6 @@ from .emulator import design_arrays, smoothed_emulator
 from .variability import lag1_correlation
 from .loop import assimilate
 from .sampling import latin_hypercube
-from .selfcal import self_calibration
 from .transforms import BoxTransform
 
 __all__ = ["EmulatedAnalysis", "emulated_esmda_update", "emulator_error_model"]
@@ -91,7 +90,7 @@ def emulated_esmda_update(design_params, design_responses, latest, obs, obs_erro
                           lower, upper, n_members: int, rng: RngLike, times, groups=None,
                           inner_members: int = 400, inner_steps: int = 8, transform_kind: str = "logit",
                           temper: float = 1.0, smoothing="loo", loo_scale=None,
-                          names: Sequence[str] | None = None, self_calibrate: bool = False) -> EmulatedAnalysis:
+                          names: Sequence[str] | None = None) -> EmulatedAnalysis:
     """One analysis of the emulator-assisted ES-MDA (module docstring).
 
     Parameters
@@ -107,8 +106,6 @@ def emulated_esmda_update(design_params, design_responses, latest, obs, obs_erro
     smoothing : the emulator's nugget (RBF smoothing) or ``"loo"`` (default: the value with the least
         leave-one-out error at the latest runs, :func:`enkf.emulator.smoothed_emulator`), each time's
         residual divided by ``loo_scale`` (m,) where given.
-    self_calibrate : scale ``R + C_emulator`` by the factor the latest runs ask for as pseudo-data of
-        known parameters (:func:`enkf.selfcal.self_calibration`; ``diagnostics["self_calibration"]``).
     """
     X, Y, latest, d = design_arrays(design_params, design_responses, latest, obs)
     lo, hi = np.asarray(lower, float), np.asarray(upper, float)
@@ -127,13 +124,7 @@ def emulated_esmda_update(design_params, design_responses, latest, obs, obs_erro
     emu_err, emu_info = emulator_error_model(em.loo_residuals()[latest], times, groups)
     emu_info.update(smoothing_info)
 
-    lam, calibration = 1.0, None
-    if self_calibrate:
-        calibration = self_calibration(X, Y, latest, obs_error, lower=lo, upper=hi,
-                                       smoothing=smoothing_info["smoothing"],
-                                       error_model=lambda r: emulator_error_model(r, times, groups)[0], rng=rng)
-        lam = calibration["lambda"]
-    C = DenseError(temper * lam * (obs_error.dense() + emu_err.dense()), _symmetric=True)
+    C = DenseError(temper * (obs_error.dense() + emu_err.dense()), _symmetric=True)
     P0 = latin_hypercube(lo, hi, inner_members, rng)
     res = assimilate(em, P0, d, C, rng=rng, method="esmda", alphas=esmda_alphas(inner_steps),
                      transform=BoxTransform(lo, hi, kind=transform_kind), names=names)
@@ -154,7 +145,6 @@ def emulated_esmda_update(design_params, design_responses, latest, obs, obs_erro
                   "posterior": posterior_dict(P_inner, names)},
         "emulated_mean_chi2_per_obs": float(np.dot(w, w) / d.size),
         "temper": temper,
-        "self_calibration": calibration,
         "params": {name: {"mean_after": float(P_next[:, j].mean()), "std_after": float(P_next[:, j].std(ddof=1))}
                    for j, name in enumerate(names)},
     }

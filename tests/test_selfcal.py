@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from scipy import linalg, stats
 
+from enkf.ces import emulator_posterior
 from enkf.covariance import DiagonalError
 from enkf.emulated import emulated_esmda_update, emulator_error_model
 from enkf.emulator import CurveEmulator
@@ -82,21 +83,45 @@ def test_the_self_calibration_leaves_a_right_error_model_nearly_alone():
     assert np.median(lams) < 1.8 and lams.min() >= 1.0
 
 
-def test_the_emulated_analysis_widens_by_the_factor_it_reports():
+def _grid_sd(em, C, d, scale: float, n: int = 201) -> np.ndarray:
+    """Marginal sds of the box-prior posterior exp(-chi2 / 2 scale) on an n x n grid (exact, no sampler)."""
+    g = np.linspace(0.0, 1.0, n)
+    G = np.array(np.meshgrid(g, g, indexing="ij")).reshape(2, -1).T
+    L = linalg.cholesky(C, lower=True)
+    c2 = np.sum(linalg.solve_triangular(L, (em(G) - d).T, lower=True) ** 2, axis=0)
+    w = np.exp(-0.5 * (c2 - c2.min()) / scale)
+    w /= w.sum()
+    mean = w @ G
+    return np.sqrt(w @ (G - mean) ** 2)
+
+
+def test_the_reported_emulator_posterior_samples_the_scaled_likelihood():
+    # the sample's marginal sds against the exact grid posterior of the same emulator and C_em, with and
+    # without lambda: the sampler targets lambda (R + C_em), and the scaling widens what it reports
     X, Y, latest, d, truth, _ = stand_in(7, 0.4)
     R = DiagonalError(np.full(M, NOISE))
-    kw = dict(lower=LO, upper=HI, n_members=20, times=T, inner_members=200, inner_steps=4, smoothing=SMOOTHING)
-    plain = emulated_esmda_update(X, Y, latest, d, R, rng=np.random.default_rng(1), **kw)
-    cal = emulated_esmda_update(X, Y, latest, d, R, rng=np.random.default_rng(1), self_calibrate=True, **kw)
-    lam = cal.diagnostics["self_calibration"]["lambda"]
-    assert plain.diagnostics["self_calibration"] is None and lam > 2.0
-    s_plain = plain.diagnostics["inner"]["posterior"]["p0"]["std"]
-    s_cal = cal.diagnostics["inner"]["posterior"]["p0"]["std"]
-    # a Gaussian-linear posterior's sd grows as sqrt(lambda) (exactly so for a linear model with a wide prior)
-    assert s_cal / s_plain == pytest.approx(np.sqrt(lam), rel=0.35)
+    kw = dict(lower=LO, upper=HI, times=T, smoothing=SMOOTHING, walkers=16, min_steps=2000)
+    plain = emulator_posterior(X, Y, latest, d, R, rng=np.random.default_rng(1), **kw)
+    cal = emulator_posterior(X, Y, latest, d, R, rng=np.random.default_rng(1), self_calibrate=True, **kw)
+    lam = cal.diagnostics["emulator_error"]["self_calibration"]["lambda"]
+    assert "self_calibration" not in plain.diagnostics["emulator_error"] and lam > 2.0
+    em = CurveEmulator(X, Y, LO, HI, smoothing=SMOOTHING)
+    C = R.dense() + error_model(em.loo_residuals()[latest]).dense()
+    # 2000 steps x 16 walkers give thousands of effective draws: an sd to a few per cent; 15 % allowed
+    assert cal.samples.std(axis=0) == pytest.approx(_grid_sd(em, C, d, lam), rel=0.15)
+    assert plain.samples.std(axis=0) == pytest.approx(_grid_sd(em, C, d, 1.0), rel=0.15)
+    assert np.all(cal.samples.std(axis=0) > 1.5 * plain.samples.std(axis=0))
 
 
-def test_the_config_switch_reaches_the_analysis_and_is_off_by_default():
+def test_the_analyses_are_not_scaled():
+    # the loop's analyses keep R + C_em: the scaling is the reported posterior's (a wider analysis would
+    # spread the next design and slow the stop rule, which the default twin must still reach)
+    import inspect
+
+    assert "self_calibrate" not in inspect.signature(emulated_esmda_update).parameters
+
+
+def test_the_config_switch_is_on_in_the_default_twin_and_needs_the_emulator_posterior():
     from pathlib import Path
 
     from calibration.experiment import ExperimentSpec
@@ -105,10 +130,15 @@ def test_the_config_switch_reaches_the_analysis_and_is_off_by_default():
     root = Path(__file__).resolve().parents[1]
     cfg = load_yaml(root / "config" / "config.yaml")
     exp = validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)["experiments"]["twin_ref"]
-    assert ExperimentSpec.from_config("twin_ref", exp).self_calibrate is False
-    cfg["experiments"]["twin_ref"]["emulated"] = {"self_calibrate": True}
-    exp = validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)["experiments"]["twin_ref"]
     assert ExperimentSpec.from_config("twin_ref", exp).self_calibrate is True
+    assert exp["posterior"] == "emulator_mcmc"
+    cfg["experiments"]["twin_ref"]["emulated"] = {"self_calibrate": False}
+    exp = validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)["experiments"]["twin_ref"]
+    assert ExperimentSpec.from_config("twin_ref", exp).self_calibrate is False
     cfg["experiments"]["twin_ref"]["emulated"] = {"self_calibrate": "yes"}
     with pytest.raises(Exception, match="self_calibrate"):
+        validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)
+    cfg["experiments"]["twin_ref"]["emulated"] = {"self_calibrate": True}
+    cfg["experiments"]["twin_ref"]["posterior"] = "ensemble"
+    with pytest.raises(Exception, match="self_calibrate.*needs posterior: emulator_mcmc"):
         validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)
