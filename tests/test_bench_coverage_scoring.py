@@ -98,3 +98,32 @@ def test_the_emulator_mcmc_intervals_are_scored_with_failed_samplers_counted_as_
         assert c["fraction_counting_failures_as_misses"] == pytest.approx(c["fraction"] * 50 / 55)
         assert c["fraction"] > ens["params"][p]["coverage_90"]["fraction"] + 0.3
     assert score_mcmc(over, LOWER, UPPER, NAMES) is None
+
+
+def test_the_readme_table_shows_the_reported_posterior_with_failed_samplers_as_misses():
+    """tools/coverage_table.py: with ``reported_posterior: emulator_mcmc`` the table's coverage is the
+    MCMC's, a failed sampler counted as a miss, and the ensemble's coverage is named as such beside it."""
+    from benchmarks.bench_coverage import score_mcmc
+    from tools.coverage_table import table
+
+    cal, over = _records("calibrated", n=20, seed=3), _records("overconfident", n=20, seed=3)
+    records = []
+    for i, (a, b) in enumerate(zip(cal, over)):
+        rec = dict(b)
+        rec["params"] = {p: {**v, "interval": "t prediction interval"} for p, v in b["params"].items()}
+        rec["emulator_mcmc"] = ({"error": "RuntimeError: short chain"} if i < 2 else
+                                {"params": a["params"], "sampler": {"converged_chain": True}})
+        records.append(rec)
+    mc = score_mcmc(records, LOWER, UPPER, NAMES)
+    bench = {"method": "emulated_esmda", "ensemble_size": 25, "window_s": [0.0, 1.6e-4],
+             "reported_posterior": "emulator_mcmc", "self_calibrate": True,
+             "well_specified": {"planned": 20, "complete": True, "twins": records,
+                                "summary": score(records, LOWER, UPPER, NAMES), "summary_emulator_mcmc": mc}}
+    text = table(bench, "x.json")
+    row = next(line for line in text.splitlines() if line.startswith("| well-specified"))
+    k = round(mc["params"]["sigma_t"]["coverage_90"]["fraction"] * 18)
+    assert row.split("|")[2].strip() == "20"
+    assert row.split("|")[4].strip().startswith(f"{100 * k / 20:.0f} %")
+    assert "reported posterior: emulator_mcmc with self-calibration" in text
+    assert "samplers failed 2" in text and "last simulated ensemble" in text
+    assert "quantiles of the emulator MCMC sample" in text

@@ -24,8 +24,17 @@ def _pct(x) -> str:
 
 
 def _cov(c: dict) -> str:
-    lo, hi = c["ci95"]
-    return f"{_pct(c['fraction'])} [{_pct(lo)}, {_pct(hi)}]"
+    # a reported MCMC posterior's failed samplers count as misses (score_mcmc)
+    f = c.get("fraction_counting_failures_as_misses", c["fraction"])
+    lo, hi = c.get("ci95_counting_failures_as_misses", c["ci95"])
+    return f"{_pct(f)} [{_pct(lo)}, {_pct(hi)}]"
+
+
+def reported(bench: dict, name: str) -> dict:
+    """The set's summary of the posterior the twin reports (``reported_posterior``; the ensemble before it
+    was recorded)."""
+    mcmc = bench.get("reported_posterior") == "emulator_mcmc"
+    return bench[name]["summary_emulator_mcmc"] if mcmc else bench[name]["summary"]
 
 
 def table(bench: dict, source: str) -> str:
@@ -36,7 +45,7 @@ def table(bench: dict, source: str) -> str:
         if name not in bench or not bench[name]["twins"]:
             continue
         done = "" if bench[name].get("complete", True) else f" of {bench[name]['planned']} planned"
-        s = bench[name]["summary"]
+        s = reported(bench, name)
         p = s["params"]
 
         def both(f):
@@ -49,27 +58,53 @@ def table(bench: dict, source: str) -> str:
             return f"{q['width_over_prior_median']:.2f}"
 
         rows.append(
-            f"| {name.replace('_', '-')} | {s['n_twins']}{done} | {s['converged']} "
+            f"| {name.replace('_', '-')} | {s['n_twins'] + s.get('sampler_failed', 0)}{done} | {s['converged']} "
             f"| {both(lambda q: _cov(q['coverage_90']))} | {both(lambda q: _cov(q['coverage_50']))} "
             f"| {both(sbc)} | {both(width)} | {both(lambda q: _pct(q['half_width_90_rel_median']))} "
             f"| {both(lambda q: _pct(q['bar']['fraction_met']))} |")
+    posterior = bench.get("reported_posterior", "ensemble")
+    if posterior == "emulator_mcmc":
+        posterior += " with self-calibration" if bench.get("self_calibrate") else ""
     head = (f"From `{source}` ({bench['method']}, N = {bench['ensemble_size']}, window "
-            f"{bench['window_s'][0] * 1e6:.0f}-{bench['window_s'][1] * 1e6:.0f} us; brackets: binomial 95 % intervals):")
-    return "\n".join([head, "", *rows, "", _reference_line(bench)])
+            f"{bench['window_s'][0] * 1e6:.0f}-{bench['window_s'][1] * 1e6:.0f} us; reported posterior: {posterior}; "
+            f"brackets: binomial 95 % intervals):")
+    return "\n".join([head, "", *rows, "", _reference_line(bench), *_ensemble_line(bench)])
 
 
-def _reference_line(bench: dict) -> str:
-    """What a calibrated posterior would give with these members, and how far each coverage is from it."""
-    ws = bench["well_specified"]["summary"]["params"]
+def _ensemble_line(bench: dict) -> list:
+    """Under an MCMC posterior, the last simulated ensemble's 90 % coverage on the same twins, and the
+    samplers that failed or did not converge."""
+    if bench.get("reported_posterior") != "emulator_mcmc":
+        return []
     parts = []
     for name in ("well_specified", "misspecified"):
         if name not in bench or not bench[name]["twins"]:
             continue
-        p = bench[name]["summary"]["params"]
+        e, m = bench[name]["summary"]["params"], bench[name]["summary_emulator_mcmc"]
+        parts.append(f"{name.replace('_', '-')} " + " / ".join(_pct(e[q]["coverage_90"]["fraction"]) for q in NAMES)
+                     + " (width / prior's " + " / ".join(f"{e[q]['width_over_prior_median']:.2f}" for q in NAMES)
+                     + f"; samplers failed {m['sampler_failed']}, chains converged {m['chains_converged']} "
+                     f"of {m['n_twins']})")
+    return ["", "The last simulated ensemble's own 90 % intervals on the same twins cover (`sigma_t` / `E_t`): "
+            + "; ".join(parts) + "."]
+
+
+def _reference_line(bench: dict) -> str:
+    """What a calibrated posterior would give with these members, and how far each coverage is from it."""
+    ws = reported(bench, "well_specified")["params"]
+    parts = []
+    for name in ("well_specified", "misspecified"):
+        if name not in bench or not bench[name]["twins"]:
+            continue
+        p = reported(bench, name)["params"]
         parts.append(f"{name.replace('_', '-')} 90 %: " + " / ".join(f"{p[q]['coverage_90']['p_vs_reference']:.2g}" for q in NAMES)
                      + ", 50 %: " + " / ".join(f"{p[q]['coverage_50']['p_vs_reference']:.2g}" for q in NAMES))
     prediction = bool(bench["well_specified"]["twins"][0]["params"]["sigma_t"].get("interval"))
-    if prediction:
+    if bench.get("reported_posterior") == "emulator_mcmc":
+        lead = ("The reported intervals are the 5-95 % and 25-75 % quantiles of the emulator MCMC sample "
+                "(thousands of draws: calibrated at their nominal 90 % and 50 %); binomial p of each coverage "
+                "against that")
+    elif prediction:
         lead = ("The reported intervals are t prediction intervals of one more draw from the members "
                 "(`enkf.prediction_interval_dict`), calibrated at their nominal 90 % and 50 %; binomial p of "
                 "each coverage against that")
