@@ -245,6 +245,9 @@ def score(records: list, lower, upper, names) -> dict:
             "width_over_prior_median": float(np.median((hi90 - lo90) / (0.9 * (upper[j] - lower[j])))),
             "half_width_90_rel_median": float(np.median(0.5 * (hi90 - lo90) / t)),
             "mean_rel_error_median_abs": float(np.median(np.abs(mean / t - 1.0))),
+            # which side the truth falls on: a biased posterior misses on one side only
+            "mean_over_truth_median": float(np.median(mean / t)),
+            "misses_90": {"truth_above": int(np.sum(t > hi90)), "truth_below": int(np.sum(t < lo90))},
             "bar": {"within_bar": int(np.sum(near)), "wider_and_covers": int(np.sum(~near & wide & inside)),
                     "fraction_met": float(np.mean(near | (wide & inside)))},
         })
@@ -272,6 +275,10 @@ def score_mcmc(records: list, lower, upper, names) -> dict | None:
             c["ci95_counting_failures_as_misses"] = _ci(k, n)
     out["chains_converged"] = sum(bool(r["emulator_mcmc"]["sampler"]["converged_chain"]) for r in have
                                   if "error" not in r["emulator_mcmc"])
+    lam = [r["emulator_mcmc"]["self_calibration_lambda"] for r in have
+           if r["emulator_mcmc"].get("self_calibration_lambda") is not None]
+    out["self_calibration_lambda"] = ({"median": float(np.median(lam)), "min": float(np.min(lam)),
+                                       "max": float(np.max(lam))} if lam else None)
     return out
 
 

@@ -80,8 +80,7 @@ def _mcmc_marginals(spec, params, responses, analyses, obs, truth) -> dict:
     out = {p: {"q05": s[p]["q05"], "q95": s[p]["q95"], "mean": s[p]["mean"],
                "covers": bool(s[p]["q05"] <= truth[j] <= s[p]["q95"])} for j, p in enumerate(spec.names)}
     out["converged_chain"] = bool(post.diagnostics.get("converged_chain"))
-    out["lambda"] = post.diagnostics["emulator_error"]["self_calibration"]["lambda"] \
-        if "emulator_error" in post.diagnostics else None
+    out["lambda"] = post.diagnostics["emulator_error"]["self_calibration"]["lambda"]
     return out
 
 

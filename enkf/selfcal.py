@@ -1,6 +1,6 @@
 """Self-calibration of an emulated likelihood on the runs themselves (issue 30).
 
-The emulated analyses and ``posterior: emulator_mcmc`` assimilate with ``N(d; em(theta), R + D + C_em)``,
+The reported ``posterior: emulator_mcmc`` (like the emulated analyses) uses ``N(d; em(theta), R + D + C_em)``,
 ``C_em`` the AR(1) model of the emulator's leave-one-out residuals (per-time rms, one correlation
 time). It is only as honest as that covariance: a departure correlated otherwise (a mesh realization's
 stiffness moves a whole rise, a crack path a whole post-peak) is counted as more independent
@@ -14,7 +14,8 @@ emulator's own leave-one-out residuals),
 is chi-square with ``n`` degrees of freedom when the likelihood is right (``n`` parameters, the profile
 likelihood ratio). ``lambda = median(delta) / median(chi2_n)``, at least 1, is the factor by which the
 covariance must grow for the runs' own parameters to sit inside their posterior regions at the nominal
-rate; the analysis then uses ``lambda (R + D + C_em)``. This is the calibration of a generalized
+rate; the reported posterior then uses ``lambda (R + D + C_em)`` (:func:`enkf.ces.emulator_posterior`; the
+loop's analyses are left unscaled, so that its designs and stop rule are the unscaled loop's). This is the calibration of a generalized
 posterior's learning rate ``1 / lambda`` so that its credible regions cover (Syring & Martin 2019),
 with the simulator's own runs as the replicates of known truth. The median, not the mean or a high
 quantile: 25 runs give it to about +-30 % and a run at the box's edge (a truncated region) does not move

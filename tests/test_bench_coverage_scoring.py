@@ -127,3 +127,21 @@ def test_the_readme_table_shows_the_reported_posterior_with_failed_samplers_as_m
     assert "reported posterior: emulator_mcmc with self-calibration" in text
     assert "samplers failed 2" in text and "last simulated ensemble" in text
     assert "quantiles of the emulator MCMC sample" in text
+
+
+def test_the_misses_are_counted_by_side_and_a_biased_posterior_misses_on_one_side():
+    """``misses_90`` splits the 90 % misses by the side the truth falls on (they add up to the misses);
+    a posterior centred 10 % low misses with the truth above only, and its mean over the truth shows it."""
+    recs = _records("calibrated", n=100, seed=11)
+    s = score(recs, LOWER, UPPER, NAMES)["params"]["sigma_t"]
+    m = s["misses_90"]
+    assert m["truth_above"] + m["truth_below"] == round((1 - s["coverage_90"]["fraction"]) * 100)
+    assert m["truth_above"] > 0 and m["truth_below"] > 0
+    biased = []
+    for r in _records("overconfident", n=100, seed=11):
+        r = {**r, "params": {p: {k: (v * 0.9 if k != "n" and k != "sbc_u" else v) for k, v in q.items()}
+                             for p, q in r["params"].items()}}
+        biased.append(r)
+    b = score(biased, LOWER, UPPER, NAMES)["params"]["sigma_t"]
+    assert b["misses_90"]["truth_below"] == 0 and b["misses_90"]["truth_above"] > 90
+    assert b["mean_over_truth_median"] == pytest.approx(0.9, abs=0.01)
