@@ -67,11 +67,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
-from scipy.integrate import cumulative_trapezoid
 
 from .bars import FREIBURG_BAR, BarSetup, bridge_strain_per_volt, freiburg_bar
-from .dispersion import correct_bar_signals
-from .signals import despike, detect_arrival, robust_std, saturation_onset, select_gauges, stuck_runs
+from .signals import cumulative_trapezoid, despike, detect_arrival, robust_std, saturation_onset, select_gauges, stuck_runs
 
 if TYPE_CHECKING:  # pragma: no cover
     from .records import RawRecord
@@ -450,7 +448,7 @@ def _forces(bar: BarSetup, L_s: float, D_s: float, tau: np.ndarray, eps_I: np.nd
     F2 = bar.E * A_b * eps_T
     s1, s2 = F1 / A_s, F2 / A_s
     rate = bar.c0 / L_s * (eps_I - eps_R - eps_T)
-    strain = cumulative_trapezoid(rate, tau, initial=0.0)
+    strain = cumulative_trapezoid(rate, tau)
     Fsum = F1 + F2
     with np.errstate(divide="ignore", invalid="ignore"):
         R = 2.0 * np.abs(F1 - F2) / Fsum
@@ -531,6 +529,9 @@ def reduce_record(raw: "RawRecord", bar: BarSetup | None = None, specimen_length
     n_w = tm.window_samples(i_a)
     inc_I, inc_R, tra = b.inc, b.inc, b.tra
     if dispersion_nu is not None:
+        # imported here: the correction is optional, and scipy.fft/interpolate cost every simulation
+        # driven by a measured record 0.3 s of start-up
+        from .dispersion import correct_bar_signals
         inc_I, inc_R, tra = correct_bar_signals(b.inc, b.tra, dt, bar, dispersion_nu)
         notes.append(f"Pochhammer-Chree dispersion correction of the bar signals (first mode, phase only, "
                      f"bar Poisson ratio {dispersion_nu:g})")
