@@ -14,7 +14,7 @@ as one parameter needing a larger multiplier than the other. Also: the covarianc
 before and after the curve's peak (``PHASE_SCALES``, ``lambda`` re-fitted on top: does the post-peak, where
 ``E_t`` acts, need more than the rise?), the misses by side, and the coverage per quarter of the box in
 which the run's value lies; and the credible levels recalibrated per parameter from each twin's own
-runs' ranks (:func:`recalibrated`).
+runs' ranks or from every other twin's (:func:`recalibrated`).
 
     python benchmarks/bench_emulated_likelihood.py --seed 50 --twins 40 --which 0,1,2,3,4,5,6,7,8,9,10,11 \
         --keep <folder>        # the 12 development twins' runs (about 22 min on 2 cores), once
@@ -108,21 +108,26 @@ def _beta_levels(u: np.ndarray, level: float = 0.90) -> tuple[float, float]:
     return float(stats.beta.ppf(q, m * k, (1 - m) * k)), float(stats.beta.ppf(1 - q, m * k, (1 - m) * k))
 
 
-def recalibrated(twins: list[list[dict]], names) -> dict:
-    """Leave one run out: the ranks of the twin's other runs recalibrate the credible levels per parameter
-    (:func:`_beta_levels`); the fraction of left-out runs inside the recalibrated 90 % interval."""
+def recalibrated(twins: list[list[dict]], names, across: bool = False) -> dict:
+    """The fraction of runs inside their recalibrated 90 % interval, the credible levels per parameter from
+    the ranks (:func:`_beta_levels`) of the twin's other runs (``across`` False: leave one run out) or of
+    every other twin's runs (``across`` True: leave one twin out, a correction learnt across twins)."""
     n, c50, base = len(names), stats.chi2.median(len(names)), PHASE_SCALES[0]
-    inside, total = np.zeros(n), 0
+    per_twin = []
     for rows in twins:
         deltas = np.array([q["delta"][base] for q in rows])
         lams = [max(1.0, float(np.median(np.delete(deltas, i)) / c50)) for i in range(len(rows))]
         U = np.array([_ranks(r["axes"], r["c2"][base], lams[i], r["theta"]) for i, r in enumerate(rows)])
+        per_twin.append((rows, lams, U))
+    inside, total = np.zeros(n), 0
+    for t, (rows, lams, U) in enumerate(per_twin):
+        pooled = np.vstack([u for k, (_, _, u) in enumerate(per_twin) if k != t]) if across else None
         for i, r in enumerate(rows):
             w = np.exp(-0.5 * (r["c2"][base] - r["c2"][base].min()) / lams[i]).reshape([len(a) for a in r["axes"]])
             for j in range(n):
                 marg = w.sum(axis=tuple(k for k in range(n) if k != j))
                 c = np.cumsum(marg) / marg.sum()
-                a, b = _beta_levels(np.delete(U[:, j], i))
+                a, b = _beta_levels(pooled[:, j] if across else np.delete(U[:, j], i))
                 inside[j] += np.interp(a, c, r["axes"][j]) <= r["theta"][j] <= np.interp(b, c, r["axes"][j])
             total += 1
     return {p: round(float(inside[j]) / total, 3) for j, p in enumerate(names)}
@@ -163,6 +168,7 @@ def score(twins: list[list[dict]], names, lower, upper) -> dict:
             "marginal_inside_90_phase_scales": {f"pre x{a:g} / post x{b:g}": frac(by_phase[(a, b)])
                                                 for a, b in PHASE_SCALES},
             "marginal_inside_90_recalibrated_per_twin": recalibrated(twins, names),
+            "marginal_inside_90_recalibrated_across_twins": recalibrated(twins, names, across=True),
             "misses_at_lambda": {p: {"value_below_interval": int(below[j]), "value_above_interval": int(above[j])}
                                  for j, p in enumerate(names)},
             "inside_90_by_box_quarter": {p: [{"runs": int(quarters[j, k, 0]),
