@@ -1,5 +1,5 @@
 """Is the self-calibrated posterior's miscalibration a matter of size or of direction? A development
-check of issue 30 (kept runs of development seed 50 only; never the coverage benchmark's seeds).
+check of issue 30 (kept runs of development seeds; the coverage benchmark's 40 and 41 are refused).
 
 ``enkf.selfcal`` scales the emulated likelihood's covariance by one ``lambda``. On the coverage benchmark
 the reported 90 % intervals cover ``sigma_t`` at 0.92 and ``E_t`` at 0.80: one factor cannot fix both
@@ -18,9 +18,9 @@ runs' ranks or from every other twin's (:func:`recalibrated`).
 
     python benchmarks/bench_emulated_likelihood.py --seed 50 --twins 40 --which 0,1,2,3,4,5,6,7,8,9,10,11 \
         --keep <folder>        # the 12 development twins' runs (about 22 min on 2 cores), once
-    python benchmarks/selfcal_marginals.py --keep <folder>
+    python benchmarks/selfcal_marginals.py --keep <folder> [<folder of another seed> ...]
 
-Prints one JSON object; about a minute per twin on one core.
+Prints one JSON object; about 5 s per twin on one core.
 """
 
 from __future__ import annotations
@@ -43,7 +43,6 @@ from calibration.model_error import stored_error
 from enkf.emulated import emulator_error_model
 from enkf.emulator import CurveEmulator, smoothed_emulator
 
-
 GRID = 81
 MULTIPLIERS = (1.0, 1.5, 2.0, 3.0)
 #: (before the peak, after it): the covariance's scale per phase, then lambda re-fitted by the median rule
@@ -51,8 +50,8 @@ PHASE_SCALES = ((1.0, 1.0), (1.0, 2.0), (1.0, 4.0), (2.0, 1.0), (4.0, 1.0))
 
 
 def twin_runs(spec, params, responses, analyses, obs, seed: int) -> list[dict]:
-    """Per run of the last iteration: its delta chi2 and, per multiplier, whether each parameter's 90 %
-    marginal interval holds the run's own value (lambda left for :func:`score`)."""
+    """Per run of the last iteration: its parameters and, per pair of ``PHASE_SCALES``, the grid's chi2 and
+    the run's delta chi2 (``lambda`` and the intervals are left to :func:`score`)."""
     K = len(analyses) - 1
     X, Y, latest = all_runs(spec, params[:K + 1], responses[:K + 1], np.asarray(analyses[K]["alive"], bool))
     terms = stored_error(obs, analyses[K])
@@ -133,6 +132,16 @@ def recalibrated(twins: list[list[dict]], names, across: bool = False) -> dict:
     return {p: round(float(inside[j]) / total, 3) for j, p in enumerate(names)}
 
 
+def run_ranks(rows: list[dict]) -> list[list[float]]:
+    """Per run of a twin, each parameter's marginal CDF at the run's value (``lambda`` of the other runs):
+    what a correction learnt across twins is fitted to."""
+    c50, base = stats.chi2.median(rows[0]["theta"].size), PHASE_SCALES[0]
+    deltas = np.array([q["delta"][base] for q in rows])
+    return [[round(u, 4) for u in _ranks(r["axes"], r["c2"][base],
+                                          max(1.0, float(np.median(np.delete(deltas, i)) / c50)), r["theta"])]
+            for i, r in enumerate(rows)]
+
+
 def score(twins: list[list[dict]], names, lower, upper) -> dict:
     n = len(names)
     c50 = stats.chi2.median(n)
@@ -178,11 +187,12 @@ def score(twins: list[list[dict]], names, lower, upper) -> dict:
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--keep", required=True, help="folder of twin_<seed>.pkl from bench_emulated_likelihood --keep")
+    ap.add_argument("--keep", required=True, nargs="+",
+                    help="folder(s) of twin_<seed>.pkl from bench_emulated_likelihood --keep")
     args = ap.parse_args(argv)
-    files = sorted(Path(args.keep).glob("twin_*.pkl"))
+    files = sorted(f for folder in args.keep for f in Path(folder).glob("twin_*.pkl"))
     if not files:
-        raise SystemExit(f"--keep {args.keep}: no twin_*.pkl")
+        raise SystemExit(f"--keep {' '.join(args.keep)}: no twin_*.pkl")
     started, twins, names = time.time(), [], None
     for f in files:
         seed = int(f.stem.split("_")[1])
@@ -193,7 +203,9 @@ def main(argv=None) -> None:
         twins.append(twin_runs(spec, params, responses, analyses, obs, seed))
     print(json.dumps({"benchmark": "selfcal_marginals", "seeds": [int(f.stem.split("_")[1]) for f in files],
                       "grid": GRID, "cores": os.cpu_count(), "wall_s": round(time.time() - started, 1),
-                      **score(twins, names, lower, upper)}, indent=1))
+                      **score(twins, names, lower, upper),
+                      "ranks_at_lambda": {str(int(f.stem.split("_")[1])): run_ranks(rows)
+                                          for f, rows in zip(files, twins)}}, indent=1))
 
 
 if __name__ == "__main__":
