@@ -3,10 +3,11 @@ development runs only (issue 30; never the coverage benchmark's seeds 40 and 41)
 
 ``enkf.selfcal`` sets ``lambda = median(delta) / median(chi2_n)`` from the ``delta`` of the last
 iteration's 25 runs used as data of known parameters. Here, from the ``delta_chi2`` lists that
-``bench_emulated_likelihood`` stored for development seed 50 (12 twins x 25 runs), each rule is scored
-leave-one-run-out: ``lambda`` from 24 runs, then whether the 25th run's ``delta / lambda`` lies inside the
-chi-square 90 % and 50 % regions (300 checks per rule; a calibrated rule gives 0.90 and 0.50). The
-twins' truths (12) are counted too, with ``lambda`` from all 25 runs. These are the joint regions of
+``bench_emulated_likelihood`` stored for a development seed (50 and 51: 12 twins x 25 runs each), each rule
+is scored leave-one-run-out: ``lambda`` from 24 runs, then whether the 25th run's ``delta / lambda`` lies
+inside the chi-square 90 % and 50 % regions (300 checks per rule and seed; a calibrated rule gives 0.90
+and 0.50; runs of one twin are not independent, so the binomial interval is a guide). The twins' truths
+(12) are counted too, with ``lambda`` from all 25 runs. These are the joint regions of
 both parameters; a marginal interval (what the README reports) can under-cover in one direction while
 the joint region is calibrated.
 
@@ -57,6 +58,8 @@ def score(twins: list, n: int = N_PARAMS) -> dict:
 def main(argv=None) -> None:
     argv = sys.argv[1:] if argv is None else argv
     src = json.load(open(argv[0]))
+    if src.get("seed") in (40, 41):
+        raise SystemExit(f"{argv[0]}: seeds 40 and 41 are the coverage benchmark's: use a development seed")
     print(json.dumps({"benchmark": "selfcal_rules", "source": argv[0], "seed": src["seed"],
                       "rules": score(src["twins"])}, indent=1))
 
