@@ -56,6 +56,7 @@ def test_the_report_page_opens_on_the_summaries_in_run_order(tmp_path):
     """report/workflow.rst rendered as Snakemake renders it (Jinja2, then docutils to HTML) with two
     summary files in the "0 Summary" category: both tables appear, in the config's run order."""
     from docutils.core import publish_parts
+    from docutils.writers import get_writer_class
     from jinja2 import Environment
 
     class Cat:
@@ -78,7 +79,7 @@ def test_the_report_page_opens_on_the_summaries_in_run_order(tmp_path):
     text = Environment(trim_blocks=True, lstrip_blocks=True).from_string(
         (REPO / "report" / "workflow.rst").read_text()).render(
         snakemake=Snakemake, categories={Cat("0 Summary"): {Cat("Other"): results}, Cat("twin_ref"): {}}, files=[])
-    html = publish_parts(text, writer_name="html")["html_body"]
+    html = publish_parts(text, writer=get_writer_class("html")())["html_body"]  # writer_name is deprecated
     assert re.findall(r"<h3[^>]*>(\w+)</h3>", html) == ["twin_ref", "marble_loop"]
     assert "[39.14, 45.12]" in html and "[39.7, 46.28]" in html and "System Message" not in html
     assert html.index("Verdict") < html.index("Each experiment's files")
