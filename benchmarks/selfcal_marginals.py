@@ -41,7 +41,8 @@ from scipy import linalg, stats
 from calibration.experiment import all_runs
 from calibration.model_error import stored_error
 from enkf.emulated import emulator_error_model
-from enkf.emulator import CurveEmulator, smoothed_emulator
+from enkf.emulator import smoothed_emulator
+from enkf.selfcal import pseudo_runs
 
 GRID = 81
 MULTIPLIERS = (1.0, 1.5, 2.0, 3.0)
@@ -58,17 +59,13 @@ def twin_runs(spec, params, responses, analyses, obs, seed: int) -> list[dict]:
     lo, hi = np.asarray(spec.lower, float), np.asarray(spec.upper, float)
     _, info = smoothed_emulator(X, Y, lo, hi, list(spec.names), latest, spec.smoothing, terms.likelihood().std)
     groups = obs.frame["record"].to_numpy(str)
-    R = terms.emulated().dense()
-    L_R = linalg.cholesky(R, lower=True)
-    rng = np.random.default_rng(seed)
     axes = [np.linspace(lo[j], hi[j], GRID) for j in range(lo.size)]
     G = np.array(np.meshgrid(*axes, indexing="ij")).reshape(lo.size, -1).T
     rows = []
-    for i in np.flatnonzero(latest):
-        keep = np.arange(X.shape[0]) != i
-        em = CurveEmulator(X[keep], Y[keep], lo, hi, smoothing=info["smoothing"])
-        C = R + emulator_error_model(em.loo_residuals()[latest[keep]], obs.time, groups)[0].dense()
-        y = Y[i] + L_R @ rng.standard_normal(Y.shape[1])
+    # the runs as enkf.selfcal makes them data of known parameters
+    for i, em, C, y in pseudo_runs(X, Y, latest, terms.emulated(), lower=lo, upper=hi, smoothing=info["smoothing"],
+                                   error_model=lambda r: emulator_error_model(r, obs.time, groups)[0],
+                                   rng=np.random.default_rng(seed)):
         E, e_i = em(G) - y, em(X[i][None, :])[0] - y
         after = np.arange(y.size) > int(np.argmax(y))
         row = {"theta": X[i], "c2": {}, "delta": {}}
@@ -85,15 +82,17 @@ def twin_runs(spec, params, responses, analyses, obs, seed: int) -> list[dict]:
     return rows
 
 
-def _ranks(axes, c2, scale, theta) -> list[float]:
-    """Per parameter, the grid posterior's marginal CDF at ``theta``: below 0.05 the value lies below the
-    central 90 % interval, above 0.95 above it."""
+def _marginal_cdfs(axes, c2, scale) -> list[np.ndarray]:
+    """Per parameter, the grid posterior ``exp(-(chi2 - min) / 2 scale)``'s marginal CDF on its axis."""
     w = np.exp(-0.5 * (c2 - c2.min()) / scale).reshape([len(a) for a in axes])
-    out = []
-    for j in range(len(axes)):
-        marg = w.sum(axis=tuple(k for k in range(len(axes)) if k != j))
-        out.append(float(np.interp(theta[j], axes[j], np.cumsum(marg) / marg.sum())))
-    return out
+    margs = [w.sum(axis=tuple(k for k in range(len(axes)) if k != j)) for j in range(len(axes))]
+    return [np.cumsum(m) / m.sum() for m in margs]
+
+
+def _ranks(axes, c2, scale, theta) -> list[float]:
+    """Per parameter, the marginal CDF at ``theta``: below 0.05 the value lies below the central 90 %
+    interval, above 0.95 above it."""
+    return [float(np.interp(theta[j], axes[j], c)) for j, c in enumerate(_marginal_cdfs(axes, c2, scale))]
 
 
 def _beta_levels(u: np.ndarray, level: float = 0.90) -> tuple[float, float]:
@@ -122,10 +121,7 @@ def recalibrated(twins: list[list[dict]], names, across: bool = False) -> dict:
     for t, (rows, lams, U) in enumerate(per_twin):
         pooled = np.vstack([u for k, (_, _, u) in enumerate(per_twin) if k != t]) if across else None
         for i, r in enumerate(rows):
-            w = np.exp(-0.5 * (r["c2"][base] - r["c2"][base].min()) / lams[i]).reshape([len(a) for a in r["axes"]])
-            for j in range(n):
-                marg = w.sum(axis=tuple(k for k in range(n) if k != j))
-                c = np.cumsum(marg) / marg.sum()
+            for j, c in enumerate(_marginal_cdfs(r["axes"], r["c2"][base], lams[i])):
                 a, b = _beta_levels(pooled[:, j] if across else np.delete(U[:, j], i))
                 inside[j] += np.interp(a, c, r["axes"][j]) <= r["theta"][j] <= np.interp(b, c, r["axes"][j])
             total += 1

@@ -34,7 +34,7 @@ from .covariance import ObservationError
 from .emulator import CurveEmulator
 from .sampling import latin_hypercube
 
-__all__ = ["self_calibration"]
+__all__ = ["pseudo_runs", "self_calibration"]
 
 
 def _min_chi2(chi2: Callable[[np.ndarray], np.ndarray], lo, hi, starts: np.ndarray) -> float:
@@ -44,6 +44,25 @@ def _min_chi2(chi2: Callable[[np.ndarray], np.ndarray], lo, hi, starts: np.ndarr
     res = optimize.minimize(lambda u: float(chi2(lo + u[None, :] * (hi - lo))[0]), x0, method="L-BFGS-B",
                             bounds=[(0.0, 1.0)] * lo.size)
     return float(min(values.min(), res.fun))
+
+
+def pseudo_runs(X, Y, latest, obs_error: ObservationError, *, lower, upper, smoothing: float,
+                error_model: Callable[[np.ndarray], ObservationError], rng: RngLike):
+    """Each latest run as data of known parameters: yields ``(i, em, C, y)``, ``em`` the emulator of the
+    other runs, ``C = R + C_em`` (``C_em`` from ``em``'s leave-one-out residuals at the other latest runs,
+    as the analysis measures it) and ``y`` run ``i``'s curve plus a draw of ``R`` (one draw per run, in
+    the order of the runs)."""
+    X, Y = np.asarray(X, float), np.asarray(Y, float)
+    latest = np.asarray(latest, bool)
+    lo, hi = np.asarray(lower, float), np.asarray(upper, float)
+    rng = as_generator(rng)
+    R = obs_error.dense()
+    L_R = linalg.cholesky(R, lower=True)
+    for i in np.flatnonzero(latest):
+        keep = np.arange(X.shape[0]) != i
+        em = CurveEmulator(X[keep], Y[keep], lo, hi, smoothing=smoothing)
+        C = R + error_model(em.loo_residuals()[latest[keep]]).dense()
+        yield i, em, C, Y[i] + L_R @ rng.standard_normal(Y.shape[1])
 
 
 def self_calibration(X, Y, latest, obs_error: ObservationError, *, lower, upper, smoothing: float,
@@ -68,16 +87,11 @@ def self_calibration(X, Y, latest, obs_error: ObservationError, *, lower, upper,
     if idx.size < 3 or X.shape[0] - 1 < n + 2:
         raise ValueError(f"self-calibration needs at least 3 latest runs and {n + 3} runs; got {idx.size} "
                          f"and {X.shape[0]}")
-    R = obs_error.dense()
-    L_R = linalg.cholesky(R, lower=True)
     starts = np.vstack([latin_hypercube(lo, hi, search_points, rng), X[latest]])
     deltas = []
-    for i in idx:
-        keep = np.arange(X.shape[0]) != i
-        em = CurveEmulator(X[keep], Y[keep], lo, hi, smoothing=smoothing)
-        C = R + error_model(em.loo_residuals()[latest[keep]]).dense()
+    for i, em, C, y in pseudo_runs(X, Y, latest, obs_error, lower=lo, upper=hi, smoothing=smoothing,
+                                   error_model=error_model, rng=rng):
         L = linalg.cholesky(C, lower=True)
-        y = Y[i] + L_R @ rng.standard_normal(Y.shape[1])
 
         def chi2(P, em=em, L=L, y=y):
             w = linalg.solve_triangular(L, (em(np.atleast_2d(P)) - y).T, lower=True)
