@@ -39,6 +39,12 @@ def _parse_snapshots(text):
         raise ValueError(f"--snapshots expects a count N or comma-separated times in s, got {text!r}") from None
 
 
+def _peak(stress) -> float:
+    """The curve's largest stress; NaN when no value is a number (a failed run's empty curve)."""
+    values = [v for v in stress.tolist() if v == v]
+    return max(values) if values else float("nan")
+
+
 def package_version() -> str:
     """The installed distribution's version (importlib.metadata), else pyproject.toml's beside the
     package (a source tree on the path without an install), else ``"unknown"``."""
@@ -103,7 +109,7 @@ def main(argv=None) -> int:
     r = out.run
     print(f"{r['status']}: {r['geometry']} {r['preset']}, {r['n_triangles']} triangles, "
           f"{r['n_joints']} joints, {r['steps']} steps, {r['wall_s']:.1f} s, "
-          f"peak {out.curve['stress_Pa'].max() / 1e6:.1f} MPa -> {args.out}")
+          f"peak {_peak(out.columns['stress_Pa']) / 1e6:.1f} MPa -> {args.out}")
     if r["status"] != "ok":
         print(f"simulation failed: {r['reason']}", file=sys.stderr)
         return contract.EXIT_NUMERICAL

@@ -176,8 +176,8 @@ def summarize(model, geometry, result, curve, arrival_s: float) -> FractureSumma
     """Failure pattern of a run of ``shpb.simulate`` (curve time axis: 0 at the wave's arrival)."""
     R = 0.5 * geometry.specimen_dims["diameter_m"]
     idx, mid = joint_midpoints(model, geometry.specimen, R)
-    t = curve["time_s"].to_numpy()
-    sigma = curve["stress_Pa"].to_numpy()
+    t = np.asarray(curve["time_s"])
+    sigma = np.asarray(curve["stress_Pa"])
     ip = first_peak(sigma, PEAK_DROP[geometry.kind])
     t_peak = float(t[ip])
     onset = result.joint_onset_t[idx] - arrival_s
@@ -191,8 +191,8 @@ def summarize(model, geometry, result, curve, arrival_s: float) -> FractureSumma
         t_first = float(onset[k])
     broken_peak = (result.joint_break_t[idx] >= 0.0) & (brk <= t_peak + 1e-12)
     damaged_peak = started & (onset <= t_peak + 1e-12)
-    front = curve["stress_front_Pa"].to_numpy()[ip]
-    back = curve["stress_back_Pa"].to_numpy()[ip]
+    front = np.asarray(curve["stress_front_Pa"])[ip]
+    back = np.asarray(curve["stress_back_Pa"])[ip]
     return FractureSummary(
         first_joint_xy=first, first_joint_t_s=t_first, peak_t_s=t_peak, peak_stress_Pa=float(sigma[ip]),
         broken_at_peak=int(broken_peak.sum()),

@@ -15,7 +15,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from fdem import ContactParams, JointParams, Material, TractionBC, build_model, run
 from fdem.model import DEFAULT_SAFETY
@@ -51,15 +50,32 @@ CURVE_COLUMNS = list(contract.CURVE_COLUMNS)
 
 @dataclass
 class SimulationOutput:
-    curve: pd.DataFrame
+    """One run: ``columns`` maps CURVE_COLUMNS to 1-D arrays (SI); ``curve`` is the same as a DataFrame."""
+    columns: dict
     run: dict
     extra: dict = field(default_factory=dict)
 
+    @property
+    def curve(self):
+        # pandas imported on first use: a simulation process (one per member job) never needs it, and
+        # its import is 0.2 s of every such process
+        import pandas as pd
 
-def write_outputs(out_dir, curve: pd.DataFrame, run_info: dict) -> None:
+        return pd.DataFrame({c: self.columns[c] for c in CURVE_COLUMNS})
+
+
+def curve_csv_text(columns: dict) -> str:
+    """``curve.csv``: the header, then one row per sample in ``%.9e``, a missing value empty (the text of
+    pandas' ``to_csv(index=False, float_format="%.9e")``, written without importing pandas)."""
+    data = np.column_stack([np.asarray(columns[c], dtype=float) for c in CURVE_COLUMNS])
+    rows = (",".join("" if v != v else "%.9e" % v for v in row) for row in data.tolist())
+    return "\n".join([",".join(CURVE_COLUMNS), *rows]) + "\n"
+
+
+def write_outputs(out_dir, columns: dict, run_info: dict) -> None:
     """curve.csv then run.json, each atomically (run.json last: its presence means complete)."""
     out = Path(out_dir)
-    atomic_write_text(out / "curve.csv", curve.to_csv(index=False, float_format="%.9e"))
+    atomic_write_text(out / "curve.csv", curve_csv_text(columns))
     atomic_write_text(out / "run.json", json.dumps(run_info, indent=1, default=float))
 
 
@@ -304,7 +320,7 @@ def simulate(geometry: str, preset: str = "fast", params: dict | None = None, re
                      2.0 * np.abs(F_front - F_back) / denom, np.nan)
     st = res.stress
     centre = st[f"{g.specimen}.centre"]
-    curve = pd.DataFrame({
+    curve = {
         "time_s": res.time - arrival,
         "stress_Pa": F_back * to_stress,
         "stress_front_Pa": F_front * to_stress,
@@ -314,8 +330,8 @@ def simulate(geometry: str, preset: str = "fast", params: dict | None = None, re
         "centre_syy_Pa": centre[:, 1],
         "eps_incident_gauge": -st[f"{g.incident_bar}.gauge"][:, 0] / bar.E,
         "eps_transmitted_gauge": -st[f"{g.transmission_bar}.gauge"][:, 0] / bar.E,
-    })[CURVE_COLUMNS]
-    finite = np.all(np.isfinite(curve.drop(columns=["force_balance"]).to_numpy()))
+    }
+    finite = all(np.all(np.isfinite(v)) for k, v in curve.items() if k != "force_balance")
     status = "ok" if (res.status == "ok" and finite) else "failed"
     reason = res.message if res.status != "ok" else ("" if finite else "non-finite values in the curve")
     W = float(res.energy["external_work"][-1]) if len(res.time) else 0.0
@@ -346,7 +362,7 @@ def simulate(geometry: str, preset: str = "fast", params: dict | None = None, re
             info["snapshots"] = _write_snapshots(Path(out_dir) / "snapshots", model, g, res, arrival,
                                                  to_stress, curve)
         write_outputs(out_dir, curve, info)
-    return SimulationOutput(curve=curve, run=info, extra={"result": res, "setup": setup})
+    return SimulationOutput(columns=curve, run=info, extra={"result": res, "setup": setup})
 
 
 def _stress_factor(g) -> float:

@@ -120,10 +120,10 @@ def fracture_overview(path, model, geometry, curve, frames) -> Path:
     fig = Figure(figsize=(5.2 * (1 + len(frames)), 4.6))
     FigureCanvasAgg(fig)
     ax = fig.add_subplot(1, 1 + len(frames), 1)
-    t_us = curve["time_s"].to_numpy() * 1e6
-    ax.plot(t_us, curve["stress_Pa"].to_numpy() / 1e6, "k", lw=1.5, label="specimen (back face)")
-    ax.plot(t_us, curve["stress_front_Pa"].to_numpy() / 1e6, "C0--", lw=1.0, label="front face")
-    ax.plot(t_us, curve["stress_back_Pa"].to_numpy() / 1e6, "C3:", lw=1.0, label="back face")
+    t_us = np.asarray(curve["time_s"]) * 1e6
+    ax.plot(t_us, np.asarray(curve["stress_Pa"]) / 1e6, "k", lw=1.5, label="specimen (back face)")
+    ax.plot(t_us, np.asarray(curve["stress_front_Pa"]) / 1e6, "C0--", lw=1.0, label="front face")
+    ax.plot(t_us, np.asarray(curve["stress_back_Pa"]) / 1e6, "C3:", lw=1.0, label="back face")
     for label, _, t in frames:
         ax.axvline(t * 1e6, color="0.5", lw=0.8)
         ax.text(t * 1e6, ax.get_ylim()[1], f" {label}", fontsize=8, va="top", rotation=90)

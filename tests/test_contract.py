@@ -33,3 +33,38 @@ def test_the_cli_exits_with_the_contract_codes(tmp_path):
 
     assert main(["simulate", "--geometry", "brazilian_disc", "--preset", "fast", "--param", "no_such=1",
                  "--out", str(tmp_path)]) == contract.EXIT_BAD_INPUT
+
+
+def test_curve_csv_is_the_text_pandas_writes():
+    """curve.csv is written without pandas (a simulation process never imports it); its text is pandas'
+    to_csv(index=False, float_format="%.9e") to the byte: missing values empty, negative zero, extremes."""
+    import numpy as np
+    import pandas as pd
+
+    rng = np.random.default_rng(5)
+    cols = {c: rng.normal(size=40) * 10.0 ** rng.uniform(-12, 9, 40) for c in contract.CURVE_COLUMNS}
+    cols["force_balance"][[0, 3, 39]] = np.nan
+    cols["stress_Pa"][5] = -0.0
+    cols["time_s"][7] = 1e-300
+    expected = pd.DataFrame(cols)[list(contract.CURVE_COLUMNS)].to_csv(index=False, float_format="%.9e")
+    assert sim.curve_csv_text(cols) == expected
+    empty = {c: np.array([]) for c in contract.CURVE_COLUMNS}
+    assert sim.curve_csv_text(empty) == pd.DataFrame(empty).to_csv(index=False, float_format="%.9e")
+
+
+def test_a_measured_record_is_read_and_reduced_without_pandas_or_scipy_ndimage():
+    """What every member job of a measured record does before the solver starts (the record read, its
+    specimen looked up in the spreadsheet, its rock properties, the reduction) leaves pandas, scipy.ndimage
+    and scipy.integrate unimported: each costs 0.1-0.3 s per process, and a default run has ~270 of them."""
+    import subprocess
+    import sys
+
+    from shpb.paths import freiburg_data_dir
+
+    record = sorted((freiburg_data_dir() / "Rae2021" / "SHPBdata" / "CaMa").glob("CaMa_SHPB_004*.txt"))[0]
+    code = ("import sys; from shpb.simulate import _measured_incident; "
+            f"m = _measured_incident({str(record)!r}); assert m['length'] > 0 and m['rock']['E'] > 0; "
+            "print(sorted(x for x in ('pandas', 'scipy.ndimage', 'scipy.integrate') if x in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"

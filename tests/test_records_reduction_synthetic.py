@@ -267,3 +267,26 @@ def test_cumulative_trapezoid_is_scipys_to_the_bit():
     # the trapezoid rule is exact for a linear integrand: int_0^t (2 s + 1) ds = t^2 + t
     t = np.linspace(0.0, 3.0, 31)
     assert np.allclose(cumulative_trapezoid(2.0 * t + 1.0, t), t * t + t, rtol=0.0, atol=1e-12)
+
+
+def test_running_filters_are_scipy_ndimages_to_the_bit():
+    """The reduction's moving average and median (shpb.lab.signals.running_mean / running_median, kept off
+    scipy.ndimage's import cost) give scipy's floats exactly: window sizes odd and even, signals shorter
+    than the window, scales from strain to stress; and the moving average of a line away from its ends is
+    the line."""
+    from scipy.ndimage import median_filter, uniform_filter1d
+
+    from shpb.lab.signals import running_mean, running_median
+
+    rng = np.random.default_rng(4)
+    for _ in range(400):
+        n, size = int(rng.integers(1, 300)), int(rng.integers(1, 40))
+        x = rng.normal(size=n) * 10.0 ** rng.uniform(-8, 8) + rng.normal() * 10.0 ** rng.uniform(-6, 6)
+        assert np.array_equal(running_mean(x, size), uniform_filter1d(x, size, mode="nearest"))
+        if size % 2:
+            assert np.array_equal(running_median(x, size), median_filter(x, size=size, mode="nearest"))
+    t = np.arange(100.0)
+    assert np.allclose(running_mean(3.0 * t + 1.0, 9)[4:-4], 3.0 * t[4:-4] + 1.0, rtol=0.0, atol=1e-12)
+    assert running_mean(np.array([]), 5).size == 0
+    with pytest.raises(ValueError, match="odd"):
+        running_median(t, 4)

@@ -26,7 +26,6 @@ from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from .bars import FREIBURG_BAR, BarSetup
 
@@ -302,8 +301,81 @@ _META_COLUMNS = {
 _META_WITH_SIGMA = {"strength_Pa", "max_stress_Pa", "strain_rate_per_s", "E_Pa"}
 
 
-def read_freiburg_metadata(xlsx_path: str | Path) -> pd.DataFrame:
-    """Read a Freiburg specimen spreadsheet (``Rae2021/{CaMa,SaLi,SeeSst}.xlsx``), SI units.
+def _sheet_rows(xlsx_path: Path, sheet: str | None = None) -> list[list]:
+    """The cell values of one sheet of a spreadsheet (the first when ``sheet`` is None), row by row,
+    padded to one width. openpyxl's read-only reader (the engine of pandas' ``read_excel``) is called
+    directly: a simulation of a measured record looks up its specimen in a fresh process, and pandas'
+    import would cost it 0.2 s."""
+    from openpyxl import load_workbook
+
+    wb = load_workbook(xlsx_path, read_only=True, data_only=True)
+    try:
+        if sheet is not None and sheet not in wb.sheetnames:
+            raise ValueError(f"{xlsx_path}: no sheet named {sheet!r} (sheets: {wb.sheetnames})")
+        ws = wb.worksheets[0] if sheet is None else wb[sheet]
+        rows = [list(r) for r in ws.iter_rows(values_only=True)]
+    finally:
+        wb.close()
+    width = max((len(r) for r in rows), default=0)
+    return [r + [None] * (width - len(r)) for r in rows]
+
+
+def _number(v) -> float:
+    """A cell as a float, NaN when it holds no number (``pd.to_numeric(errors="coerce")`` of one cell)."""
+    if isinstance(v, bool) or v is None:
+        return math.nan
+    if isinstance(v, (int, float)):
+        return float(v)
+    if isinstance(v, str):
+        try:
+            return float(v.strip())
+        except ValueError:
+            return math.nan
+    return math.nan
+
+
+def _present(v) -> bool:
+    """A cell holds a value (``pd.notna`` of one cell)."""
+    return v is not None and not (isinstance(v, float) and math.isnan(v))
+
+
+def _metadata_columns(xlsx_path: Path) -> dict[str, list]:
+    """The columns of :func:`read_freiburg_metadata` as lists (one entry per test)."""
+    rows = _sheet_rows(xlsx_path)
+    hits = [i for i, r in enumerate(rows) if str(r[0]).strip() == "Name"]
+    if not hits:
+        raise ValueError(f"{xlsx_path}: no header row with 'Name' in the first column")
+    hrow = hits[0]
+    headers = [str(h).strip() if isinstance(h, str) else None for h in rows[hrow]]
+    body = rows[hrow + 2:]  # skip the mu/sigma sub-header
+    out: dict[str, list] = {}
+    for col, head in enumerate(headers):
+        if head is None or head not in _META_COLUMNS:
+            continue
+        name, scale = _META_COLUMNS[head]
+        cells = [r[col] for r in body]
+        if scale is None:
+            out[name] = [str(v).strip() if isinstance(v, str) or _present(v) else None for v in cells]
+        else:
+            out[name] = [_number(v) * scale for v in cells]
+        if name in _META_WITH_SIGMA and col + 1 < len(headers):
+            out[name.replace("_Pa", "_sd_Pa").replace("_per_s", "_sd_per_s")] = [_number(r[col + 1]) * scale
+                                                                                   for r in body]
+    missing = [n for n in ("name", "length_m", "diameter_m") if n not in out]
+    if missing:
+        raise ValueError(f"{xlsx_path}: required columns not found in the header row: {missing}")
+    keep = [i for i, n in enumerate(out["name"]) if n is not None and len(n) > 0]
+    out = {k: [v[i] for i in keep] for k, v in out.items()}
+    first, *rest = list(out)
+    out = {first: out[first], "lithology": [xlsx_path.stem] * len(keep), **{k: out[k] for k in rest}}
+    strength = out.get("strength_Pa", [math.nan] * len(keep))
+    max_stress = out.get("max_stress_Pa", [math.nan] * len(keep))
+    out["reference_stress_Pa"] = [a if a == a else b for a, b in zip(strength, max_stress)]
+    return out
+
+
+def read_freiburg_metadata(xlsx_path: str | Path):
+    """Read a Freiburg specimen spreadsheet (``Rae2021/{CaMa,SaLi,SeeSst}.xlsx``), SI units, as a DataFrame.
 
     One row per test (quasi-static ``UCS`` rows included; filter on ``experiment_type``). Columns:
 
@@ -319,53 +391,28 @@ def read_freiburg_metadata(xlsx_path: str | Path) -> pd.DataFrame:
     The header row is the row whose first cell is ``Name``; the row below it holds the
     mean/standard-deviation sub-header; columns are located by their header text.
     """
+    import pandas as pd
+
+    return pd.DataFrame(_metadata_cached(*_xlsx_key(xlsx_path, "Freiburg specimen spreadsheet")))
+
+
+def _xlsx_key(xlsx_path: str | Path, what: str) -> tuple[str, float]:
     xlsx_path = Path(xlsx_path)
     if not xlsx_path.is_file():
-        raise FileNotFoundError(f"Freiburg specimen spreadsheet not found: {xlsx_path}")
-    raw = pd.read_excel(xlsx_path, sheet_name=0, header=None)
-    first = raw.iloc[:, 0].astype(str).str.strip()
-    hits = np.flatnonzero(first.to_numpy() == "Name")
-    if hits.size == 0:
-        raise ValueError(f"{xlsx_path}: no header row with 'Name' in the first column")
-    hrow = int(hits[0])
-    headers = [str(h).strip() if isinstance(h, str) else None for h in raw.iloc[hrow]]
-    out: dict[str, object] = {}
-    body = raw.iloc[hrow + 2:].reset_index(drop=True)  # skip the mu/sigma sub-header
-    for col, head in enumerate(headers):
-        if head is None or head not in _META_COLUMNS:
-            continue
-        name, scale = _META_COLUMNS[head]
-        series = body.iloc[:, col]
-        if scale is None:
-            out[name] = series.map(lambda v: str(v).strip() if isinstance(v, str) or pd.notna(v) else None)
-        else:
-            out[name] = pd.to_numeric(series, errors="coerce") * scale
-        if name in _META_WITH_SIGMA and col + 1 < body.shape[1]:
-            out[name.replace("_Pa", "_sd_Pa").replace("_per_s", "_sd_per_s")] = (
-                pd.to_numeric(body.iloc[:, col + 1], errors="coerce") * scale
-            )
-    missing = [n for n in ("name", "length_m", "diameter_m") if n not in out]
-    if missing:
-        raise ValueError(f"{xlsx_path}: required columns not found in the header row: {missing}")
-    df = pd.DataFrame(out)
-    df = df[df["name"].notna() & (df["name"].astype(str).str.len() > 0)].reset_index(drop=True)
-    df.insert(1, "lithology", xlsx_path.stem)
-    strength = df["strength_Pa"] if "strength_Pa" in df else pd.Series(np.nan, index=df.index)
-    max_stress = df["max_stress_Pa"] if "max_stress_Pa" in df else pd.Series(np.nan, index=df.index)
-    df["reference_stress_Pa"] = strength.where(strength.notna(), max_stress)
-    return df
+        raise FileNotFoundError(f"{what} not found: {xlsx_path}")
+    return str(xlsx_path.resolve()), xlsx_path.stat().st_mtime
 
 
 @lru_cache(maxsize=16)
-def _metadata_cached(path: str, mtime: float) -> pd.DataFrame:
-    return read_freiburg_metadata(path)
+def _metadata_cached(path: str, mtime: float) -> dict[str, list]:
+    return _metadata_columns(Path(path))
 
 
-def freiburg_specimen(raw_path: str | Path) -> pd.Series:
-    """The spreadsheet row of a Freiburg raw record.
+def freiburg_specimen(raw_path: str | Path) -> dict:
+    """The spreadsheet row of a Freiburg raw record, as a dict of :func:`read_freiburg_metadata`'s columns.
 
     ``<root>/Rae2021/SHPBdata/<lith>/<name>.txt`` is looked up as ``Name == <name>`` in
-    ``<root>/Rae2021/<lith>.xlsx`` (read with :func:`read_freiburg_metadata`, SI units).
+    ``<root>/Rae2021/<lith>.xlsx`` (SI units; a missing number is NaN).
 
     Raises
     ------
@@ -382,30 +429,22 @@ def freiburg_specimen(raw_path: str | Path) -> pd.Series:
             f"specimen spreadsheet for {raw_path.name} not found: expected {xlsx} "
             f"(Rae2021/<lithology>.xlsx next to SHPBdata/)"
         )
-    meta = _metadata_cached(str(xlsx.resolve()), xlsx.stat().st_mtime)
-    rows = meta[meta["name"] == raw_path.stem]
-    if rows.empty:
+    meta = _metadata_cached(*_xlsx_key(xlsx, "Freiburg specimen spreadsheet"))
+    if raw_path.stem not in meta["name"]:
         raise KeyError(f"{raw_path.stem!r} not found in the 'Name' column of {xlsx}")
-    return rows.iloc[0].copy()
+    i = meta["name"].index(raw_path.stem)
+    return {k: v[i] for k, v in meta.items()}
 
 
 # --------------------------------------------------------------------------------------------------
 # Petrophysical properties
 # --------------------------------------------------------------------------------------------------
-def read_petrophysical_properties(xlsx_path: str | Path) -> pd.DataFrame:
-    """Rock properties from ``PetrophysicalProperties.xlsx`` (sheet ``Summary``), SI units.
-
-    Columns: ``lithology`` (full name, e.g. ``Carrara Marble``), ``code`` (``CaMa`` ...),
-    ``variant`` (``Parallel``/``Perpendicular`` for the gneiss, else empty), ``E_Pa``, ``E_sd_Pa``,
-    ``nu``, ``nu_sd``, ``rho_kg_m3``, ``rho_sd_kg_m3``, ``P_modulus_Pa``, ``Vp_m_s``, ``Vp_sd_m_s``,
-    ``porosity``, ``porosity_sd``, ``K_Ic_Pa_sqrt_m``, ``K_Ic_sd_Pa_sqrt_m``.
-    The sheet's units are GPa, g/cm^3, km/s and MPa m^0.5; each value is followed by its sigma.
-    """
-    xlsx_path = Path(xlsx_path)
-    if not xlsx_path.is_file():
-        raise FileNotFoundError(f"petrophysical-properties spreadsheet not found: {xlsx_path}")
-    raw = pd.read_excel(xlsx_path, sheet_name="Summary", header=None)
-    head = [str(h).strip() if isinstance(h, str) else "" for h in raw.iloc[0]]
+def _petrophysical_columns(xlsx_path: Path) -> dict[str, list]:
+    """The columns of :func:`read_petrophysical_properties` as lists (one entry per rock and variant)."""
+    rows = _sheet_rows(xlsx_path, "Summary")
+    if not rows:
+        raise ValueError(f"{xlsx_path}: sheet 'Summary' is empty")
+    head = [str(h).strip() if isinstance(h, str) else "" for h in rows[0]]
 
     def col(prefix: str) -> int:
         for i, h in enumerate(head):
@@ -422,26 +461,47 @@ def read_petrophysical_properties(xlsx_path: str | Path) -> pd.DataFrame:
         ("phi", "porosity", 1.0, True),
         ("K_Ic", "K_Ic_Pa_sqrt_m", 1e6, True),
     ]
-    body = raw.iloc[1:].reset_index(drop=True)
-    names = body.iloc[:, 0].where(body.iloc[:, 0].map(lambda v: isinstance(v, str))).ffill()
-    out = pd.DataFrame({
-        "lithology": names,
-        "variant": body.iloc[:, 1].map(lambda v: v.strip() if isinstance(v, str) else ""),
-    })
+    body = rows[1:]
+    names, current = [], None
+    for r in body:  # a rock's name stands on its first row only (its variants follow)
+        current = r[0] if isinstance(r[0], str) else current
+        names.append(current)
+    out: dict[str, list] = {"lithology": names,
+                            "variant": [r[1].strip() if isinstance(r[1], str) else "" for r in body]}
     for prefix, name, scale, has_sd in spec:
         c = col(prefix)
-        out[name] = pd.to_numeric(body.iloc[:, c], errors="coerce") * scale
+        out[name] = [_number(r[c]) * scale for r in body]
         if has_sd:
             sd_name = name.replace("_Pa", "_sd_Pa").replace("_kg_m3", "_sd_kg_m3").replace("_m_s", "_sd_m_s")
             if sd_name == name:
                 sd_name = name + "_sd"
             if name == "K_Ic_Pa_sqrt_m":
                 sd_name = "K_Ic_sd_Pa_sqrt_m"
-            out[sd_name] = pd.to_numeric(body.iloc[:, c + 1], errors="coerce") * scale
-    out = out[out["lithology"].notna() & out["E_Pa"].notna()].reset_index(drop=True)
+            out[sd_name] = [_number(r[c + 1]) * scale for r in body]
+    keep = [i for i, (n, e) in enumerate(zip(out["lithology"], out["E_Pa"])) if n is not None and e == e]
     codes = {v.lower(): k for k, v in LITHOLOGY_NAMES.items()}
-    out.insert(1, "code", out["lithology"].map(lambda s: codes.get(s.strip().lower(), "")))
-    return out
+    lith = [out["lithology"][i] for i in keep]
+    return {"lithology": lith, "code": [codes.get(n.strip().lower(), "") for n in lith]} | {
+        k: [v[i] for i in keep] for k, v in out.items() if k != "lithology"}
+
+
+@lru_cache(maxsize=4)
+def _petrophysical_cached(path: str, mtime: float) -> dict[str, list]:
+    return _petrophysical_columns(Path(path))
+
+
+def read_petrophysical_properties(xlsx_path: str | Path):
+    """Rock properties from ``PetrophysicalProperties.xlsx`` (sheet ``Summary``), SI units, as a DataFrame.
+
+    Columns: ``lithology`` (full name, e.g. ``Carrara Marble``), ``code`` (``CaMa`` ...),
+    ``variant`` (``Parallel``/``Perpendicular`` for the gneiss, else empty), ``E_Pa``, ``E_sd_Pa``,
+    ``nu``, ``nu_sd``, ``rho_kg_m3``, ``rho_sd_kg_m3``, ``P_modulus_Pa``, ``Vp_m_s``, ``Vp_sd_m_s``,
+    ``porosity``, ``porosity_sd``, ``K_Ic_Pa_sqrt_m``, ``K_Ic_sd_Pa_sqrt_m``.
+    The sheet's units are GPa, g/cm^3, km/s and MPa m^0.5; each value is followed by its sigma.
+    """
+    import pandas as pd
+
+    return pd.DataFrame(_petrophysical_cached(*_xlsx_key(xlsx_path, "petrophysical-properties spreadsheet")))
 
 
 def rock_properties(lithology: str, xlsx_path: str | Path | None = None, variant: str = "") -> dict[str, float]:
@@ -461,15 +521,16 @@ def rock_properties(lithology: str, xlsx_path: str | Path | None = None, variant
         from ..paths import data_file, freiburg_data_dir
 
         xlsx_path = data_file(freiburg_data_dir() / "PetrophysicalProperties.xlsx")
-    table = read_petrophysical_properties(xlsx_path)
+    table = _petrophysical_cached(*_xlsx_key(xlsx_path, "petrophysical-properties spreadsheet"))
     key = lithology.strip().lower()
-    sel = table[(table["code"].str.lower() == key) | (table["lithology"].str.strip().str.lower() == key)]
+    sel = [i for i, (code, name) in enumerate(zip(table["code"], table["lithology"]))
+           if code.lower() == key or name.strip().lower() == key]
     if variant:
-        sel = sel[sel["variant"].str.lower() == variant.lower()]
-    if sel.empty:
+        sel = [i for i in sel if table["variant"][i].lower() == variant.lower()]
+    if not sel:
         raise KeyError(f"lithology {lithology!r} (variant {variant!r}) not in {xlsx_path}; "
                        f"known: {sorted(set(table['lithology']))}")
-    row = sel.iloc[0]
+    row = {k: v[sel[0]] for k, v in table.items()}
     return {
         "E": float(row["E_Pa"]), "E_sd": float(row["E_sd_Pa"]),
         "nu": float(row["nu"]), "nu_sd": float(row["nu_sd"]),

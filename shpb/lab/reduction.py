@@ -66,12 +66,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from .bars import FREIBURG_BAR, BarSetup, bridge_strain_per_volt, freiburg_bar
 from .signals import cumulative_trapezoid, despike, detect_arrival, robust_std, saturation_onset, select_gauges, stuck_runs
 
 if TYPE_CHECKING:  # pragma: no cover
+    import pandas as pd
+
     from .records import RawRecord
 
 __all__ = [
@@ -555,6 +556,8 @@ def reduce_record(raw: "RawRecord", bar: BarSetup | None = None, specimen_length
 # --------------------------------------------------------------------------------------------------
 def reduced_to_dataframe(red: ReducedRecord) -> pd.DataFrame:
     """The reduced curves as a DataFrame with the SI column names of :data:`CSV_COLUMNS`."""
+    import pandas as pd  # on call: the simulations that reduce a record never need it
+
     return pd.DataFrame({
         "time_s": red.time,
         "stress_Pa": red.stress_back,

@@ -6,9 +6,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.ndimage import median_filter, uniform_filter1d
 
-__all__ = ["cumulative_trapezoid", "robust_std", "despike", "stuck_runs", "saturation_onset", "detect_arrival", "select_gauges"]
+__all__ = ["cumulative_trapezoid", "running_mean", "running_median", "robust_std", "despike", "stuck_runs", "saturation_onset", "detect_arrival", "select_gauges"]
 
 
 def cumulative_trapezoid(y: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -18,6 +17,40 @@ def cumulative_trapezoid(y: np.ndarray, x: np.ndarray) -> np.ndarray:
     checks it against scipy's)."""
     y, x = np.asarray(y, float), np.asarray(x, float)
     return np.concatenate(([0.0], np.cumsum(np.diff(x) * (y[1:] + y[:-1]) / 2.0)))
+
+
+def _edge_padded(x: np.ndarray, size: int) -> np.ndarray:
+    """``x`` extended by its first value ``size // 2`` times and its last ``size - size // 2 - 1`` times:
+    the window of ``scipy.ndimage``'s ``mode="nearest"`` around every sample."""
+    before = size // 2
+    return np.concatenate((np.full(before, x[0]), x, np.full(size - before - 1, x[-1])))
+
+
+def running_mean(x: np.ndarray, size: int) -> np.ndarray:
+    """``scipy.ndimage.uniform_filter1d(x, size, mode="nearest")`` of a 1-D array, in scipy's arithmetic (a
+    running sum, updated by the sample entering minus the sample leaving, divided by ``size``): the same
+    floats. Here, like :func:`cumulative_trapezoid`, to keep ``scipy.ndimage``'s import out of every
+    simulation driven by a measured record (tests/test_records_reduction_synthetic.py checks it)."""
+    x = np.asarray(x, dtype=float)
+    if x.size == 0:
+        return x.copy()
+    xp = _edge_padded(x, size)
+    first = 0.0
+    for v in xp[:size]:  # scipy's first window: a sequential sum
+        first += v
+    steps = xp[size:size + x.size - 1] - xp[:x.size - 1]
+    return np.cumsum(np.concatenate(([first], steps))) / size  # cumsum adds in sequence, as scipy's loop
+
+
+def running_median(x: np.ndarray, size: int) -> np.ndarray:
+    """``scipy.ndimage.median_filter(x, size=size, mode="nearest")`` of a 1-D array, ``size`` odd (the
+    median of an odd window is one of its samples, so the result is exactly scipy's)."""
+    if size % 2 != 1:
+        raise ValueError(f"running_median: size must be odd, got {size}")
+    x = np.asarray(x, dtype=float)
+    if x.size == 0:
+        return x.copy()
+    return np.median(np.lib.stride_tricks.sliding_window_view(_edge_padded(x, size), size), axis=1)
 
 
 def robust_std(x: np.ndarray) -> float:
@@ -49,10 +82,10 @@ def despike(x: np.ndarray, sigma: float, k_sigma: float = 8.0, k_slope: float = 
         return y, 0
     total = 0
     for _ in range(passes):
-        med = median_filter(y, size=5, mode="nearest")
+        med = running_median(y, 5)
         d = y - med
         step = np.abs(np.diff(y))
-        local = median_filter(np.r_[step, step[-1]], size=11, mode="nearest")
+        local = running_median(np.r_[step, step[-1]], 11)
         spikes = np.flatnonzero((np.abs(d) > k_sigma * sigma) & (np.abs(d) > k_slope * local))
         if spikes.size == 0:
             break
@@ -121,7 +154,7 @@ def detect_arrival(signal: np.ndarray, sigma: float, dt: float, k_sigma: float =
     """
     s = np.asarray(signal, dtype=float)
     w = max(1, int(round(smooth_s / dt)))
-    sm = uniform_filter1d(s, size=w, mode="nearest") if w > 1 else s
+    sm = running_mean(s, w) if w > 1 else s
     seg = sm[start:]
     if seg.size == 0:
         raise ValueError("detect_arrival: empty signal")
@@ -188,7 +221,7 @@ def select_gauges(channels: np.ndarray, names: tuple[str, ...], baseline: np.nda
         mean = 0.5 * (a + b)
         scale = float(np.max(np.abs(mean))) if mean.size else 0.0
         mismatch = float(np.sqrt(np.mean((a - b) ** 2))) / scale if scale > 0 else 0.0
-        rough = [float(np.std(x - uniform_filter1d(x, 9, mode="nearest"))) for x in (a, b)]
+        rough = [float(np.std(x - running_mean(x, 9))) for x in (a, b)]
         if mismatch > mismatch_tol and max(rough) > roughness_ratio * max(min(rough), 1e-300):
             bad = keep[int(np.argmax(rough))]
             keep.remove(bad)
