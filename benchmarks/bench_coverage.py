@@ -329,7 +329,14 @@ def main(argv=None) -> dict:
             for i, truth in enumerate(truths(n, spec.lower, spec.upper, seed)):
                 path = cache / f"{name}_{seed}_{i:03d}.json"
                 if path.is_file():
-                    records.append(json.loads(path.read_text()))
+                    rec = json.loads(path.read_text())
+                    # a cached twin is keyed by its index in the design; another --twins/--misspecified count
+                    # draws another design, whose index i is another truth
+                    if not np.allclose([rec["truth"][p] for p in spec.names], truth, rtol=1e-12, atol=0.0):
+                        raise SystemExit(f"{path}: cached truth {rec['truth']} is not twin {i} of this design "
+                                         f"({dict(zip(spec.names, truth))}); the count of twins must be the one the cache was made "
+                                         "with (add twins on another --seed instead)")
+                    records.append(rec)
                     continue
                 if args.score_only:
                     continue

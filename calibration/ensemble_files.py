@@ -8,10 +8,12 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from .contracts import atomic_write_csv
+
+if TYPE_CHECKING:  # pragma: no cover
+    import numpy as np
 
 __all__ = ["member_ids", "member_params", "combine_member_runs", "write_responses", "read_responses"]
 
@@ -45,6 +47,7 @@ def combine_member_runs(runs: Mapping[str, Mapping]) -> dict:
 def write_responses(path: str | Path, members: Sequence[int], status: Sequence[Mapping], Y: np.ndarray) -> Path:
     """``iter_<k>/responses.csv``: one row per member, ``member, status, reason, wall_s`` and the curve
     on the observation grid as ``y_0 ... y_{m-1}`` (the order of ``obs.csv``; empty = missing)."""
+    import numpy as np
     import pandas as pd
 
     Y = np.asarray(Y, float)

@@ -14,6 +14,7 @@ failed member's header cannot drift from a successful member's. Nothing here imp
 from __future__ import annotations
 
 import math
+import numbers
 import os
 import shlex
 import shutil
@@ -23,8 +24,6 @@ import tempfile
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-
-import numpy as np
 
 from shpb.contract import CURVE_COLUMNS as _SIM_CURVE_COLUMNS, EXIT_BAD_INPUT, EXIT_NUMERICAL, EXIT_OK
 from .contracts import atomic_write_json, atomic_write_text, read_json
@@ -223,9 +222,12 @@ def _jsonable(obj):
         return {str(k): _jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
         return [_jsonable(v) for v in obj]
-    if isinstance(obj, (np.integer,)):
+    # numbers' abstract types hold numpy's scalars too, without importing numpy into every member job
+    if isinstance(obj, bool):
+        return obj
+    if isinstance(obj, numbers.Integral):
         return int(obj)
-    if isinstance(obj, (float, np.floating)):
+    if isinstance(obj, numbers.Real):
         v = float(obj)
         return v if math.isfinite(v) else None
     return obj

@@ -68,3 +68,24 @@ def test_a_measured_record_is_read_and_reduced_without_pandas_or_scipy_ndimage()
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[]"
+
+
+def test_the_member_job_wrapper_imports_no_numpy_and_keeps_run_json_types():
+    """scripts/member.py's imports (calibration.workflow_io) load neither numpy nor pandas, which every one
+    of a run's ~270 member jobs would pay for; run.json's numbers still come out as JSON numbers (numpy
+    scalars included), booleans as booleans and non-finite values as null."""
+    import json
+    import subprocess
+    import sys
+
+    import numpy as np
+
+    from calibration.runner import _jsonable
+
+    code = "import sys, calibration.workflow_io; print(sorted(x for x in ('numpy', 'pandas') if x in sys.modules))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"
+    run = _jsonable({"steps": np.int64(7), "dt_s": np.float32(0.5), "ok": True, "bad": float("nan"),
+                     "list": (np.float64(2.5), 3), 4: "key"})
+    assert json.dumps(run) == '{"steps": 7, "dt_s": 0.5, "ok": true, "bad": null, "list": [2.5, 3], "4": "key"}'

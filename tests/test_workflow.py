@@ -203,6 +203,8 @@ def test_shipped_configs_are_valid():
     (lambda c: c["experiments"]["twin"].update(method="emulated_esmda", localization={"E_t": [[0.0, 1.0e-5]]}),
      "experiments.twin.localization: emulated_esmda has no localization"),
     (lambda c: c["experiments"]["twin"].update(emulated={"temper_base": 0.5}), "experiments.twin.emulated.temper_base"),
+    (lambda c: c["experiments"]["twin"].update(method="esmda", esmda={"alphas": [2.0, 3.0]}),
+     "experiments.twin.esmda.alphas: sum of 1/alpha must be 1 (got 0.833333)"),
 ])
 def test_a_bad_config_key_or_value_fails_with_a_message_naming_it(mutate, expected):
     cfg = twin_config()
