@@ -145,3 +145,31 @@ def test_the_misses_are_counted_by_side_and_a_biased_posterior_misses_on_one_sid
     b = score(biased, LOWER, UPPER, NAMES)["params"]["sigma_t"]
     assert b["misses_90"]["truth_below"] == 0 and b["misses_90"]["truth_above"] > 90
     assert b["mean_over_truth_median"] == pytest.approx(0.9, abs=0.01)
+
+
+def _bench(seed: int, kind: str) -> dict:
+    """A bench_coverage JSON of 10 synthetic misspecified twins of one seed (the reported MCMC = the sample)."""
+    recs = _records(kind, n=10, seed=seed)
+    for i, r in enumerate(recs):
+        r.update(seed=1000 * seed + i, emulator_mcmc={"params": r["params"], "sampler": {"converged_chain": True},
+                                                      "self_calibration_lambda": 2.0})
+    return {"experiment": "twin_ref", "method": "emulated_esmda", "reported_posterior": "emulator_mcmc",
+            "misspecified": {"twins": recs, "summary_emulator_mcmc": None}, "wall_s_this_call": 1.0}
+
+
+def test_pooled_sets_count_every_twin_once():
+    """benchmarks/pool_coverage.py scores the union of two seeds' twins (the covered counts add up) and
+    refuses the same seed twice or two different twin settings."""
+    from benchmarks.pool_coverage import pool
+
+    a, b = _bench(41, "calibrated"), _bench(43, "overconfident")
+    out = pool("misspecified", {"a.json": a, "b.json": b})
+    assert out["n_twins"] == 20 and out["sources"]["b.json"]["seeds"] == [43]
+    for p in NAMES:
+        k = [round(score(x["misspecified"]["twins"], LOWER, UPPER, NAMES)["params"][p]["coverage_90"]["fraction"] * 10)
+             for x in (a, b)]
+        assert out["summary_emulator_mcmc"]["params"][p]["coverage_90"]["fraction"] == pytest.approx(sum(k) / 20)
+    with pytest.raises(SystemExit, match="same seed twice"):
+        pool("misspecified", {"a.json": a, "c.json": _bench(41, "calibrated")})
+    with pytest.raises(SystemExit, match="reported_posterior"):
+        pool("misspecified", {"a.json": a, "b.json": {**b, "reported_posterior": "ensemble"}})

@@ -1,0 +1,62 @@
+"""One set of the coverage benchmark's twins scored over several of its JSONs (twins of different seeds).
+
+    python benchmarks/pool_coverage.py misspecified A.json B.json --out benchmarks/results/<name>.json
+
+Each JSON is a ``benchmarks/bench_coverage.py`` output; the set's twins of all of them are scored
+together by the benchmark's own ``score`` / ``score_mcmc`` (coverage with Clopper-Pearson intervals,
+SBC, widths, the restated bar), and each JSON's own score is kept beside the pooled one. Refuses two
+JSONs with the same seed for the set (the same twins twice) or with different twin settings. Prints one
+JSON object (and writes it with ``--out``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from benchmarks.bench_coverage import score, score_mcmc, twin_experiment  # noqa: E402
+from calibration.experiment import ExperimentSpec  # noqa: E402
+from shpb.atomic import emit_json  # noqa: E402
+
+SETTINGS = ("experiment", "method", "ensemble_size", "window_s", "model_error", "mesh_realizations",
+            "emulator_smoothing", "self_calibrate", "reported_posterior")
+
+
+def pool(name: str, benches: dict[str, dict]) -> dict:
+    """``benches``: path -> bench_coverage JSON. The set ``name`` scored over all their twins."""
+    first = next(iter(benches.values()))
+    for path, b in benches.items():
+        differ = [k for k in SETTINGS if b.get(k) != first.get(k)]
+        if differ:
+            raise SystemExit(f"{path}: twin settings {differ} differ from {next(iter(benches))}'s")
+    seeds = {path: sorted({r["seed"] // 1000 for r in b[name]["twins"]}) for path, b in benches.items()}
+    flat = [s for v in seeds.values() for s in v]
+    if len(flat) != len(set(flat)):
+        raise SystemExit(f"the same seed twice among {seeds}: those twins would count twice")
+    spec = ExperimentSpec.from_config(first["experiment"], twin_experiment())
+    twins = [r for b in benches.values() for r in b[name]["twins"]]
+    return {"benchmark": "pool_coverage", "set": name, "sources": {p: {"seeds": seeds[p],
+            "twins": len(b[name]["twins"]), "wall_s_this_call": b.get("wall_s_this_call"),
+            "summary_emulator_mcmc": b[name]["summary_emulator_mcmc"]} for p, b in benches.items()},
+            **{k: first.get(k) for k in SETTINGS}, "n_twins": len(twins),
+            "summary": score(twins, spec.lower, spec.upper, spec.names),
+            "summary_emulator_mcmc": score_mcmc(twins, spec.lower, spec.upper, spec.names)}
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("set", choices=["well_specified", "misspecified"])
+    ap.add_argument("jsons", nargs="+")
+    ap.add_argument("--out", default=None)
+    a = ap.parse_args(argv)
+    benches = {str(Path(p)): json.loads(Path(p).read_text()) for p in a.jsons}
+    return emit_json(pool(a.set, benches), a.out)
+
+
+if __name__ == "__main__":
+    main()
