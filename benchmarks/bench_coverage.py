@@ -95,7 +95,7 @@ def _simulate(task):
     out = simulate("brazilian_disc", preset, params, t_end=t_end, sample_dt=sample_dt, mesh_seed=seed)
     if out.run["status"] != "ok":
         return np.full(grid.size, np.nan)
-    return curve_on_grid(out.curve["time_s"].to_numpy(), out.curve["stress_Pa"].to_numpy(), grid)
+    return curve_on_grid(out.columns["time_s"], out.columns["stress_Pa"], grid)
 
 
 def run_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: str) -> dict:

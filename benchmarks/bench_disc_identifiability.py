@@ -25,7 +25,7 @@ CHANGES = [("sigma_t", f) for f in (0.005, -0.005, 0.01, -0.01, 0.02, -0.02, 0.2
 def _on_grid(out, grid):
     """The curve on the 1 us grid, as the workflow puts simulations on the observation grid."""
     from calibration.observations import curve_on_grid
-    return curve_on_grid(out.curve.time_s.to_numpy(), out.curve.stress_Pa.to_numpy(), grid)
+    return curve_on_grid(out.columns["time_s"], out.columns["stress_Pa"], grid)
 
 
 def main():

@@ -73,7 +73,7 @@ def run_one(case: dict, grid: np.ndarray, mesh_seed=None, params: dict | None = 
             "peak_stress_Pa": f.get("peak_stress_Pa"), "peak_t_s": f.get("peak_t_s"),
             "first_joint_t_s": f.get("first_joint_t_s"), "first_joint_xy_over_R": f.get("first_joint_xy_over_R"),
             "checks": f.get("checks"), "broken_at_end": r["broken_joints"],
-            "curve": curve_on_grid(out.curve["time_s"].to_numpy(), out.curve["stress_Pa"].to_numpy(), grid)}
+            "curve": curve_on_grid(out.columns["time_s"], out.columns["stress_Pa"], grid)}
 
 
 def correlation_time(dev: np.ndarray, dt: float) -> float | None:

@@ -40,7 +40,7 @@ def _simulate(p):
                    sample_dt=5.0e-7)
     if out.run["status"] != "ok":
         return np.full(GRID.size, np.nan)
-    return curve_on_grid(out.curve["time_s"].to_numpy(), out.curve["stress_Pa"].to_numpy(), GRID)
+    return curve_on_grid(out.columns["time_s"], out.columns["stress_Pa"], GRID)
 
 
 def _twin(pool, truth, seed, method, n_members=25, analyses=3):

@@ -85,7 +85,7 @@ def pooled_summary(rows: list, names) -> dict:
                    [r["covers"][p]["posterior_mean_over_theta_star"] for r in rows]))} for p in names}
     out["chi2_per_obs_at_truth"] = {"median": float(np.median(chi_t)), "min": min(chi_t), "max": max(chi_t)}
     out["chi2_per_obs_at_theta_star"] = {"median": float(np.median(chi_s)), "min": min(chi_s), "max": max(chi_s)}
-    out["searches_at_their_budget"] = sum(r["evaluations"] >= r.get("maxfev", 0) for r in rows)
+    out["searches_at_their_budget"] = sum(r["evaluations"] >= r["maxfev"] for r in rows)
     return out
 
 

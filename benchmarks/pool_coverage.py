@@ -4,8 +4,8 @@
 
 Each JSON is a ``benchmarks/bench_coverage.py`` output; the set's twins of all of them are scored
 together by the benchmark's own ``score`` / ``score_mcmc`` (coverage with Clopper-Pearson intervals,
-SBC, widths, the restated bar), and each JSON's own score is kept beside the pooled one. Refuses two
-JSONs with the same seed for the set (the same twins twice) or with different twin settings. Prints one
+SBC, widths, the restated bar), and each JSON's own score is kept beside the pooled one. Refuses a
+twin seed met twice (the same twin counted twice) and JSONs of different twin settings. Prints one
 JSON object (and writes it with ``--out``).
 """
 
@@ -34,13 +34,14 @@ def pool(name: str, benches: dict[str, dict]) -> dict:
         differ = [k for k in SETTINGS if b.get(k) != first.get(k)]
         if differ:
             raise SystemExit(f"{path}: twin settings {differ} differ from {next(iter(benches))}'s")
-    seeds = {path: sorted({r["seed"] // 1000 for r in b[name]["twins"]}) for path, b in benches.items()}
+    seeds = {path: [r["seed"] for r in b[name]["twins"]] for path, b in benches.items()}
     flat = [s for v in seeds.values() for s in v]
     if len(flat) != len(set(flat)):
-        raise SystemExit(f"the same seed twice among {seeds}: those twins would count twice")
+        twice = sorted({s for s in flat if flat.count(s) > 1})
+        raise SystemExit(f"the same twin seed twice ({twice[:5]}...): those twins would count twice")
     spec = ExperimentSpec.from_config(first["experiment"], twin_experiment())
     twins = [r for b in benches.values() for r in b[name]["twins"]]
-    return {"benchmark": "pool_coverage", "set": name, "sources": {p: {"seeds": seeds[p],
+    return {"benchmark": "pool_coverage", "set": name, "sources": {p: {"twin_seeds": seeds[p],
             "twins": len(b[name]["twins"]), "wall_s_this_call": b.get("wall_s_this_call"),
             "summary_emulator_mcmc": b[name]["summary_emulator_mcmc"]} for p, b in benches.items()},
             **{k: first.get(k) for k in SETTINGS}, "n_twins": len(twins),

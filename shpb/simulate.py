@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -55,10 +56,9 @@ class SimulationOutput:
     run: dict
     extra: dict = field(default_factory=dict)
 
-    @property
+    @cached_property
     def curve(self):
-        # pandas imported on first use: a simulation process (one per member job) never needs it, and
-        # its import is 0.2 s of every such process
+        # pandas imported on first use: a simulation process (one per member job) never needs it
         import pandas as pd
 
         return pd.DataFrame({c: self.columns[c] for c in CURVE_COLUMNS})

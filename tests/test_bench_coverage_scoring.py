@@ -164,12 +164,12 @@ def test_pooled_sets_count_every_twin_once():
 
     a, b = _bench(41, "calibrated"), _bench(43, "overconfident")
     out = pool("misspecified", {"a.json": a, "b.json": b})
-    assert out["n_twins"] == 20 and out["sources"]["b.json"]["seeds"] == [43]
+    assert out["n_twins"] == 20 and out["sources"]["b.json"]["twin_seeds"] == [43000 + i for i in range(10)]
     for p in NAMES:
         k = [round(score(x["misspecified"]["twins"], LOWER, UPPER, NAMES)["params"][p]["coverage_90"]["fraction"] * 10)
              for x in (a, b)]
         assert out["summary_emulator_mcmc"]["params"][p]["coverage_90"]["fraction"] == pytest.approx(sum(k) / 20)
-    with pytest.raises(SystemExit, match="same seed twice"):
+    with pytest.raises(SystemExit, match="same twin seed twice"):
         pool("misspecified", {"a.json": a, "c.json": _bench(41, "calibrated")})
     with pytest.raises(SystemExit, match="reported_posterior"):
         pool("misspecified", {"a.json": a, "b.json": {**b, "reported_posterior": "ensemble"}})

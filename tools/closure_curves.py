@@ -50,7 +50,7 @@ def main(argv=None) -> None:
     for (label, params), colour in zip(cases(closure).items(), colours):
         out = simulate("cylinder", "fast", params={**BASE, **params}, record=record, t_end=args.t_end,
                        sample_dt=0.5e-6)
-        t, s = out.curve.time_s.to_numpy(), out.curve.stress_Pa.to_numpy()
+        t, s = out.columns["time_s"], out.columns["stress_Pa"]
         keep = t >= 0.0
         t, s = t[keep], s[keep]
         ds = np.diff(s)

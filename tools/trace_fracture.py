@@ -48,8 +48,8 @@ def trace(record: str, params: dict, preset: str = "fast", t_end: float = 2.8e-4
         mid = 0.25 * (x0[a1] + x0[a2] + x0[b1] + x0[b2])
         joints.append((float((res.joint_break_t[j] - arrival) * 1e6), abs(opening) > abs(slip),
                        float(np.degrees(np.arctan2(abs(d[1]), abs(d[0])))), abs(mid[0]) > 0.8 * half_length))
-    t = out.curve["time_s"].to_numpy() * 1e6
-    s = out.curve["stress_Pa"].to_numpy()
+    t = out.columns["time_s"] * 1e6
+    s = out.columns["stress_Pa"]
     ip = int(np.argmax(s))
     after = np.nonzero(t > t[ip])[0]
 
