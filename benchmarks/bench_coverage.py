@@ -15,7 +15,11 @@ Two sets:
 * ``well_specified`` (``--twins``, default 50): data and model at ``fast``.
 * ``misspecified`` (``--misspecified``, default 10): data from the ``standard`` mesh, model at
   ``fast`` (the resolution is a model error the calibration must absorb through its discrepancy term,
-  which the default twin estimates).
+  which the default twin estimates). With ``--approximation-pairs n`` the set is calibrated as the
+  workflow does with ``observations.model_error.approximation_error: {preset: standard, pairs: n}``
+  (:mod:`calibration.approximation`: the pairs' design and mesh realizations from the set's seed, the
+  data corrected by the pairs' mean difference and their scatter added to the noise), its twins cached
+  in ``<cache>/approx-<n>/`` beside the pairs' curves.
 
 ``--mesh``, ``--replicates`` and ``--smoothing`` override the twin's settings for development runs on
 other seeds (``--seed``); the committed JSON is the default twin's, seeds 40 and 41. The twin reports
@@ -69,7 +73,7 @@ from calibration.experiment import (ExperimentSpec, analysis_step, initial_ensem
 from enkf import prediction_interval_dict
 from calibration.posterior import sample_posterior
 from shpb.atomic import atomic_write_text, emit_json
-from calibration.observations import curve_on_grid, observation_grid, twin_observations
+from calibration.observations import curve_on_grid, observation_grid, twin_observations, with_approximation_error
 from calibration.workflow_io import load_yaml, validate_config
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -98,15 +102,18 @@ def _simulate(task):
     return curve_on_grid(out.columns["time_s"], out.columns["stress_Pa"], grid)
 
 
-def run_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: str) -> dict:
+def run_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: str, approx=None) -> dict:
     """One twin through the workflow's analysis steps, with the workflow's mesh realizations (the
     truth on its own, the members per ``simulation.mesh_realizations``) and replicates at each
-    iteration's ensemble mean; the reported posterior's numbers."""
-    spec, params, responses, analyses, obs = simulate_twin(pool, exp, truth, seed, data_preset)
+    iteration's ensemble mean; the reported posterior's numbers. ``approx``: ``(offset, M, info)`` of
+    :func:`approximation_pairs`, applied to the twin's data (None: the data as observed)."""
+    spec, params, responses, analyses, obs = simulate_twin(pool, exp, truth, seed, data_preset, approx)
     names = list(spec.names)
     R, P, alive = reported_ensemble(spec, analyses, params)
     rec = _twin_record(spec, truth, seed, data_preset, P[names].to_numpy(float)[alive], analyses, R)
     rec["emulator_mcmc"] = _mcmc_record(spec, truth, seed, params, responses, analyses, obs)
+    if approx is not None:
+        rec["approximation_error"] = {k: v for k, v in approx[2].items() if k != "sd_Pa"}
     return rec
 
 
@@ -117,7 +124,41 @@ def twin_task(exp: dict, names, p, preset: str, ms) -> tuple:
     return (preset, dict(zip(names, map(float, p))), sim["t_end"], sim["sample_dt"], grid, ms)
 
 
-def simulate_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: str):
+def approximation_pairs(pool, exp: dict, n: int, seed: int, data_preset: str, path: Path):
+    """``(offset, M, info)``: the approximation error of the model's preset against ``data_preset`` as
+    the workflow makes it (``observations.model_error.approximation_error`` with ``pairs: n``,
+    :mod:`calibration.approximation`: its design, from the set's ``seed`` and so independent of the
+    twins' truths, its mesh realizations, its default coarse realizations), on the twin's grid. The
+    curves are cached at ``path`` (JSON)."""
+    from calibration.approximation import (approximation_design, approximation_mesh_seed, approximation_run,
+                                           approximation_run_ids)
+    from enkf.approximation import approximation_error
+
+    me = exp["observations"]["model_error"]
+    block = {"preset": data_preset, "pairs": n, "coarse_realizations": 2}
+    exp = {**exp, "seed": seed, "observations": {**exp["observations"], "model_error": {**me, "approximation_error": block}}}
+    spec = ExperimentSpec.from_config(EXPERIMENT, exp)
+    names, ids = list(spec.names), approximation_run_ids(exp)
+    o = exp["observations"]
+    grid = observation_grid(o["t_start"], o["t_end"], o["dt"])
+    if path.is_file():
+        Y = np.array(json.loads(path.read_text())["curves"], float)
+    else:
+        design = approximation_design(EXPERIMENT, exp)
+        tasks = []
+        for r in ids:
+            level, i, _ = approximation_run(r)
+            tasks.append(twin_task(exp, names, design[i], data_preset if level == "fine" else exp["preset"],
+                                   approximation_mesh_seed(exp, r)))
+        Y = np.array(pool.map(_simulate, tasks, chunksize=1))
+        atomic_write_text(path, json.dumps({"runs": ids, "design": design.tolist(), "curves": Y.tolist()}))
+    k = block["coarse_realizations"]
+    Y = Y.reshape(n, 1 + k, grid.size)
+    offset, M, info = approximation_error(Y[:, 0], Y[:, 1:], grid)
+    return offset, M, {**info, "fine_preset": data_preset, "coarse_preset": exp["preset"], "coarse_realizations": k}
+
+
+def simulate_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: str, approx=None):
     """The twin's loop: ``(spec, params, responses, analyses, obs)`` as the workflow would leave them."""
     exp = {**exp, "seed": seed}
     spec = ExperimentSpec.from_config(EXPERIMENT, exp)
@@ -131,6 +172,8 @@ def simulate_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: st
     ref = pool.map(_simulate, [task(truth, data_preset, mesh_seed(seed, "truth"))])[0]
     obs = twin_observations(pd.DataFrame({"time_s": grid, "stress_Pa": ref}), grid, rng=rng_for(seed, "noise"),
                             relative_sigma=o["noise"]["relative_sigma"])
+    if approx is not None:
+        obs = with_approximation_error(obs, *approx)
     params, responses, analyses = [initial_ensemble(spec)], [], []
     for k in range(spec.max_iterations + 1):
         P = params[k][names].to_numpy()
@@ -296,6 +339,9 @@ def main(argv=None) -> dict:
     ap.add_argument("--smoothing", default=None, help="override emulated.smoothing (loo or a number)")
     ap.add_argument("--no-self-calibrate", action="store_true",
                     help="emulated.self_calibrate: false (the reported emulator posterior without its scaling)")
+    ap.add_argument("--approximation-pairs", type=int, default=0,
+                    help="calibrate the misspecified set with the approximation error of the model's preset "
+                         "from this many paired runs (0: the discrepancy term alone)")
     ap.add_argument("--score-only", action="store_true",
                     help="score the cached twins without simulating the missing ones (a partial result says so)")
     args = ap.parse_args(argv)
@@ -315,6 +361,7 @@ def main(argv=None) -> dict:
     tag = "_".join(f"{k}-{v}" for k, v in (("mesh", args.mesh), ("replicates", args.replicates),
                                             ("smoothing", args.smoothing),
                                             ("selfcal", "off" if args.no_self_calibrate else None)) if v is not None)
+    approx_tag = f"approx-{args.approximation_pairs}" if args.approximation_pairs else ""
     cache = Path(args.cache) / tag if tag else Path(args.cache)
     cache.mkdir(parents=True, exist_ok=True)
     # the small misspecified set first, so that a run cut short has both
@@ -325,9 +372,15 @@ def main(argv=None) -> dict:
         for name, (n, data_preset, seed) in sets.items():
             if n == 0:
                 continue
-            records = []
+            records, approx, folder = [], None, cache
+            if name == "misspecified" and args.approximation_pairs:
+                folder = cache / approx_tag
+                folder.mkdir(parents=True, exist_ok=True)
+                pairs = folder / f"pairs_{seed}.json"
+                if pairs.is_file() or not args.score_only:
+                    approx = approximation_pairs(pool, exp, args.approximation_pairs, seed, data_preset, pairs)
             for i, truth in enumerate(truths(n, spec.lower, spec.upper, seed)):
-                path = cache / f"{name}_{seed}_{i:03d}.json"
+                path = folder / f"{name}_{seed}_{i:03d}.json"
                 if path.is_file():
                     rec = json.loads(path.read_text())
                     # a cached twin is keyed by its index in the design; another --twins/--misspecified count
@@ -340,7 +393,7 @@ def main(argv=None) -> dict:
                     continue
                 if args.score_only:
                     continue
-                rec = run_twin(pool, exp, truth, 1000 * seed + i, data_preset)
+                rec = run_twin(pool, exp, truth, 1000 * seed + i, data_preset, approx)
                 atomic_write_text(path, json.dumps(rec, default=float))
                 records.append(rec)
                 simulated += 1
@@ -357,6 +410,7 @@ def main(argv=None) -> dict:
            "emulator_smoothing": (exp.get("emulated") or {}).get("smoothing", "loo"),
            "self_calibrate": bool((exp.get("emulated") or {}).get("self_calibrate", False)),
            "reported_posterior": exp.get("posterior", "ensemble"), "cores": os.cpu_count(),
+           "approximation_pairs": args.approximation_pairs,
            "pool_workers": args.cores, "twins_simulated_this_call": simulated,
            "wall_s_this_call": time.time() - started, **result}
     return emit_json(out, args.out)

@@ -24,7 +24,7 @@ from calibration.experiment import ExperimentSpec  # noqa: E402
 from shpb.atomic import emit_json  # noqa: E402
 
 SETTINGS = ("experiment", "method", "ensemble_size", "window_s", "model_error", "mesh_realizations",
-            "emulator_smoothing", "self_calibrate", "reported_posterior")
+            "emulator_smoothing", "self_calibrate", "reported_posterior", "approximation_pairs")
 
 
 def pool(name: str, benches: dict[str, dict]) -> dict:

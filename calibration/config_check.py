@@ -161,6 +161,7 @@ def _semantic_errors(config: Mapping, base: Path) -> list[str]:
                 if obs.get(key) is not None:
                     errors.append(f"{where}.observations.{key}: only twin experiments take it")
         errors += _diagnosis_errors(where, exp, obs, base)
+        errors += _approximation_errors(where, exp)
         method = exp.get("method")
         if method == "esmda" and exp.get("esmda", {}).get("alphas") is not None:
             total = math.fsum(1.0 / float(a) for a in exp["esmda"]["alphas"])  # the schema has alphas > 0
@@ -255,6 +256,27 @@ def _diagnosis_errors(where: str, exp: Mapping, obs: Mapping, base: Path) -> lis
             errors.append(f"{where}.diagnosis.validation: loro needs at least 3 records (each fold calibrates "
                           f"on the others), got {len(obs.get('records') or [])}")
     return errors
+
+
+#: The presets from coarse to fine (shpb.presets).
+PRESET_ORDER = ("fast", "standard", "paper")
+
+
+def _approximation_errors(where: str, exp: Mapping) -> list[str]:
+    block = ((exp.get("observations") or {}).get("model_error") or {}).get("approximation_error") or {}
+    pairs = block.get("pairs") or 0
+    key = f"{where}.observations.model_error.approximation_error"
+    if not pairs:
+        return []
+    if pairs < 3:
+        return [f"{key}.pairs: {pairs} pairs cannot give a mean and a scatter; use at least 3 (or 0 for off)"]
+    fine, own = block.get("preset"), exp.get("preset")
+    if fine is None:
+        return [f"{key}.preset: pairs > 0 needs the finer preset to compare with ({list(PRESET_ORDER[1:])})"]
+    if own in PRESET_ORDER and PRESET_ORDER.index(fine) <= PRESET_ORDER.index(own):
+        return [f"{key}.preset: {fine!r} is not finer than the experiment's preset {own!r} "
+                f"(presets from coarse to fine: {list(PRESET_ORDER)})"]
+    return []
 
 
 def coerce_yaml_floats(obj):

@@ -52,7 +52,8 @@ __all__ = ["PURPOSES", "MESH_STAGES", "rng_for", "mesh_seed", "run_mesh_seed", "
 
 #: Independent random streams of an experiment (the ``spawn_key`` of :func:`rng_for`).
 #: (``mesh``: the specimen-mesh realizations, :func:`calibration.model_error.mesh_seed`.)
-PURPOSES = {"lhs": 1, "noise": 2, "analysis": 3, "posterior": 4, "predictive": 5, "mesh": MESH_PURPOSE}
+PURPOSES = {"lhs": 1, "noise": 2, "analysis": 3, "posterior": 4, "predictive": 5, "mesh": MESH_PURPOSE,
+            "approximation": 7}
 
 
 def rng_for(seed: int, purpose: str, k: int = 0) -> np.random.Generator:
@@ -460,6 +461,7 @@ def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], 
     svar = (analyses[R].get("model_error") or {}).get("simulator_variability")
     out["simulator_variability"] = None if svar is None else {k: v for k, v in svar.items() if k != "sd_Pa"}
     out["inflated_noise_baseline"] = (analyses[R].get("model_error") or {}).get("inflated_noise_baseline")
+    out["approximation_error"] = (analyses[R].get("model_error") or {}).get("approximation_error")
     if predictive is not None:
         out["predictive_coverage_90"] = predictive
     out["verdict"] = calibration_verdict(misfits=out["misfit"], decision=decision, posterior=post,

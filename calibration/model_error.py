@@ -82,7 +82,7 @@ def check_replicate_count(exp: Mapping) -> int:
 #: The spawn key of the mesh realizations' stream (``calibration.experiment.PURPOSES["mesh"]``) and what a
 #: simulation's realization is drawn for.
 MESH_PURPOSE = 6
-MESH_STAGES = {"member": 1, "truth": 2, "replicate": 3, "design": 4, "check": 5}
+MESH_STAGES = {"member": 1, "truth": 2, "replicate": 3, "design": 4, "check": 5, "approximation": 6}
 
 
 def mesh_seed(seed: int, stage: str, k: int = 0, index: int = 0, record: int = 0) -> int:
@@ -172,6 +172,9 @@ def analysis_error(kind: str, obs: Observations, Y: np.ndarray, alive: np.ndarra
     ``measured``: the data are measured (not a twin's), so the stop test includes ``D``."""
     R = obs.error_model()
     block = {"noise": R.describe(), "discrepancy": None, "mesh_realizations": mode, "measured_data": bool(measured)}
+    approx = obs.meta.get("approximation_error")
+    if approx:  # in R already (calibration.observations.Observations.added_cov): reported, not added again
+        block["approximation_error"] = {k: v for k, v in approx.items() if k != "sd_Pa"}
     S_err, s_info = variability_from_replicates(obs, replicates)
     block["simulator_variability"] = s_info
     Rd = R.dense()

@@ -36,12 +36,12 @@ import numpy as np
 import pandas as pd
 
 from enkf import estimate_noise, observation_error
-from enkf.covariance import ObservationError
+from enkf.covariance import AR1Error, DenseError, ObservationError
 
 __all__ = [
     "OBS_COLUMNS", "ObservationFileError", "Observations", "observation_grid", "curve_on_grid", "read_curve",
     "twin_observations", "reduce_measured_record", "measured_observations", "check_record",
-    "read_observations", "response_matrix",
+    "read_observations", "response_matrix", "with_approximation_error",
 ]
 
 #: Columns of ``obs.csv`` (SI units).
@@ -105,12 +105,15 @@ class Observations:
     ``frame``: one row per observation, columns :data:`OBS_COLUMNS` (+ ``truth_stress_Pa`` for twins).
     ``error_kind``: ``"diagonal"`` or ``"ar1"``; ``corr_time``: AR(1) correlation time [s] per record.
     ``meta``: JSON-ready description (source files, noise estimates, reduction notes).
+    ``added_cov``: a known covariance added to the noise (the approximation error of a coarse model,
+    :func:`with_approximation_error`), dense on the whole vector; None: the noise alone.
     """
 
     frame: pd.DataFrame
     error_kind: str = "diagonal"
     corr_time: dict[str, float] = field(default_factory=dict)
     meta: dict = field(default_factory=dict)
+    added_cov: np.ndarray | None = None
 
     @property
     def records(self) -> list[str]:
@@ -146,18 +149,22 @@ class Observations:
 
     def of_record(self, record: str) -> "Observations":
         """The observations of one record, with its own error model (e.g. to calibrate on it alone)."""
-        frame = self.frame.iloc[self.record_slice(record)].reset_index(drop=True)
+        sl = self.record_slice(record)
+        frame = self.frame.iloc[sl].reset_index(drop=True)
         corr = {record: self.corr_time[record]} if record in self.corr_time else {}
-        return Observations(frame, self.error_kind, corr, {})
+        added = None if self.added_cov is None else self.added_cov[sl, sl]
+        return Observations(frame, self.error_kind, corr, {}, added)
 
     def error_model(self) -> ObservationError:
-        """The :class:`enkf.covariance.ObservationError` ``R`` of the whole vector (records independent).
+        """The :class:`enkf.covariance.ObservationError` ``R`` of the whole vector (records independent),
+        with :attr:`added_cov` added where there is one.
 
         enkf's AR(1) model takes one correlation time; with several records the mean of theirs is used.
         """
         tau = float(np.mean([self.corr_time.get(r, 0.0) for r in self.records])) if self.corr_time else 0.0
         kind = self.error_kind if (self.error_kind != "ar1" or tau > 0) else "diagonal"
-        return observation_error(kind, self.sigma, times=self.time, corr_time=tau, groups=self.groups)
+        R = observation_error(kind, self.sigma, times=self.time, corr_time=tau, groups=self.groups)
+        return R if self.added_cov is None else DenseError(R.dense() + self.added_cov, _symmetric=True)
 
     def to_meta(self) -> dict:
         return {"error_kind": self.error_kind, "corr_time_s": dict(self.corr_time), "records": self.records,
@@ -210,7 +217,33 @@ def read_observations(csv_path: str | Path, json_path: str | Path) -> Observatio
                                    f"'diagonal' or 'ar1'")
     corr = {str(k): float(v) for k, v in (meta.get("corr_time_s") or {}).items()}
     extra = {k: v for k, v in meta.items() if k not in ("error_kind", "corr_time_s", "records", "n_obs")}
-    return Observations(df, kind, corr, extra)
+    obs = Observations(df, kind, corr, extra)
+    approx = extra.get("approximation_error") or {}
+    if approx.get("sd_Pa"):
+        sd = np.asarray(approx["sd_Pa"], float)
+        if sd.size != obs.m:
+            raise ObservationFileError(f"observation metadata {json_path}: approximation_error.sd_Pa has {sd.size} "
+                                       f"values for {obs.m} observations")
+        obs.added_cov = AR1Error(sd, obs.time, float(approx["corr_time_s"]), groups=obs.groups).dense()
+    return obs
+
+
+def with_approximation_error(obs: Observations, offset, M: ObservationError | None, info: Mapping) -> Observations:
+    """``obs`` for a coarse model of data from a finer one (:func:`enkf.approximation.approximation_error`):
+    the mean resolution error ``offset`` subtracted from the observed stress (the column
+    ``stress_uncorrected_Pa`` keeps the data as observed) and its scatter ``M`` added to the error model.
+    ``info`` (with ``M``'s ``sd_Pa`` and ``corr_time_s``) goes to the metadata, from which
+    :func:`read_observations` rebuilds ``M``."""
+    offset = np.asarray(offset, float)
+    if offset.shape != (obs.m,) or (M is not None and M.m != obs.m):
+        raise ValueError(f"approximation error on {offset.size} times for {obs.m} observations")
+    frame = obs.frame.copy()
+    frame["stress_uncorrected_Pa"] = frame["stress_Pa"].to_numpy(float)
+    frame["stress_Pa"] = frame["stress_Pa"].to_numpy(float) - offset
+    if obs.added_cov is not None:
+        raise ValueError("these observations already carry an approximation error")
+    return Observations(frame, obs.error_kind, dict(obs.corr_time), {**obs.meta, "approximation_error": dict(info)},
+                        None if M is None else M.dense())
 
 
 # --------------------------------------------------------------------------------------------------

@@ -5,6 +5,7 @@
 from calibration.experiment import ExperimentSpec
 from calibration.experiment import final_iteration as _final_iteration
 from calibration.experiment import run_mesh_seed
+from calibration.approximation import approximation_mesh_seed, approximation_run_ids, approximation_settings
 from calibration.model_error import replicate_count
 from calibration.workflow_io import experiment_records, member_ids, read_json
 
@@ -98,7 +99,8 @@ def simulation_group(exp, stage, index, n_index, record, record_names):
     """Group id of one simulation job (the `group:` of the simulation rules; docs/cluster.md).
 
     The n = n_index x len(record_names) simulations of one stage of one experiment (an ensemble
-    iteration, the sensitivity design, the diagnosis design, the diagnosis check), numbered member by
+    iteration, the sensitivity design, the diagnosis design, the diagnosis check, the approximation
+    error's pairs), numbered member by
     member, are cut into max(1, n // k) contiguous groups of nearly equal size, k the config's
     `simulations_per_cluster_job` for the experiment's preset: a group holds at least k simulations
     (all n if n < k) and fewer than 2k, and never mixes stages, iterations or experiments. A cluster

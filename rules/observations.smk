@@ -26,11 +26,51 @@ rule truth:
         "../scripts/truth.py"
 
 
+def approximation_files(exp, name):
+    """`name` of every approximation run (none when observations.model_error.approximation_error is off)."""
+    return expand("results/{exp}/approximation/{run}/{record}/{name}", exp=exp, run=approximation_run_ids(EXPERIMENTS[exp]),
+                  record=list(records(exp)), name=name)
+
+
+def approximation_preset(exp, run):
+    return approximation_settings(EXPERIMENTS[exp])["preset"] if run.startswith("fine") else EXPERIMENTS[exp]["preset"]
+
+
+rule approximation_run:
+    """One run of the approximation error's pairs (calibration.approximation): a design point of the
+    prior at the finer preset (fine_<i>) or at the experiment's own (coarse_<i>_<r>), on its own mesh
+    realization. A failed run leaves its pair out."""
+    input:
+        lambda wc: [p for p in [records(wc.exp)[wc.record]] if p],
+    output:
+        curve="results/{exp}/approximation/{run}/{record}/curve.csv",
+        run="results/{exp}/approximation/{run}/{record}/run.json",
+    log:
+        "results/{exp}/approximation/{run}/{record}/simulate.log",
+    wildcard_constraints:
+        run="fine_[0-9]+|coarse_[0-9]+_[0-9]+",
+    params:
+        sim=lambda wc: sim_settings(wc.exp, approximation_preset(wc.exp, wc.run)),
+        record_file=lambda wc: records(wc.exp)[wc.record],
+        mesh_seed=lambda wc: approximation_mesh_seed(EXPERIMENTS[wc.exp], wc.run, list(records(wc.exp)).index(wc.record)),
+        max_attempts=config["member_retries"] + 1,
+    threads: 1
+    retries: config["member_retries"]
+    group: lambda wc: simulation_group(wc.exp, "approximation", approximation_run_ids(EXPERIMENTS[wc.exp]).index(wc.run), len(approximation_run_ids(EXPERIMENTS[wc.exp])), wc.record, records(wc.exp))
+    resources:
+        attempt=lambda wc, attempt: attempt,
+        time_limit_s=lambda wc: time_limit_s(wc.exp, approximation_preset(wc.exp, wc.run)),
+        runtime=lambda wc: runtime_min(wc.exp, approximation_preset(wc.exp, wc.run)),
+    script:
+        "../scripts/approximation_run.py"
+
+
 def observation_inputs(wc):
     e = EXPERIMENTS[wc.exp]
+    out = {"approximation": approximation_files(wc.exp, "curve.csv")}
     if e["kind"] == "twin":
-        return {"truth": f"results/{wc.exp}/truth/synthetic/curve.csv"}
-    return {"records": list(records(wc.exp).values())}
+        return {**out, "truth": f"results/{wc.exp}/truth/synthetic/curve.csv"}
+    return {**out, "records": list(records(wc.exp).values())}
 
 
 rule observations:
@@ -40,7 +80,8 @@ rule observations:
         csv="results/{exp}/observations/obs.csv",
         meta="results/{exp}/observations/obs.json",
     params:
-        exp=lambda wc: {k: EXPERIMENTS[wc.exp][k] for k in ("kind", "seed", "observations")},
+        exp=lambda wc: {k: EXPERIMENTS[wc.exp][k] for k in ("kind", "seed", "preset", "observations")},
         records=lambda wc: records(wc.exp),
+        approximation_runs=lambda wc: approximation_run_ids(EXPERIMENTS[wc.exp]),
     script:
         "../scripts/observations.py"

@@ -1,8 +1,12 @@
-"""observations/obs.csv + obs.json: twin (truth + noise) or measured records (calibration.observations)."""
+"""observations/obs.csv + obs.json: twin (truth + noise) or measured records (calibration.observations),
+corrected by the approximation error of the experiment's preset where it is configured (calibration.approximation)."""
+from pathlib import Path
+
 import pandas as pd
 
+from calibration.approximation import apply_approximation_error
 from calibration.experiment import rng_for
-from calibration.observations import measured_observations, observation_grid, twin_observations
+from calibration.observations import measured_observations, observation_grid, read_curve, twin_observations
 
 e = snakemake.params.exp
 o = e["observations"]
@@ -14,4 +18,9 @@ if e["kind"] == "twin":
 else:
     obs, _ = measured_observations(snakemake.params.records, t_start=o["t_start"], t_end=o["t_end"], dt=o["dt"],
                                    error_kind=o["error"]["kind"], sigma_scale=o["error"]["sigma_scale"])
+runs = list(snakemake.params.approximation_runs)
+if runs:
+    root = Path(snakemake.output.csv).parents[1] / "approximation"
+    curves = {r: {rec: read_curve(root / r / rec / "curve.csv") for rec in obs.records} for r in runs}
+    obs = apply_approximation_error(obs, e, curves)
 obs.write(snakemake.output.csv, snakemake.output.meta)

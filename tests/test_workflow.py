@@ -64,7 +64,8 @@ STAND_IN = textwrap.dedent('''
 
     Peak 0.8 sigma_t at 20 us, exponential decay with tau = 5 us + 30 us E_t / 2400 J/m^2. A mesh
     realization (--mesh-seed) adds a ripple after the peak, 0.5 % of it at 10 us period with a phase
-    drawn from the seed: the stand-in's own "simulator variability".
+    drawn from the seed: the stand-in's own "simulator variability". The finer presets (standard, paper)
+    peak 7 % lower: a planted resolution error (test_approximation_error.py).
     Injected failures (environment): STAND_IN_FAIL_BELOW: sigma_t below it -> exit 3 with a failed
     run.json; STAND_IN_CRASH_ONCE_BELOW: sigma_t below it -> crash (exit 1) on the first call only
     (a marker file per parameter set); STAND_IN_SLEEP: seconds per run; STAND_IN_HANG_RANGE "lo,hi":
@@ -99,6 +100,8 @@ STAND_IN = textwrap.dedent('''
     t = np.arange(0.0, a.t_end + 1e-12, a.sample_dt)
     tau = 5e-6 + 30e-6 * et / 2400.0
     y = np.where(t < 20e-6, 0.8 * st * np.sin(0.5 * np.pi * t / 20e-6) ** 2, 0.8 * st * np.exp(-(t - 20e-6) / tau))
+    if a.preset in ("standard", "paper"):
+        y = 0.93 * y
     if a.mesh_seed is not None:
         phase = 2.0 * np.pi * np.random.default_rng(a.mesh_seed).random()
         y = y + np.where(t < 20e-6, 0.0, 0.004 * st * np.sin(2.0 * np.pi * (t - 20e-6) / 10e-6 + phase))

@@ -2,6 +2,7 @@
 
     python tools/coverage_table.py benchmarks/results/bench_coverage_<date>.json          # print it
     python tools/coverage_table.py benchmarks/results/bench_coverage_<date>.json --readme  # rewrite README's block
+    python tools/coverage_table.py bench.json pooled_a.json pooled_b.json --readme  # pooled misspecified sets
 
 The block sits between ``<!-- coverage-table:start -->`` and ``<!-- coverage-table:end -->`` in
 README.md; ``tests/test_docs_tables.py`` checks that it equals what this tool makes from the JSON named
@@ -37,15 +38,35 @@ def reported(bench: dict, name: str) -> dict:
     return bench[name]["summary_emulator_mcmc"] if mcmc else bench[name]["summary"]
 
 
-def table(bench: dict, source: str) -> str:
+def _label(entry: dict) -> str:
+    if entry.get("set") is None:
+        return entry["name"].replace("_", "-")
+    seeds = sorted({s // 1000 for v in entry["sources"].values() for s in v["twin_seeds"]})
+    extra = f" + approximation error ({entry['approximation_pairs']} pairs)" if entry.get("approximation_pairs") else ""
+    return f"{entry['set']}{extra}, seeds {', '.join(map(str, seeds))}"
+
+
+def _sets(bench: dict, pooled: list) -> list:
+    """``[(label, reported summary, ensemble summary, planned-note)]``: the bench's well-specified set and
+    either its misspecified set or, given pooled JSONs (``benchmarks/pool_coverage.py``), those."""
+    out = []
+    for name in ("well_specified", "misspecified"):
+        if name not in bench or not bench[name]["twins"] or (name == "misspecified" and pooled):
+            continue
+        done = "" if bench[name].get("complete", True) else f" of {bench[name]['planned']} planned"
+        out.append((_label({"name": name}), reported(bench, name), bench[name]["summary"], done))
+    for entry in pooled:
+        mcmc = entry.get("reported_posterior") == "emulator_mcmc"
+        out.append((_label(entry), entry["summary_emulator_mcmc"] if mcmc else entry["summary"], entry["summary"], ""))
+    return out
+
+
+def table(bench: dict, source: str, pooled: list | None = None, pooled_sources: tuple = ()) -> str:
     rows = ["| twins | n | converged | 90 % covers (`sigma_t` / `E_t`) | 50 % covers | SBC uniformity p (chi^2) "
             "| 90 % width / prior's | median 90 % half-width | restated bar met |",
             "|---|---|---|---|---|---|---|---|---|"]
-    for name in ("well_specified", "misspecified"):
-        if name not in bench or not bench[name]["twins"]:
-            continue
-        done = "" if bench[name].get("complete", True) else f" of {bench[name]['planned']} planned"
-        s = reported(bench, name)
+    sets = _sets(bench, pooled or [])
+    for label, s, _, done in sets:
         p = s["params"]
 
         def both(f):
@@ -58,30 +79,29 @@ def table(bench: dict, source: str) -> str:
             return f"{q['width_over_prior_median']:.2f}"
 
         rows.append(
-            f"| {name.replace('_', '-')} | {s['n_twins'] + s.get('sampler_failed', 0)}{done} | {s['converged']} "
+            f"| {label} | {s['n_twins'] + s.get('sampler_failed', 0)}{done} | {s['converged']} "
             f"| {both(lambda q: _cov(q['coverage_90']))} | {both(lambda q: _cov(q['coverage_50']))} "
             f"| {both(sbc)} | {both(width)} | {both(lambda q: _pct(q['half_width_90_rel_median']))} "
             f"| {both(lambda q: _pct(q['bar']['fraction_met']))} |")
     posterior = bench.get("reported_posterior", "ensemble")
     if posterior == "emulator_mcmc":
         posterior += " with self-calibration" if bench.get("self_calibrate") else ""
-    head = (f"From `{source}` ({bench['method']}, N = {bench['ensemble_size']}, window "
+    also = "".join(f", `{x}`" for x in pooled_sources)
+    head = (f"From `{source}`{also} ({bench['method']}, N = {bench['ensemble_size']}, window "
             f"{bench['window_s'][0] * 1e6:.0f}-{bench['window_s'][1] * 1e6:.0f} us; reported posterior: {posterior}; "
             f"brackets: binomial 95 % intervals):")
-    return "\n".join([head, "", *rows, "", _reference_line(bench), *_ensemble_line(bench)])
+    return "\n".join([head, "", *rows, "", _reference_line(bench, sets), *_ensemble_line(bench, sets)])
 
 
-def _ensemble_line(bench: dict) -> list:
+def _ensemble_line(bench: dict, sets: list) -> list:
     """Under an MCMC posterior, the last simulated ensemble's 90 % coverage on the same twins, and the
     samplers that failed or did not converge."""
     if bench.get("reported_posterior") != "emulator_mcmc":
         return []
     parts = []
-    for name in ("well_specified", "misspecified"):
-        if name not in bench or not bench[name]["twins"]:
-            continue
-        e, m = bench[name]["summary"]["params"], bench[name]["summary_emulator_mcmc"]
-        parts.append(f"{name.replace('_', '-')} " + " / ".join(_pct(e[q]["coverage_90"]["fraction"]) for q in NAMES)
+    for label, m, e, _ in sets:
+        e = e["params"]
+        parts.append(f"{label} " + " / ".join(_pct(e[q]["coverage_90"]["fraction"]) for q in NAMES)
                      + " (width / prior's " + " / ".join(f"{e[q]['width_over_prior_median']:.2f}" for q in NAMES)
                      + f"; samplers failed {m['sampler_failed']}, chains converged {m['chains_converged']} "
                      f"of {m['n_twins']})")
@@ -89,15 +109,13 @@ def _ensemble_line(bench: dict) -> list:
             + "; ".join(parts) + "."]
 
 
-def _reference_line(bench: dict) -> str:
+def _reference_line(bench: dict, sets: list) -> str:
     """What a calibrated posterior would give with these members, and how far each coverage is from it."""
     ws = reported(bench, "well_specified")["params"]
     parts = []
-    for name in ("well_specified", "misspecified"):
-        if name not in bench or not bench[name]["twins"]:
-            continue
-        p = reported(bench, name)["params"]
-        parts.append(f"{name.replace('_', '-')} 90 %: " + " / ".join(f"{p[q]['coverage_90']['p_vs_reference']:.2g}" for q in NAMES)
+    for label, s, _, _ in sets:
+        p = s["params"]
+        parts.append(f"{label} 90 %: " + " / ".join(f"{p[q]['coverage_90']['p_vs_reference']:.2g}" for q in NAMES)
                      + ", 50 %: " + " / ".join(f"{p[q]['coverage_50']['p_vs_reference']:.2g}" for q in NAMES))
     prediction = bool(bench["well_specified"]["twins"][0]["params"]["sigma_t"].get("interval"))
     if bench.get("reported_posterior") == "emulator_mcmc":
@@ -116,26 +134,30 @@ def _reference_line(bench: dict) -> str:
     return lead + " (`sigma_t` / `E_t`): " + "; ".join(parts) + "."
 
 
-def block(path: str) -> str:
+def block(path: str, *pooled_paths: str) -> str:
+    """The README block from the benchmark JSON ``path`` and, optionally, pooled misspecified sets
+    (``benchmarks/pool_coverage.py`` JSONs), which then replace the benchmark's own misspecified row."""
     bench = json.loads((ROOT / path).read_text())
-    return f"{START}\n{table(bench, path)}\n{END}"
+    pooled = [json.loads((ROOT / q).read_text()) for q in pooled_paths]
+    return f"{START}\n{table(bench, path, pooled, pooled_paths)}\n{END}"
 
 
-def readme_block_source(text: str) -> str:
-    """The JSON path named in README's block."""
+def readme_block_sources(text: str) -> list:
+    """The JSON paths named in README's block (the benchmark's first)."""
     inner = text.split(START, 1)[1].split(END, 1)[0]
-    return inner.split("`", 2)[1]
+    head = inner.strip().split("\n", 1)[0]
+    return [part for part in head.split("`")[1::2] if part.endswith(".json")]
 
 
 def main(argv) -> int:
-    path = argv[1]
+    paths = [a for a in argv[1:] if a != "--readme"]
     if "--readme" in argv:
         readme = ROOT / "README.md"
         text = readme.read_text()
         a, b = text.index(START), text.index(END) + len(END)
-        readme.write_text(text[:a] + block(path) + text[b:])
+        readme.write_text(text[:a] + block(*paths) + text[b:])
     else:
-        print(block(path))
+        print(block(*paths))
     return 0
 
 

@@ -1,0 +1,186 @@
+"""The approximation error of a coarse model against a finer one (enkf.approximation) and its use on
+observations (calibration.observations.with_approximation_error)."""
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import stats
+
+from calibration.observations import Observations, with_approximation_error
+from enkf import AR1Error, DiagonalError
+from enkf.approximation import approximation_error
+
+T = np.arange(120) * 1e-6
+
+
+def test_paired_runs_recover_a_planted_offset_scatter_and_correlation_time():
+    """A fine model = coarse + a fixed 2 MPa bump + AR(1) scatter (1.5 MPa, 6 us), the coarse runs with
+    their own 0.5 MPa white mesh noise averaged over two realizations: from 400 pairs the offset within
+    five standard errors everywhere, the scatter's rms within 10 % of its planted value (1.5 MPa and the
+    coarse mean's 0.5/sqrt(2)) and the correlation time of the sum within 10 %."""
+    rng = np.random.default_rng(3)
+    n = 400
+    base = 30e6 * np.sin(np.pi * T / T[-1])[None, :] * rng.uniform(0.5, 1.5, (n, 1))
+    bump = 2e6 * np.exp(-((T - 60e-6) / 15e-6) ** 2)
+    scatter = AR1Error(np.full(T.size, 1.5e6), T, 6e-6).sample(rng, n)
+    fine = base + bump + scatter
+    coarse = base[:, None, :] + 0.5e6 * rng.standard_normal((n, 2, T.size))
+    offset, M, info = approximation_error(fine, coarse, T)
+    sd = np.hypot(1.5e6, 0.5e6 / np.sqrt(2))
+    assert np.max(np.abs(offset - bump)) < 5 * sd / np.sqrt(n)
+    assert info["rms_Pa"] == pytest.approx(sd, rel=0.10)
+    # the lag-1 correlation of the sum: the AR(1) part's exp(-1 us / 6 us), weighted by its share of the variance
+    rho = np.exp(-1.0 / 6.0) * 1.5e6 ** 2 / sd ** 2
+    assert info["corr_time_s"] == pytest.approx(-1e-6 / np.log(rho), rel=0.10)
+    assert info["n_pairs_used"] == n and info["offset_rms_Pa"] == pytest.approx(np.sqrt(np.mean(bump ** 2)), rel=0.05)
+
+
+def test_failed_pairs_are_left_out_and_too_few_pairs_are_refused():
+    rng = np.random.default_rng(4)
+    fine = rng.standard_normal((5, T.size))
+    coarse = rng.standard_normal((5, T.size))
+    fine[1, 7] = np.nan
+    _, _, info = approximation_error(fine, coarse, T)
+    assert info["n_pairs"] == 5 and info["n_pairs_used"] == 4
+    fine[2:4, 0] = np.nan
+    with pytest.raises(ValueError, match="at least 3 usable pairs"):
+        approximation_error(fine, coarse, T)
+    with pytest.raises(ValueError, match="must match"):
+        approximation_error(fine[:, :-1], coarse, T)
+
+
+def test_a_biased_coarse_model_covers_its_truths_only_with_the_approximation_error():
+    """Gauss-linear stand-in: the fine model is the coarse one (y = G theta) plus a bias that grows with
+    theta_1 and a scatter of its own; data from the fine model, 1 % noise. Over 300 truths from the
+    prior, the exact posterior of the coarse model with the noise alone puts the truth inside its 90 %
+    interval of theta_1 in under half of them; with the approximation error of 40 prior pairs, in
+    0.80-0.98 (the 90 % intervals' binomial band for 300 truths is 0.86-0.93; the bias's dependence
+    on theta, which a prior-averaged correction leaves in the scatter, and 40 pairs' estimate of it
+    make it approximate, not exact)."""
+    rng = np.random.default_rng(5)
+    m = T.size
+    G = np.stack([np.sin(np.pi * T / T[-1]), (T / T[-1]) ** 2], axis=1) * 10e6  # (m, 2)
+    mu0, sd0 = np.array([1.0, 1.0]), np.array([0.3, 0.3])
+    shape = np.exp(-((T - 80e-6) / 20e-6) ** 2) * 1e6
+    scatter = AR1Error(np.full(m, 0.4e6), T, 5e-6)
+
+    def fine(theta, n=1):
+        return theta @ G.T + (1.5 + theta[:, :1]) * shape + scatter.sample(rng, n)
+
+    design = mu0 + sd0 * rng.standard_normal((40, 2))
+    offset, M, _ = approximation_error(fine(design, 40), design @ G.T, T)
+    noise = DiagonalError(np.full(m, 0.1e6))
+    truths = mu0 + sd0 * rng.standard_normal((300, 2))
+    data = fine(truths, 300) + noise.sample(rng, 300)
+    z = stats.norm.ppf(0.95)
+    inside = {}
+    for name, C, shift in (("noise", noise.dense(), 0.0), ("approx", noise.dense() + M.dense(), offset)):
+        Ci = np.linalg.inv(C)
+        P = np.linalg.inv(G.T @ Ci @ G + np.diag(1 / sd0 ** 2))
+        mean = (P @ (G.T @ Ci @ (data - shift).T + (mu0 / sd0 ** 2)[:, None])).T
+        inside[name] = np.mean(np.abs(mean[:, 0] - truths[:, 0]) <= z * np.sqrt(P[0, 0]))
+    assert inside["noise"] < 0.5
+    assert 0.80 <= inside["approx"] <= 0.98
+
+
+def test_observations_carry_the_offset_and_the_added_covariance_record_by_record():
+    t = np.arange(5) * 1e-6
+    frame = pd.DataFrame({"record": ["a"] * 5 + ["b"] * 5, "time_s": np.r_[t, t],
+                          "stress_Pa": np.arange(10.0) * 1e6, "sigma_Pa": np.full(10, 1e5)})
+    obs = Observations(frame)
+    M = AR1Error(np.full(10, 2e5), np.r_[t, t], 2e-6, groups=np.r_[np.zeros(5), np.ones(5)])
+    offset = np.full(10, 0.5e6)
+    out = with_approximation_error(obs, offset, M, {"n_pairs": 3, "sd_Pa": [0.0]})
+    assert np.allclose(out.values, obs.values - 0.5e6)
+    assert np.allclose(out.frame["stress_uncorrected_Pa"], obs.values)
+    assert np.allclose(out.error_model().dense(), obs.error_model().dense() + M.dense())
+    assert np.allclose(out.of_record("b").error_model().dense(), 1e10 * np.eye(5) + M.dense()[5:, 5:])
+    assert out.meta["approximation_error"] == {"n_pairs": 3, "sd_Pa": [0.0]}
+    with pytest.raises(ValueError, match="approximation error on 9 times"):
+        with_approximation_error(obs, offset[:9], M, {})
+
+
+def test_obs_files_carry_the_approximation_error_and_a_bad_one_is_named(tmp_path):
+    """obs.csv holds the corrected stress beside the observed one; obs.json the term, from which
+    read_observations rebuilds the same error model."""
+    import json
+
+    from calibration.observations import read_observations
+
+    t = np.arange(8) * 1e-6
+    frame = pd.DataFrame({"record": ["a"] * 8, "time_s": t, "stress_Pa": np.linspace(0, 7e6, 8),
+                          "sigma_Pa": np.full(8, 1e5)})
+    rng = np.random.default_rng(9)
+    fine, coarse = rng.normal(1e6, 2e5, (6, 8)), rng.normal(0.0, 2e5, (6, 2, 8))
+    obs = with_approximation_error(Observations(frame), *approximation_error(fine, coarse, t))
+    obs.write(tmp_path / "obs.csv", tmp_path / "obs.json")
+    back = read_observations(tmp_path / "obs.csv", tmp_path / "obs.json")
+    assert np.allclose(back.values, obs.values) and np.allclose(back.frame["stress_uncorrected_Pa"], frame["stress_Pa"])
+    assert np.allclose(back.error_model().dense(), obs.error_model().dense(), rtol=1e-12)
+    meta = json.loads((tmp_path / "obs.json").read_text())
+    meta["approximation_error"]["sd_Pa"] = meta["approximation_error"]["sd_Pa"][:5]
+    (tmp_path / "obs.json").write_text(json.dumps(meta))
+    with pytest.raises(ValueError, match="obs.json: approximation_error.sd_Pa has 5 values for 8 observations"):
+        read_observations(tmp_path / "obs.csv", tmp_path / "obs.json")
+
+
+def test_the_workflow_runs_the_pairs_and_calibrates_on_corrected_observations(tmp_path):
+    """A twin made at ``standard`` and calibrated at ``fast`` with 5 pairs, on the stand-in simulator
+    whose finer presets peak 7 % lower: the pairs run at their presets on mesh realizations of their
+    own, obs.csv holds the data less the pairs' mean difference (before the wave's peak, where the
+    stand-in has no mesh ripple, exactly -7 % of the design's mean rise), obs.json the scatter that
+    read_observations adds to the error model, and summary.json reports the term."""
+    from calibration.approximation import approximation_design, approximation_mesh_seed, approximation_run_ids
+    from calibration.observations import read_observations
+    from calibration.workflow_io import validate_config
+    from test_workflow import SCHEMA, snakemake, twin_config, write_config, write_stand_in
+
+    cfg = twin_config(esmda={"steps": 1})
+    exp = cfg["experiments"]["twin"]
+    exp["observations"]["preset"] = "standard"
+    exp["observations"]["model_error"]["approximation_error"] = {"preset": "standard", "pairs": 5}
+    cfg["simulator"] = write_stand_in(tmp_path)
+    write_config(tmp_path, cfg)
+    run = snakemake(tmp_path, "--cores", "2")
+    assert run.returncode == 0, run.stderr[-4000:]
+    res = tmp_path / "results" / "twin"
+    full = validate_config(cfg, SCHEMA, base_dir=tmp_path)["experiments"]["twin"]
+    ids = approximation_run_ids(full)
+    assert len(ids) == 15
+    runs = {r: json.loads((res / "approximation" / r / "synthetic" / "run.json").read_text()) for r in ids}
+    assert {runs[r]["preset"] for r in ids if r.startswith("fine")} == {"standard"}
+    assert {runs[r]["preset"] for r in ids if r.startswith("coarse")} == {"fast"}
+    assert [runs[r]["design_point"] for r in ids[:3]] == [0, 0, 0] and runs[ids[1]]["approximation"] == "coarse"
+    assert len({approximation_mesh_seed(full, r) for r in ids}) == 15  # the stand-in does not echo its seed
+    design = approximation_design("twin", full)
+    obs = read_observations(res / "observations" / "obs.csv", res / "observations" / "obs.json")
+    offset = obs.values - obs.frame["stress_uncorrected_Pa"].to_numpy()
+    t = obs.time
+    rise = 0.8 * np.sin(0.5 * np.pi * t / 20e-6) ** 2 * design[:, 0].mean()
+    before = t < 19.5e-6
+    assert np.allclose(-offset[before], -0.07 * rise[before], rtol=1e-9, atol=1e-3)
+    after = t > 25e-6
+    assert np.all(obs.error_model().std[after] > obs.sigma[after])
+    summary = json.loads((res / "summary.json").read_text())
+    assert summary["approximation_error"]["n_pairs_used"] == 5
+    assert summary["approximation_error"]["fine_preset"] == "standard"
+
+
+@pytest.mark.parametrize("block, message", [
+    ({"preset": "standard", "pairs": 2}, "approximation_error.pairs: 2 pairs cannot give a mean and a scatter"),
+    ({"pairs": 10}, "approximation_error.preset: pairs > 0 needs the finer preset"),
+    ({"preset": "standard", "pairs": 10}, "'standard' is not finer than the experiment's preset 'standard'"),
+    ({"preset": "fast", "pairs": 10}, "approximation_error.preset: 'fast' is not one of"),
+])
+def test_a_bad_approximation_error_block_is_named_before_any_job_runs(block, message):
+    from calibration.workflow_io import ConfigError, validate_config
+    from test_workflow import SCHEMA, twin_config
+
+    cfg = twin_config(preset="standard" if "finer than the experiment" in message else "fast")
+    cfg["experiments"]["twin"]["observations"]["model_error"]["approximation_error"] = block
+    with pytest.raises(ConfigError) as err:
+        validate_config(cfg, SCHEMA)
+    assert "experiments.twin.observations.model_error.approximation_error" in str(err.value)
+    assert message in str(err.value)
