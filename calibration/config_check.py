@@ -273,6 +273,9 @@ def _approximation_errors(where: str, exp: Mapping) -> list[str]:
     fine, own = block.get("preset"), exp.get("preset")
     if fine is None:
         return [f"{key}.preset: pairs > 0 needs the finer preset to compare with ({list(PRESET_ORDER[1:])})"]
+    if exp.get("parameters") == "auto":
+        return [f"{key}: the pairs' design spans the prior box, which parameters: auto leaves to the sensitivity "
+                f"stage; name the parameters and their boxes"]
     if own in PRESET_ORDER and PRESET_ORDER.index(fine) <= PRESET_ORDER.index(own):
         return [f"{key}.preset: {fine!r} is not finer than the experiment's preset {own!r} "
                 f"(presets from coarse to fine: {list(PRESET_ORDER)})"]

@@ -5,7 +5,8 @@
 from calibration.experiment import ExperimentSpec
 from calibration.experiment import final_iteration as _final_iteration
 from calibration.experiment import run_mesh_seed
-from calibration.approximation import approximation_mesh_seed, approximation_run_ids, approximation_settings
+from calibration.approximation import (approximation_design, approximation_mesh_seed, approximation_run,
+                                       approximation_run_ids, approximation_settings)
 from calibration.model_error import replicate_count
 from calibration.workflow_io import experiment_records, member_ids, read_json
 

@@ -32,6 +32,12 @@ def approximation_files(exp, name):
                   record=list(records(exp)), name=name)
 
 
+def approximation_point(exp, run):
+    """The run's design point {parameter: value} (a param, so that a new box or seed re-runs the pairs)."""
+    names = spec(exp).names
+    return dict(zip(names, map(float, approximation_design(exp, EXPERIMENTS[exp])[approximation_run(run)[1]])))
+
+
 def approximation_preset(exp, run):
     return approximation_settings(EXPERIMENTS[exp])["preset"] if run.startswith("fine") else EXPERIMENTS[exp]["preset"]
 
@@ -51,6 +57,7 @@ rule approximation_run:
         run="fine_[0-9]+|coarse_[0-9]+_[0-9]+",
     params:
         sim=lambda wc: sim_settings(wc.exp, approximation_preset(wc.exp, wc.run)),
+        point=lambda wc: approximation_point(wc.exp, wc.run),
         record_file=lambda wc: records(wc.exp)[wc.record],
         mesh_seed=lambda wc: approximation_mesh_seed(EXPERIMENTS[wc.exp], wc.run, list(records(wc.exp)).index(wc.record)),
         max_attempts=config["member_retries"] + 1,

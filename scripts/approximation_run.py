@@ -1,15 +1,11 @@
 """One run of the approximation error's pairs at its design point and preset (calibration.approximation)."""
-from calibration.approximation import approximation_design, approximation_run
-from calibration.experiment import ExperimentSpec
+from calibration.approximation import approximation_run
 from calibration.workflow_io import run_member, simulator_command
 
 sim, wc = snakemake.params.sim, snakemake.wildcards
-exp = snakemake.config["experiments"][wc.exp]
 level, index, realization = approximation_run(wc.run)
-point = approximation_design(wc.exp, exp)[index]
-names = ExperimentSpec.from_config(wc.exp, exp).names
 run_member(command=simulator_command(sim["command"]), geometry=sim["geometry"], preset=sim["preset"],
-           params={**sim["fixed"], **dict(zip(names, map(float, point)))},
+           params={**sim["fixed"], **snakemake.params.point},
            record=snakemake.params.record_file or None, t_end=sim["t_end"], sample_dt=sim["sample_dt"],
            curve_path=snakemake.output.curve, run_path=snakemake.output.run, log_path=snakemake.log[0],
            attempt=snakemake.resources.attempt, mesh_seed=snakemake.params.mesh_seed,

@@ -153,6 +153,7 @@ def test_the_workflow_runs_the_pairs_and_calibrates_on_corrected_observations(tm
     assert {runs[r]["preset"] for r in ids if r.startswith("fine")} == {"standard"}
     assert {runs[r]["preset"] for r in ids if r.startswith("coarse")} == {"fast"}
     assert [runs[r]["design_point"] for r in ids[:3]] == [0, 0, 0] and runs[ids[1]]["approximation"] == "coarse"
+    assert runs["coarse_004_1"]["params"]["sigma_t"] == approximation_design("twin", full)[4, 0]
     assert len({approximation_mesh_seed(full, r) for r in ids}) == 15  # the stand-in does not echo its seed
     design = approximation_design("twin", full)
     obs = read_observations(res / "observations" / "obs.csv", res / "observations" / "obs.json")
@@ -173,6 +174,7 @@ def test_the_workflow_runs_the_pairs_and_calibrates_on_corrected_observations(tm
     ({"pairs": 10}, "approximation_error.preset: pairs > 0 needs the finer preset"),
     ({"preset": "standard", "pairs": 10}, "'standard' is not finer than the experiment's preset 'standard'"),
     ({"preset": "fast", "pairs": 10}, "approximation_error.preset: 'fast' is not one of"),
+    ({"preset": "paper", "pairs": 10}, "approximation_error: the pairs' design spans the prior box, which parameters: auto"),
 ])
 def test_a_bad_approximation_error_block_is_named_before_any_job_runs(block, message):
     from calibration.workflow_io import ConfigError, validate_config
@@ -180,6 +182,9 @@ def test_a_bad_approximation_error_block_is_named_before_any_job_runs(block, mes
 
     cfg = twin_config(preset="standard" if "finer than the experiment" in message else "fast")
     cfg["experiments"]["twin"]["observations"]["model_error"]["approximation_error"] = block
+    if "auto" in message:
+        cfg["experiments"]["twin"]["parameters"] = "auto"
+        cfg["experiments"]["twin"]["sensitivity"] = {"parameters": {"sigma_t": [4.0e6, 60.0e6], "E_t": [200.0, 2400.0]}}
     with pytest.raises(ConfigError) as err:
         validate_config(cfg, SCHEMA)
     assert "experiments.twin.observations.model_error.approximation_error" in str(err.value)
