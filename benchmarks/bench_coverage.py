@@ -130,15 +130,14 @@ def approximation_pairs(pool, exp: dict, n: int, seed: int, data_preset: str, pa
     :mod:`calibration.approximation`: its design, from the set's ``seed`` and so independent of the
     twins' truths, its mesh realizations, its default coarse realizations), on the twin's grid. The
     curves are cached at ``path`` (JSON)."""
-    from calibration.approximation import (approximation_design, approximation_mesh_seed, approximation_run,
-                                           approximation_run_ids)
-    from enkf.approximation import approximation_error
+    from calibration.approximation import (approximation_design, approximation_from_runs, approximation_mesh_seed,
+                                           approximation_run, approximation_run_ids)
 
     me = exp["observations"]["model_error"]
-    block = {"preset": data_preset, "pairs": n, "coarse_realizations": 2}
+    # the schema's defaults (coarse_realizations) filled in by the validated twin block
+    block = {**me["approximation_error"], "preset": data_preset, "pairs": n}
     exp = {**exp, "seed": seed, "observations": {**exp["observations"], "model_error": {**me, "approximation_error": block}}}
-    spec = ExperimentSpec.from_config(EXPERIMENT, exp)
-    names, ids = list(spec.names), approximation_run_ids(exp)
+    names, ids = list(ExperimentSpec.from_config(EXPERIMENT, exp).names), approximation_run_ids(exp)
     o = exp["observations"]
     grid = observation_grid(o["t_start"], o["t_end"], o["dt"])
     if path.is_file():
@@ -152,10 +151,7 @@ def approximation_pairs(pool, exp: dict, n: int, seed: int, data_preset: str, pa
                                    approximation_mesh_seed(exp, r)))
         Y = np.array(pool.map(_simulate, tasks, chunksize=1))
         atomic_write_text(path, json.dumps({"runs": ids, "design": design.tolist(), "curves": Y.tolist()}))
-    k = block["coarse_realizations"]
-    Y = Y.reshape(n, 1 + k, grid.size)
-    offset, M, info = approximation_error(Y[:, 0], Y[:, 1:], grid)
-    return offset, M, {**info, "fine_preset": data_preset, "coarse_preset": exp["preset"], "coarse_realizations": k}
+    return approximation_from_runs(exp, Y, grid)
 
 
 def simulate_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: str, approx=None):

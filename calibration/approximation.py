@@ -3,7 +3,8 @@
 
 A calibration at the ``fast`` preset of data from a finer mesh (a twin made at ``standard``, or a lab's
 records, which have no mesh at all) carries the coarse mesh's resolution error into its parameters:
-the ``fast`` disc peaks a median 7 % above the ``standard`` one at the same parameters. With
+the ``fast`` disc fails differently from the ``standard`` one at the same parameters
+(``benchmarks/results/approximation_pairs_seed41_2026-11-28.png``). With
 ``pairs: n`` the workflow runs, before any analysis, ``n`` design points of a Latin hypercube of the
 prior box at the finer ``preset`` (one run each) and at the experiment's own preset
 (``coarse_realizations`` runs each), every run on its own mesh realization, record by record with the
@@ -32,7 +33,7 @@ from .model_error import mesh_seed
 from .observations import Observations, response_matrix, with_approximation_error
 
 __all__ = ["approximation_settings", "approximation_design", "approximation_run_ids", "approximation_run",
-           "approximation_mesh_seed", "apply_approximation_error"]
+           "approximation_mesh_seed", "apply_approximation_error", "approximation_from_runs"]
 
 _RUN_RE = re.compile(r"^(fine)_(\d+)$|^(coarse)_(\d+)_(\d+)$")
 
@@ -84,11 +85,15 @@ def apply_approximation_error(obs: Observations, exp: Mapping,
                               curves: Mapping[str, Mapping[str, pd.DataFrame]]) -> Observations:
     """``obs`` corrected by the approximation error of the runs ``curves[run_id][record]`` (a failed
     run's empty curve leaves its pair out)."""
+    Y = response_matrix([curves[r] for r in approximation_run_ids(exp)], obs)
+    return with_approximation_error(obs, *approximation_from_runs(exp, Y, obs.time, obs.groups))
+
+
+def approximation_from_runs(exp: Mapping, Y: np.ndarray, times, groups=None) -> tuple:
+    """``(offset, M, info)`` of the runs' curves ``Y`` on the observation grid, one row per run in the
+    order of :func:`approximation_run_ids` (NaN rows: failed runs)."""
     s = approximation_settings(exp)
-    ids = approximation_run_ids(exp)
     n, k = int(s["pairs"]), int(s["coarse_realizations"])
-    Y = response_matrix([curves[r] for r in ids], obs)
-    Y = Y.reshape(n, 1 + k, obs.m)
-    offset, M, info = approximation_error(Y[:, 0], Y[:, 1:], obs.time, obs.groups)
-    info = {**info, "fine_preset": s["preset"], "coarse_preset": exp["preset"], "coarse_realizations": k}
-    return with_approximation_error(obs, offset, M, info)
+    Y = np.asarray(Y, float).reshape(n, 1 + k, -1)
+    offset, M, info = approximation_error(Y[:, 0], Y[:, 1:], times, groups)
+    return offset, M, {**info, "fine_preset": s["preset"], "coarse_preset": exp["preset"], "coarse_realizations": k}

@@ -237,11 +237,11 @@ def with_approximation_error(obs: Observations, offset, M: ObservationError | No
     offset = np.asarray(offset, float)
     if offset.shape != (obs.m,) or (M is not None and M.m != obs.m):
         raise ValueError(f"approximation error on {offset.size} times for {obs.m} observations")
+    if obs.added_cov is not None:
+        raise ValueError("these observations already carry an approximation error")
     frame = obs.frame.copy()
     frame["stress_uncorrected_Pa"] = frame["stress_Pa"].to_numpy(float)
     frame["stress_Pa"] = frame["stress_Pa"].to_numpy(float) - offset
-    if obs.added_cov is not None:
-        raise ValueError("these observations already carry an approximation error")
     return Observations(frame, obs.error_kind, dict(obs.corr_time), {**obs.meta, "approximation_error": dict(info)},
                         None if M is None else M.dense())
 
