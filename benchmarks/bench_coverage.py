@@ -124,18 +124,19 @@ def twin_task(exp: dict, names, p, preset: str, ms) -> tuple:
     return (preset, dict(zip(names, map(float, p))), sim["t_end"], sim["sample_dt"], grid, ms)
 
 
-def approximation_pairs(pool, exp: dict, n: int, seed: int, data_preset: str, path: Path):
+def approximation_pairs(pool, exp: dict, n: int, seed: int, data_preset: str, path: Path,
+                        coarse_variability: str = "subtracted"):
     """``(offset, M, info)``: the approximation error of the model's preset against ``data_preset`` as
     the workflow makes it (``observations.model_error.approximation_error`` with ``pairs: n``,
     :mod:`calibration.approximation`: its design, from the set's ``seed`` and so independent of the
-    twins' truths, its mesh realizations, its default coarse realizations), on the twin's grid. The
-    curves are cached at ``path`` (JSON)."""
+    twins' truths, its mesh realizations, its default coarse realizations), on the twin's grid, with
+    ``coarse_variability`` (:mod:`enkf.approximation`). The curves are cached at ``path`` (JSON)."""
     from calibration.approximation import (approximation_design, approximation_from_runs, approximation_mesh_seed,
                                            approximation_run, approximation_run_ids)
 
     me = exp["observations"]["model_error"]
     # the schema's defaults (coarse_realizations) filled in by the validated twin block
-    block = {**me["approximation_error"], "preset": data_preset, "pairs": n}
+    block = {**me["approximation_error"], "preset": data_preset, "pairs": n, "coarse_variability": coarse_variability}
     exp = {**exp, "seed": seed, "observations": {**exp["observations"], "model_error": {**me, "approximation_error": block}}}
     names, ids = list(ExperimentSpec.from_config(EXPERIMENT, exp).names), approximation_run_ids(exp)
     o = exp["observations"]
@@ -338,6 +339,9 @@ def main(argv=None) -> dict:
     ap.add_argument("--approximation-pairs", type=int, default=0,
                     help="calibrate the misspecified set with the approximation error of the model's preset "
                          "from this many paired runs (0: the discrepancy term alone)")
+    ap.add_argument("--coarse-variability", choices=["subtracted", "counted"], default="subtracted",
+                    help="observations.model_error.approximation_error.coarse_variability (enkf.approximation); "
+                         "counted: the form before 2026-11-28b, whose twins are in <cache>/approx-<n>/")
     ap.add_argument("--score-only", action="store_true",
                     help="score the cached twins without simulating the missing ones (a partial result says so)")
     args = ap.parse_args(argv)
@@ -357,7 +361,10 @@ def main(argv=None) -> dict:
     tag = "_".join(f"{k}-{v}" for k, v in (("mesh", args.mesh), ("replicates", args.replicates),
                                             ("smoothing", args.smoothing),
                                             ("selfcal", "off" if args.no_self_calibrate else None)) if v is not None)
+    # the pairs' curves do not depend on coarse_variability: one file per seed in approx-<n>/, the counted
+    # form's twins beside them (its folder from before the subtracted form), the subtracted form's in their own
     approx_tag = f"approx-{args.approximation_pairs}" if args.approximation_pairs else ""
+    twin_tag = approx_tag + ("-subtracted" if args.coarse_variability == "subtracted" else "")
     cache = Path(args.cache) / tag if tag else Path(args.cache)
     cache.mkdir(parents=True, exist_ok=True)
     # the small misspecified set first, so that a run cut short has both
@@ -370,11 +377,13 @@ def main(argv=None) -> dict:
                 continue
             records, approx, folder = [], None, cache
             if name == "misspecified" and args.approximation_pairs:
-                folder = cache / approx_tag
+                folder = cache / twin_tag
                 folder.mkdir(parents=True, exist_ok=True)
-                pairs = folder / f"pairs_{seed}.json"
+                (cache / approx_tag).mkdir(parents=True, exist_ok=True)
+                pairs = cache / approx_tag / f"pairs_{seed}.json"
                 if pairs.is_file() or not args.score_only:
-                    approx = approximation_pairs(pool, exp, args.approximation_pairs, seed, data_preset, pairs)
+                    approx = approximation_pairs(pool, exp, args.approximation_pairs, seed, data_preset, pairs,
+                                                 args.coarse_variability)
             for i, truth in enumerate(truths(n, spec.lower, spec.upper, seed)):
                 path = folder / f"{name}_{seed}_{i:03d}.json"
                 if path.is_file():
@@ -407,6 +416,7 @@ def main(argv=None) -> dict:
            "self_calibrate": bool((exp.get("emulated") or {}).get("self_calibrate", False)),
            "reported_posterior": exp.get("posterior", "ensemble"), "cores": os.cpu_count(),
            "approximation_pairs": args.approximation_pairs,
+           "coarse_variability": args.coarse_variability if args.approximation_pairs else None,
            "pool_workers": args.cores, "twins_simulated_this_call": simulated,
            "wall_s_this_call": time.time() - started, **result}
     return emit_json(out, args.out)

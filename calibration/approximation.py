@@ -9,7 +9,7 @@ the ``fast`` disc fails differently from the ``standard`` one at the same parame
 prior box at the finer ``preset`` (one run each) and at the experiment's own preset
 (``coarse_realizations`` runs each), every run on its own mesh realization, record by record with the
 experiment's own records; the observations are then the data less the pairs' mean difference, with the
-pairs' scatter added to their error model (:func:`calibration.observations.with_approximation_error`).
+pairs' scatter beyond the coarse model's own variability (``coarse_variability``) added to their error model (:func:`calibration.observations.with_approximation_error`).
 Every later step (ES-MDA, the discrepancy over it, the emulator and its MCMC, the stop test, the
 predictive coverage) sees the corrected observations and the wider error model.
 
@@ -95,5 +95,5 @@ def approximation_from_runs(exp: Mapping, Y: np.ndarray, times, groups=None) -> 
     s = approximation_settings(exp)
     n, k = int(s["pairs"]), int(s["coarse_realizations"])
     Y = np.asarray(Y, float).reshape(n, 1 + k, -1)
-    offset, M, info = approximation_error(Y[:, 0], Y[:, 1:], times, groups)
+    offset, M, info = approximation_error(Y[:, 0], Y[:, 1:], times, groups, coarse_variability=s["coarse_variability"])
     return offset, M, {**info, "fine_preset": s["preset"], "coarse_preset": exp["preset"], "coarse_realizations": k}

@@ -276,6 +276,9 @@ def _approximation_errors(where: str, exp: Mapping) -> list[str]:
     if exp.get("parameters") == "auto":
         return [f"{key}: the pairs' design spans the prior box, which parameters: auto leaves to the sensitivity "
                 f"stage; name the parameters and their boxes"]
+    if block.get("coarse_variability", "subtracted") == "subtracted" and block.get("coarse_realizations", 2) < 2:
+        return [f"{key}.coarse_realizations: coarse_variability: subtracted measures the coarse model's own "
+                f"variability from its realizations at each design point; use at least 2 (or coarse_variability: counted)"]
     if own in PRESET_ORDER and PRESET_ORDER.index(fine) <= PRESET_ORDER.index(own):
         return [f"{key}.preset: {fine!r} is not finer than the experiment's preset {own!r} "
                 f"(presets from coarse to fine: {list(PRESET_ORDER)})"]

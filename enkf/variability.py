@@ -29,7 +29,7 @@ import numpy as np
 
 from .covariance import AR1Error
 
-__all__ = ["SMOOTH_WINDOW", "lag1_correlation", "simulator_variability"]
+__all__ = ["SMOOTH_WINDOW", "lag1_correlation", "simulator_variability", "smoothed_variance"]
 
 #: Samples in the centred moving average of the replicates' per-time variance.
 SMOOTH_WINDOW = 5
@@ -67,15 +67,22 @@ def lag1_correlation(dev: np.ndarray, times: np.ndarray, groups: np.ndarray) -> 
     return rho, (-dt / math.log(rho) if rho > 0 else 0.0)
 
 
+def smoothed_variance(dev: np.ndarray, dof: int, groups: np.ndarray, window: int = SMOOTH_WINDOW) -> np.ndarray:
+    """Per-time variance ``sum dev^2 / dof`` of departures ``dev`` (rows: curves), smoothed over
+    ``window`` neighbouring times within each group (integer labels)."""
+    return _smooth(np.sum(dev ** 2, axis=0) / dof, groups, int(window))
+
+
 def simulator_variability(replicates, times, groups=None, *, window: int = SMOOTH_WINDOW,
-                          split_times=None) -> tuple[AR1Error | None, dict]:
+                          split_times=None, subtract_variance=None) -> tuple[AR1Error | None, dict]:
     """``(S, info)`` from replicate curves ``(M, m)`` at one parameter point (rows: realizations; a row
     with a non-finite value is a failed run and is left out).
 
     ``S`` is an :class:`enkf.covariance.AR1Error` with the smoothed per-time std and one correlation
     time; None when fewer than two replicates succeeded (``info["n_replicates"]`` says how many).
     ``split_times``: ``{group: t}`` (e.g. each record's observed peak) for the rms before and after it
-    in ``info["groups"]``.
+    in ``info["groups"]``. ``subtract_variance`` (m,): a per-time variance counted elsewhere, taken off
+    the smoothed one (floored at zero); the correlation time stays that of the departures.
     """
     Y = np.array(replicates, dtype=float, ndmin=2)
     t = np.asarray(times, dtype=float)
@@ -89,10 +96,12 @@ def simulator_variability(replicates, times, groups=None, *, window: int = SMOOT
     if M < 2:
         return None, info
     dev = Y - Y.mean(axis=0)
-    var = _smooth(np.sum(dev ** 2, axis=0) / (M - 1), g, int(window))
+    var = smoothed_variance(dev, M - 1, g, window)
+    if subtract_variance is not None:
+        var = var - np.asarray(subtract_variance, dtype=float)
     sd = np.sqrt(np.maximum(var, 0.0))
     top = float(sd.max())
-    if top <= 1e-12 * max(float(np.max(np.abs(Y))), 1e-300):  # replicates that agree to round-off
+    if top <= 1e-12 * max(float(np.max(np.abs(Y))), 1e-300):  # agree to round-off, or nothing left beyond subtract_variance
         return None, {**info, "rms_Pa": 0.0}
     sd = np.maximum(sd, 1e-9 * top)
     rho, corr_time = lag1_correlation(dev, t, g)

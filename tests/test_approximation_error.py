@@ -15,11 +15,17 @@ from enkf.approximation import approximation_error
 T = np.arange(120) * 1e-6
 
 
-def test_paired_runs_recover_a_planted_offset_scatter_and_correlation_time():
+@pytest.mark.parametrize("coarse_variability, sd", [
+    ("counted", np.hypot(1.5e6, 0.5e6 / np.sqrt(2))),       # the fine scatter and the two-run coarse mean's
+    ("subtracted", np.sqrt(1.5e6 ** 2 - 0.5e6 ** 2)),       # ... less (1 + 1/2) times a coarse run's variance
+])
+def test_paired_runs_recover_a_planted_offset_scatter_and_correlation_time(coarse_variability, sd):
     """A fine model = coarse + a fixed 2 MPa bump + AR(1) scatter (1.5 MPa, 6 us), the coarse runs with
     their own 0.5 MPa white mesh noise averaged over two realizations: from 400 pairs the offset within
-    five standard errors everywhere, the scatter's rms within 10 % of its planted value (1.5 MPa and the
-    coarse mean's 0.5/sqrt(2)) and the correlation time of the sum within 10 %."""
+    five standard errors everywhere, the scatter's rms within 10 % of its planted value and the
+    correlation time of the pairs' differences within 10 %. Counted, the rms is that of the differences;
+    subtracted, what the data need beyond the 0.5 MPa the error model already gives them as ``S``:
+    sqrt(1.5^2 - 0.5^2) MPa, so that ``S + M`` is the fine scatter's 1.5 MPa."""
     rng = np.random.default_rng(3)
     n = 400
     base = 30e6 * np.sin(np.pi * T / T[-1])[None, :] * rng.uniform(0.5, 1.5, (n, 1))
@@ -27,12 +33,16 @@ def test_paired_runs_recover_a_planted_offset_scatter_and_correlation_time():
     scatter = AR1Error(np.full(T.size, 1.5e6), T, 6e-6).sample(rng, n)
     fine = base + bump + scatter
     coarse = base[:, None, :] + 0.5e6 * rng.standard_normal((n, 2, T.size))
-    offset, M, info = approximation_error(fine, coarse, T)
-    sd = np.hypot(1.5e6, 0.5e6 / np.sqrt(2))
-    assert np.max(np.abs(offset - bump)) < 5 * sd / np.sqrt(n)
+    offset, M, info = approximation_error(fine, coarse, T, coarse_variability=coarse_variability)
+    diff_sd = np.hypot(1.5e6, 0.5e6 / np.sqrt(2))
+    assert np.max(np.abs(offset - bump)) < 5 * diff_sd / np.sqrt(n)
     assert info["rms_Pa"] == pytest.approx(sd, rel=0.10)
-    # the lag-1 correlation of the sum: the AR(1) part's exp(-1 us / 6 us), weighted by its share of the variance
-    rho = np.exp(-1.0 / 6.0) * 1.5e6 ** 2 / sd ** 2
+    assert np.sqrt(np.mean(M.std ** 2)) == pytest.approx(info["rms_Pa"], rel=1e-12)
+    if coarse_variability == "subtracted":
+        assert info["coarse_variability_rms_Pa"] == pytest.approx(0.5e6, rel=0.10)
+        assert info["scatter_rms_Pa"] == pytest.approx(diff_sd, rel=0.10)
+    # the lag-1 correlation of the differences: the AR(1) part's exp(-1 us / 6 us), weighted by its share
+    rho = np.exp(-1.0 / 6.0) * 1.5e6 ** 2 / diff_sd ** 2
     assert info["corr_time_s"] == pytest.approx(-1e-6 / np.log(rho), rel=0.10)
     assert info["n_pairs_used"] == n and info["offset_rms_Pa"] == pytest.approx(np.sqrt(np.mean(bump ** 2)), rel=0.05)
 
@@ -42,13 +52,15 @@ def test_failed_pairs_are_left_out_and_too_few_pairs_are_refused():
     fine = rng.standard_normal((5, T.size))
     coarse = rng.standard_normal((5, T.size))
     fine[1, 7] = np.nan
-    _, _, info = approximation_error(fine, coarse, T)
+    _, _, info = approximation_error(fine, coarse, T, coarse_variability="counted")
     assert info["n_pairs"] == 5 and info["n_pairs_used"] == 4
     fine[2:4, 0] = np.nan
     with pytest.raises(ValueError, match="at least 3 usable pairs"):
-        approximation_error(fine, coarse, T)
+        approximation_error(fine, coarse, T, coarse_variability="counted")
     with pytest.raises(ValueError, match="must match"):
-        approximation_error(fine[:, :-1], coarse, T)
+        approximation_error(fine[:, :-1], coarse, T, coarse_variability="counted")
+    with pytest.raises(ValueError, match="needs at least 2 coarse realizations per design point"):
+        approximation_error(fine, coarse, T)
 
 
 def test_a_biased_coarse_model_covers_its_truths_only_with_the_approximation_error():
@@ -70,7 +82,7 @@ def test_a_biased_coarse_model_covers_its_truths_only_with_the_approximation_err
         return theta @ G.T + (1.5 + theta[:, :1]) * shape + scatter.sample(rng, n)
 
     design = mu0 + sd0 * rng.standard_normal((40, 2))
-    offset, M, _ = approximation_error(fine(design, 40), design @ G.T, T)
+    offset, M, _ = approximation_error(fine(design, 40), design @ G.T, T, coarse_variability="counted")
     noise = DiagonalError(np.full(m, 0.1e6))
     truths = mu0 + sd0 * rng.standard_normal((300, 2))
     data = fine(truths, 300) + noise.sample(rng, 300)
@@ -83,6 +95,43 @@ def test_a_biased_coarse_model_covers_its_truths_only_with_the_approximation_err
         inside[name] = np.mean(np.abs(mean[:, 0] - truths[:, 0]) <= z * np.sqrt(P[0, 0]))
     assert inside["noise"] < 0.5
     assert 0.80 <= inside["approx"] <= 0.98
+
+
+def test_subtracting_the_coarse_variability_calibrates_what_counting_it_widens():
+    """Gauss-linear stand-in whose coarse runs scatter by a mesh variability of their own (AR(1),
+    0.6 MPa) and whose fine runs by theirs (0.8 MPa) about a bias that grows with theta_1; the error
+    model gives the data the coarse ``S`` (as the workflow's likelihood ``R + S + D`` does) plus ``M``
+    from 400 pairs with two coarse realizations each. Over 400 truths from the prior, the exact posterior
+    with ``M`` subtracted holds the truth in its 50 % and 90 % intervals at their levels (binomial
+    sd 0.025 and 0.015: bands of about 2.8 sd); counted, the coarse variability enters 1.5 times too
+    often and the 50 % intervals hold more than 0.56 (0.6-0.66 expected)."""
+    rng = np.random.default_rng(11)
+    m = T.size
+    G = np.stack([np.sin(np.pi * T / T[-1]), (T / T[-1]) ** 2], axis=1) * 10e6
+    mu0, sd0 = np.array([1.0, 1.0]), np.array([0.3, 0.3])
+    shape = np.exp(-((T - 80e-6) / 20e-6) ** 2) * 1e6
+    S_fine, S_coarse = AR1Error(np.full(m, 0.8e6), T, 5e-6), AR1Error(np.full(m, 0.6e6), T, 5e-6)
+
+    def fine(theta):
+        return theta @ G.T + (1.5 + 0.3 * theta[:, :1]) * shape + S_fine.sample(rng, theta.shape[0])
+
+    design = mu0 + sd0 * rng.standard_normal((400, 2))
+    coarse = (design @ G.T)[:, None, :] + S_coarse.sample(rng, 800).reshape(400, 2, m)
+    F = fine(design)
+    noise = DiagonalError(np.full(m, 0.1e6))
+    truths = mu0 + sd0 * rng.standard_normal((400, 2))
+    data = fine(truths) + noise.sample(rng, 400)
+    inside = {}
+    for mode in ("subtracted", "counted"):
+        offset, M, _ = approximation_error(F, coarse, T, coarse_variability=mode)
+        Ci = np.linalg.inv(noise.dense() + S_coarse.dense() + M.dense())
+        P = np.linalg.inv(G.T @ Ci @ G + np.diag(1 / sd0 ** 2))
+        mean = (P @ (G.T @ Ci @ (data - offset).T + (mu0 / sd0 ** 2)[:, None])).T
+        err = np.abs(mean - truths) / np.sqrt(np.diag(P))
+        inside[mode] = {level: np.mean(err <= stats.norm.ppf(0.5 + level / 2), axis=0) for level in (0.5, 0.9)}
+    assert np.all((inside["subtracted"][0.5] >= 0.43) & (inside["subtracted"][0.5] <= 0.57))
+    assert np.all((inside["subtracted"][0.9] >= 0.86) & (inside["subtracted"][0.9] <= 0.94))
+    assert np.all(inside["counted"][0.5] > 0.56)
 
 
 def test_observations_carry_the_offset_and_the_added_covariance_record_by_record():
@@ -113,7 +162,7 @@ def test_obs_files_carry_the_approximation_error_and_a_bad_one_is_named(tmp_path
     frame = pd.DataFrame({"record": ["a"] * 8, "time_s": t, "stress_Pa": np.linspace(0, 7e6, 8),
                           "sigma_Pa": np.full(8, 1e5)})
     rng = np.random.default_rng(9)
-    fine, coarse = rng.normal(1e6, 2e5, (6, 8)), rng.normal(0.0, 2e5, (6, 2, 8))
+    fine, coarse = rng.normal(1e6, 3e5, (6, 8)), rng.normal(0.0, 1e5, (6, 2, 8))
     obs = with_approximation_error(Observations(frame), *approximation_error(fine, coarse, t))
     obs.write(tmp_path / "obs.csv", tmp_path / "obs.json")
     back = read_observations(tmp_path / "obs.csv", tmp_path / "obs.json")
@@ -171,6 +220,8 @@ def test_the_workflow_runs_the_pairs_and_calibrates_on_corrected_observations(tm
 
 @pytest.mark.parametrize("block, message", [
     ({"preset": "standard", "pairs": 2}, "approximation_error.pairs: 2 pairs cannot give a mean and a scatter"),
+    ({"preset": "standard", "pairs": 10, "coarse_realizations": 1},
+     "approximation_error.coarse_realizations: coarse_variability: subtracted measures"),
     ({"pairs": 10}, "approximation_error.preset: pairs > 0 needs the finer preset"),
     ({"preset": "standard", "pairs": 10}, "'standard' is not finer than the experiment's preset 'standard'"),
     ({"preset": "fast", "pairs": 10}, "approximation_error.preset: 'fast' is not one of"),
