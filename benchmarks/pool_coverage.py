@@ -24,14 +24,30 @@ from calibration.experiment import ExperimentSpec  # noqa: E402
 from shpb.atomic import emit_json  # noqa: E402
 
 SETTINGS = ("experiment", "method", "ensemble_size", "window_s", "model_error", "mesh_realizations",
-            "emulator_smoothing", "self_calibrate", "reported_posterior", "approximation_pairs")
+            "emulator_smoothing", "self_calibrate", "reported_posterior", "approximation_pairs",
+            "coarse_variability")
+
+
+def setting(bench: dict, key: str):
+    """A twin setting of a bench_coverage JSON; ``coarse_variability`` of one made before the key existed
+    (2026-11-28, seeds 41 and 43) is the form that code had: ``counted``."""
+    if key == "coarse_variability" and key not in bench and bench.get("approximation_pairs"):
+        return "counted"
+    if key == "model_error" and bench.get(key):
+        # the twin block's approximation_error is off (the bench sets it per set, coarse_variability is the
+        # key above); the schema default coarse_variability filled into it since does not change a twin
+        block = dict(bench[key])
+        block["approximation_error"] = {k: v for k, v in (block.get("approximation_error") or {}).items()
+                                        if k != "coarse_variability"}
+        return block
+    return bench.get(key)
 
 
 def pool(name: str, benches: dict[str, dict]) -> dict:
     """``benches``: path -> bench_coverage JSON. The set ``name`` scored over all their twins."""
     first = next(iter(benches.values()))
     for path, b in benches.items():
-        differ = [k for k in SETTINGS if b.get(k) != first.get(k)]
+        differ = [k for k in SETTINGS if setting(b, k) != setting(first, k)]
         if differ:
             raise SystemExit(f"{path}: twin settings {differ} differ from {next(iter(benches))}'s")
     seeds = {path: [r["seed"] for r in b[name]["twins"]] for path, b in benches.items()}
@@ -44,7 +60,7 @@ def pool(name: str, benches: dict[str, dict]) -> dict:
     return {"benchmark": "pool_coverage", "set": name, "sources": {p: {"twin_seeds": seeds[p],
             "twins": len(b[name]["twins"]), "wall_s_this_call": b.get("wall_s_this_call"),
             "summary_emulator_mcmc": b[name]["summary_emulator_mcmc"]} for p, b in benches.items()},
-            **{k: first.get(k) for k in SETTINGS}, "n_twins": len(twins),
+            **{k: setting(first, k) for k in SETTINGS}, "n_twins": len(twins),
             "summary": score(twins, spec.lower, spec.upper, spec.names),
             "summary_emulator_mcmc": score_mcmc(twins, spec.lower, spec.upper, spec.names)}
 

@@ -42,7 +42,11 @@ def _label(entry: dict) -> str:
     if entry.get("set") is None:
         return entry["name"].replace("_", "-")
     seeds = sorted({s // 1000 for v in entry["sources"].values() for s in v["twin_seeds"]})
-    extra = f" + approximation error ({entry['approximation_pairs']} pairs)" if entry.get("approximation_pairs") else ""
+    extra = ""
+    if entry.get("approximation_pairs"):
+        # a pooled JSON from before coarse_variability existed holds the form that code had
+        extra = (f" + approximation error ({entry['approximation_pairs']} pairs, "
+                 f"{entry.get('coarse_variability') or 'counted'})")
     return f"{entry['set']}{extra}, seeds {', '.join(map(str, seeds))}"
 
 
