@@ -37,7 +37,6 @@ def test_paired_runs_recover_a_planted_offset_scatter_and_correlation_time(coars
     diff_sd = np.hypot(1.5e6, 0.5e6 / np.sqrt(2))
     assert np.max(np.abs(offset - bump)) < 5 * diff_sd / np.sqrt(n)
     assert info["rms_Pa"] == pytest.approx(sd, rel=0.10)
-    assert np.sqrt(np.mean(M.std ** 2)) == pytest.approx(info["rms_Pa"], rel=1e-12)
     if coarse_variability == "subtracted":
         assert info["coarse_variability_rms_Pa"] == pytest.approx(0.5e6, rel=0.10)
         assert info["scatter_rms_Pa"] == pytest.approx(diff_sd, rel=0.10)
@@ -132,6 +131,8 @@ def test_subtracting_the_coarse_variability_calibrates_what_counting_it_widens()
     assert np.all((inside["subtracted"][0.5] >= 0.43) & (inside["subtracted"][0.5] <= 0.57))
     assert np.all((inside["subtracted"][0.9] >= 0.86) & (inside["subtracted"][0.9] <= 0.94))
     assert np.all(inside["counted"][0.5] > 0.56)
+    # the two forms must differ where it matters: counting the coarse mesh twice widens every interval
+    assert np.all(inside["subtracted"][0.5] < inside["counted"][0.5])
 
 
 def test_observations_carry_the_offset_and_the_added_covariance_record_by_record():
