@@ -142,7 +142,11 @@ def approximation_pairs(pool, exp: dict, n: int, seed: int, data_preset: str, pa
     o = exp["observations"]
     grid = observation_grid(o["t_start"], o["t_end"], o["dt"])
     if path.is_file():
-        Y = np.array(json.loads(path.read_text())["curves"], float)
+        cached = json.loads(path.read_text())
+        if cached["runs"] != ids:
+            raise SystemExit(f"{path}: cached runs {cached['runs'][:3]}... are not this set's {ids[:3]}... "
+                             "(another coarse_realizations or pairs); use another --cache")
+        Y = np.array(cached["curves"], float)
     else:
         design = approximation_design(EXPERIMENT, exp)
         tasks = []
@@ -410,7 +414,9 @@ def main(argv=None) -> dict:
     out = {"benchmark": "bench_coverage", "experiment": EXPERIMENT, "method": exp["method"],
            "ensemble_size": exp["ensemble_size"], "window_s": [exp["observations"]["t_start"],
                                                                exp["observations"]["t_end"]],
-           "model_error": exp["observations"].get("model_error"),
+           # the twin block's approximation_error stays off (each set sets its own); the two keys below say what ran
+           "model_error": {k: v for k, v in (exp["observations"].get("model_error") or {}).items()
+                           if k != "approximation_error"},
            "mesh_realizations": exp["simulation"].get("mesh_realizations"),
            "emulator_smoothing": (exp.get("emulated") or {}).get("smoothing", "loo"),
            "self_calibrate": bool((exp.get("emulated") or {}).get("self_calibrate", False)),

@@ -279,6 +279,12 @@ def _approximation_errors(where: str, exp: Mapping) -> list[str]:
     if block.get("coarse_variability", "subtracted") == "subtracted" and block.get("coarse_realizations", 2) < 2:
         return [f"{key}.coarse_realizations: coarse_variability: subtracted measures the coarse model's own "
                 f"variability from its realizations at each design point; use at least 2 (or coarse_variability: counted)"]
+    me = (exp.get("observations") or {}).get("model_error") or {}
+    if block.get("coarse_variability", "subtracted") == "subtracted" and me.get("simulator_replicates", 6) == 0:
+        # subtracted leaves the data's own mesh variability to S; with S not measured nothing would count it
+        return [f"{key}.coarse_variability: subtracted takes the coarse mesh's variability off the pairs because "
+                f"S carries it, but {where}.observations.model_error.simulator_replicates is 0 (S not measured); "
+                f"measure S (simulator_replicates >= 2) or use coarse_variability: counted"]
     if own in PRESET_ORDER and PRESET_ORDER.index(fine) <= PRESET_ORDER.index(own):
         return [f"{key}.preset: {fine!r} is not finer than the experiment's preset {own!r} "
                 f"(presets from coarse to fine: {list(PRESET_ORDER)})"]

@@ -223,6 +223,8 @@ def test_the_workflow_runs_the_pairs_and_calibrates_on_corrected_observations(tm
     ({"preset": "standard", "pairs": 2}, "approximation_error.pairs: 2 pairs cannot give a mean and a scatter"),
     ({"preset": "standard", "pairs": 10, "coarse_realizations": 1},
      "approximation_error.coarse_realizations: coarse_variability: subtracted measures"),
+    ({"preset": "standard", "pairs": 10, "replicates": 0},
+     "approximation_error.coarse_variability: subtracted takes the coarse mesh's variability off"),
     ({"pairs": 10}, "approximation_error.preset: pairs > 0 needs the finer preset"),
     ({"preset": "standard", "pairs": 10}, "'standard' is not finer than the experiment's preset 'standard'"),
     ({"preset": "fast", "pairs": 10}, "approximation_error.preset: 'fast' is not one of"),
@@ -233,6 +235,9 @@ def test_a_bad_approximation_error_block_is_named_before_any_job_runs(block, mes
     from test_workflow import SCHEMA, twin_config
 
     cfg = twin_config(preset="standard" if "finer than the experiment" in message else "fast")
+    block = dict(block)
+    if "replicates" in block:
+        cfg["experiments"]["twin"]["observations"]["model_error"]["simulator_replicates"] = block.pop("replicates")
     cfg["experiments"]["twin"]["observations"]["model_error"]["approximation_error"] = block
     if "auto" in message:
         cfg["experiments"]["twin"]["parameters"] = "auto"

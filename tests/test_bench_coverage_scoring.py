@@ -173,3 +173,30 @@ def test_pooled_sets_count_every_twin_once():
         pool("misspecified", {"a.json": a, "c.json": _bench(41, "calibrated")})
     with pytest.raises(SystemExit, match="reported_posterior"):
         pool("misspecified", {"a.json": a, "b.json": {**b, "reported_posterior": "ensemble"}})
+
+
+def test_pooling_compares_the_form_that_ran_and_refuses_to_mix_forms():
+    from benchmarks.pool_coverage import setting
+
+    legacy = {"approximation_pairs": 24, "model_error": {"simulator_replicates": 6,
+              "approximation_error": {"preset": None, "pairs": 0, "coarse_realizations": 2}}}
+    filled = {"approximation_pairs": 24, "coarse_variability": "counted", "model_error": {"simulator_replicates": 6,
+              "approximation_error": {"preset": None, "pairs": 0, "coarse_variability": "subtracted"}}}
+    current = {"approximation_pairs": 24, "coarse_variability": "subtracted", "model_error": {"simulator_replicates": 6}}
+    # a JSON from before the key existed ran the raw-scatter form
+    assert setting(legacy, "coarse_variability") == "counted" == setting(filled, "coarse_variability")
+    assert setting(current, "coarse_variability") == "subtracted"
+    # the twin block's (off) approximation_error, however recorded, is not a setting that differs
+    assert setting(legacy, "model_error") == setting(filled, "model_error") == setting(current, "model_error")
+    assert setting({"model_error": {"simulator_replicates": 3}}, "model_error") != setting(current, "model_error")
+    assert setting({"approximation_pairs": 0}, "coarse_variability") is None
+
+
+def test_pooling_refuses_json_of_different_forms():
+    from benchmarks.pool_coverage import pool
+
+    a = {"experiment": "twin_ref", "approximation_pairs": 24, "coarse_variability": "subtracted",
+         "misspecified": {"twins": []}}
+    b = dict(a, coarse_variability="counted")
+    with pytest.raises(SystemExit, match=r"twin settings \['coarse_variability'\] differ"):
+        pool("misspecified", {"a.json": a, "b.json": b})
