@@ -10,8 +10,9 @@ mean)``, and carry only what that leaves. It is worth having only if the paramet
 difference on pairs the fit has not seen. This script answers with leave-one-pair-out prediction
 errors on the cached pairs (the model's training runs, no twin's truth or data read), per seed and
 pooled: the constant offset against a linear and a quadratic model in ``log theta``, next to the part
-of the scatter that is the two meshes' own variability (``fine`` once, the ``k``-run coarse mean's
-``1/k``; the coarse runs' scatter stands for both, as the error model assumes).
+of the scatter that is the two meshes' own variability, the ``(1 + 1/k)`` times the coarse runs' own
+scatter that :func:`enkf.approximation.approximation_error` takes off (``coarse_variability:
+subtracted``).
 """
 
 from __future__ import annotations
@@ -26,6 +27,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from enkf.approximation import approximation_error  # noqa: E402
 
 
 def load_pairs(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -59,12 +62,13 @@ def loo_rms(X: np.ndarray, E: np.ndarray) -> float:
     return float(np.sqrt(np.mean(loo ** 2)))
 
 
-def diagnose(design: np.ndarray, fine: np.ndarray, coarse: np.ndarray) -> dict:
+def diagnose(design: np.ndarray, fine: np.ndarray, coarse: np.ndarray, times: np.ndarray) -> dict:
+    """The leave-one-pair-out errors of the three models on pairs ``(fine (n, m), coarse (n, k, m))`` on ``times``."""
     k = coarse.shape[1]
     E = fine - coarse.mean(axis=1)
-    own = np.sum((coarse - coarse.mean(axis=1, keepdims=True)) ** 2) / (E.size * (k - 1))
+    info = approximation_error(fine, coarse, times, coarse_variability="subtracted")[2]
     out = {"n_pairs": int(E.shape[0]), "coarse_realizations": int(k),
-           "meshes_own_rms_Pa": float(np.sqrt((1 + 1 / k) * own))}
+           "meshes_own_rms_Pa": float(np.sqrt(1 + 1 / k) * info["coarse_variability_rms_Pa"])}
     for name, order in (("constant", 0), ("linear", 1), ("quadratic", 2)):
         out[f"loo_rms_{name}_Pa"] = loo_rms(features(design, order), E)
     out["linear_over_constant"] = out["loo_rms_linear_Pa"] / out["loo_rms_constant_Pa"]
@@ -76,13 +80,18 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("pairs", nargs="+", type=Path)
     args = ap.parse_args(argv)
+    from benchmarks.bench_coverage import twin_experiment
+    from calibration.observations import observation_grid
+
+    o = twin_experiment()["observations"]
+    t = observation_grid(o["t_start"], o["t_end"], o["dt"])
     sets = {p.stem: load_pairs(p) for p in sorted(args.pairs)}
     report = {"benchmark": "approximation_bias_dependence",
               "sources": [str(p.resolve().relative_to(ROOT)) if p.resolve().is_relative_to(ROOT) else str(p)
                           for p in sorted(args.pairs)],
               "cores": os.cpu_count(),
-              "per_file": {name: diagnose(*s) for name, s in sets.items()}}
-    report["pooled"] = diagnose(*(np.concatenate(parts) for parts in zip(*sets.values())))
+              "per_file": {name: diagnose(*s, t) for name, s in sets.items()}}
+    report["pooled"] = diagnose(*(np.concatenate(parts) for parts in zip(*sets.values())), t)
     print(json.dumps(report, indent=1))
 
 

@@ -276,11 +276,11 @@ def _approximation_errors(where: str, exp: Mapping) -> list[str]:
     if exp.get("parameters") == "auto":
         return [f"{key}: the pairs' design spans the prior box, which parameters: auto leaves to the sensitivity "
                 f"stage; name the parameters and their boxes"]
-    if block.get("coarse_variability", "subtracted") == "subtracted" and block.get("coarse_realizations", 2) < 2:
+    subtracted = block.get("coarse_variability", "subtracted") == "subtracted"
+    if subtracted and block.get("coarse_realizations", 2) < 2:
         return [f"{key}.coarse_realizations: coarse_variability: subtracted measures the coarse model's own "
                 f"variability from its realizations at each design point; use at least 2 (or coarse_variability: counted)"]
-    me = (exp.get("observations") or {}).get("model_error") or {}
-    if block.get("coarse_variability", "subtracted") == "subtracted" and me.get("simulator_replicates", 6) == 0:
+    if subtracted and exp["observations"]["model_error"].get("simulator_replicates") == 0:
         # subtracted leaves the data's own mesh variability to S; with S not measured nothing would count it
         return [f"{key}.coarse_variability: subtracted takes the coarse mesh's variability off the pairs because "
                 f"S carries it, but {where}.observations.model_error.simulator_replicates is 0 (S not measured); "

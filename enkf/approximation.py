@@ -26,8 +26,8 @@ variance, ``S_coarse`` measured by the coarse runs' own scatter at each design p
 of freedom per point, hence ``k >= 2``); the term left is what the data need beyond the ``S`` they are
 given, floored at zero where the fine mesh scatters less than the coarse one. ``"counted"`` keeps the
 pairs' raw scatter: the coarse model's variability then enters ``1 + 1/k`` times more than it should
-(wider intervals: on the disc at ``fast`` against ``standard`` the 50 % intervals of ``sigma_t`` held
-0.65 of 40 twins, ``benchmarks/results/bench_coverage_misspecified_approx_counted_pooled_41_43_45_49_2026-11-28.json``).
+(wider intervals: on the disc at ``fast`` against ``standard`` its 50 % intervals of ``sigma_t``
+over-cover, ``benchmarks/results/bench_coverage_misspecified_approx_counted_pooled_41_43_45_49_2026-11-28.json``).
 """
 
 from __future__ import annotations
