@@ -72,7 +72,7 @@ from calibration.experiment import (ExperimentSpec, analysis_step, initial_ensem
                                     reported_ensemble, rng_for, run_mesh_seed)
 from enkf import prediction_interval_dict
 from calibration.posterior import sample_posterior
-from shpb.atomic import atomic_write_text, emit_json
+from shpb.atomic import atomic_write_bytes, atomic_write_text, emit_json
 from calibration.observations import curve_on_grid, observation_grid, twin_observations, with_approximation_error
 from calibration.workflow_io import load_yaml, validate_config
 
@@ -102,12 +102,20 @@ def _simulate(task):
     return curve_on_grid(out.columns["time_s"], out.columns["stress_Pa"], grid)
 
 
-def run_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: str, approx=None) -> dict:
+def run_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: str, approx=None,
+             keep: Path | None = None) -> dict:
     """One twin through the workflow's analysis steps, with the workflow's mesh realizations (the
     truth on its own, the members per ``simulation.mesh_realizations``) and replicates at each
     iteration's ensemble mean; the reported posterior's numbers. ``approx``: ``(offset, M, info)`` of
-    :func:`approximation_pairs`, applied to the twin's data (None: the data as observed)."""
+    :func:`approximation_pairs`, applied to the twin's data (None: the data as observed). ``keep``: a
+    file to pickle the twin's runs to (``(spec, params, responses, analyses, obs)``), so that another
+    reported posterior can be scored on the same runs without simulating them again."""
     spec, params, responses, analyses, obs = simulate_twin(pool, exp, truth, seed, data_preset, approx)
+    if keep is not None:
+        import pickle
+
+        keep.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_bytes(keep, pickle.dumps((spec, params, responses, analyses, obs)))
     names = list(spec.names)
     R, P, alive = reported_ensemble(spec, analyses, params)
     rec = _twin_record(spec, truth, seed, data_preset, P[names].to_numpy(float)[alive], analyses, R)
@@ -346,6 +354,8 @@ def main(argv=None) -> dict:
     ap.add_argument("--coarse-variability", choices=["subtracted", "counted"], default="subtracted",
                     help="observations.model_error.approximation_error.coarse_variability (enkf.approximation); "
                          "counted: the form before 2026-11-28b, whose twins are in <cache>/approx-<n>/")
+    ap.add_argument("--keep-runs", default=None,
+                    help="folder to pickle each simulated twin's runs to (scoring another posterior on them)")
     ap.add_argument("--score-only", action="store_true",
                     help="score the cached twins without simulating the missing ones (a partial result says so)")
     args = ap.parse_args(argv)
@@ -402,7 +412,8 @@ def main(argv=None) -> dict:
                     continue
                 if args.score_only:
                     continue
-                rec = run_twin(pool, exp, truth, 1000 * seed + i, data_preset, approx)
+                keep = Path(args.keep_runs) / f"{name}_{seed}_{i:03d}.pkl" if args.keep_runs else None
+                rec = run_twin(pool, exp, truth, 1000 * seed + i, data_preset, approx, keep)
                 atomic_write_text(path, json.dumps(rec, default=float))
                 records.append(rec)
                 simulated += 1

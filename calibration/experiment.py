@@ -91,6 +91,7 @@ class ExperimentSpec:
     replicates: int = 0
     smoothing: object = "loo"
     self_calibrate: bool = False
+    emulator_error: str = "ar1"
 
     @classmethod
     def from_config(cls, name: str, exp: Mapping, sensitivity_report: Mapping | str | None = None) -> "ExperimentSpec":
@@ -128,7 +129,8 @@ class ExperimentSpec:
                    posterior=str(exp.get("posterior", cls.posterior)), discrepancy=discrepancy_kind(exp),
                    mesh_mode=mesh_mode(exp), replicates=replicate_count(exp),
                    smoothing=emulated.get("smoothing", cls.smoothing),
-                   self_calibrate=bool(emulated.get("self_calibrate", cls.self_calibrate)))
+                   self_calibrate=bool(emulated.get("self_calibrate", cls.self_calibrate)),
+                   emulator_error=str(emulated.get("emulator_error", cls.emulator_error)))
 
     @property
     def transform(self) -> BoxTransform:

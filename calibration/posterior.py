@@ -44,7 +44,8 @@ def sample_posterior(spec: ExperimentSpec, params: Sequence[pd.DataFrame], respo
                               times=obs.time, groups=obs.frame["record"].to_numpy(str),
                               rng=rng_for(spec.seed, "posterior"), start=X[latest], names=list(spec.names),
                               smoothing=spec.smoothing, loo_scale=terms.likelihood().std,
-                              self_calibrate=spec.self_calibrate)
+                              self_calibrate=spec.self_calibrate,
+                              heteroscedastic=spec.emulator_error == "heteroscedastic")
 
 
 def samples_frame(post: EmulatorPosterior) -> pd.DataFrame:

@@ -37,6 +37,7 @@ from .covariance import DenseError, ObservationError
 from .diagnostics import default_names, jsonable
 from .emulated import emulator_error_model
 from .emulator import design_arrays, smoothed_emulator
+from .hetero import HeteroscedasticError
 from .selfcal import self_calibration
 
 __all__ = ["EmulatorPosterior", "emulator_posterior", "interval_summary", "QUANTILES"]
@@ -77,7 +78,7 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
                        names: Sequence[str] | None = None, walkers: int = 32, min_steps: int = 2000,
                        max_steps: int = 40000, min_tau_multiple: float = 50.0, burn_tau: float = 5.0,
                        emulator_error: bool = True, smoothing="loo", loo_scale=None,
-                       self_calibrate: bool = False) -> EmulatorPosterior:
+                       self_calibrate: bool = False, heteroscedastic: bool = False) -> EmulatorPosterior:
     """Sample ``p(theta | d)`` on the emulator of every run (module docstring).
 
     design_params, design_responses : (k, n) / (k, m) every successful run so far (finite curves).
@@ -91,6 +92,9 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
         (as the emulated ES-MDA does, :func:`enkf.emulator.smoothed_emulator`).
     self_calibrate : scale ``R + C_em`` by the factor the latest runs ask for as pseudo-data of known
         parameters (:func:`enkf.selfcal.self_calibration`; needs ``emulator_error``).
+    heteroscedastic : ``C_em`` scaled by ``a(theta)``, the runs' local leave-one-out misfit
+        (:class:`enkf.hetero.HeteroscedasticError`; the log-determinant enters the likelihood, and with
+        ``self_calibrate`` the whole log-likelihood is divided by ``lambda``: a learning rate).
     """
     X, Y, latest, d = design_arrays(design_params, design_responses, latest, obs)
     lo, hi = np.asarray(lower, float), np.asarray(upper, float)
@@ -105,20 +109,33 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
     rng = as_generator(rng)
     em, smoothing_info = smoothed_emulator(X, Y, lo, hi, names, latest, smoothing, loo_scale)
     emu_info = {"n_residuals": 0}
-    C = DenseError(obs_error.dense(), _symmetric=True)
+    if heteroscedastic and not emulator_error:
+        raise ValueError("heteroscedastic scales the emulator's error: it needs emulator_error")
+    C, lam, width = DenseError(obs_error.dense(), _symmetric=True), 1.0, hi - lo
     if emulator_error:
         emu_err, emu_info = emulator_error_model(em.loo_residuals()[latest], times, groups)
-        lam = 1.0
         if self_calibrate:
             emu_info["self_calibration"] = self_calibration(
                 X, Y, latest, obs_error, lower=lo, upper=hi, smoothing=smoothing_info["smoothing"],
-                error_model=lambda r: emulator_error_model(r, times, groups)[0], rng=rng)
+                error_model=lambda r: emulator_error_model(r, times, groups)[0], rng=rng,
+                heteroscedastic=heteroscedastic)
             lam = emu_info["self_calibration"]["lambda"]
         C = DenseError(lam * (obs_error.dense() + emu_err.dense()), _symmetric=True)
-    # L^-1 once: the likelihood is then one matrix product per batch of walkers (a triangular solve per
-    # call costs more in SciPy's wrapper than the product)
-    Linv_T = linalg.solve_triangular(C.cholesky, np.eye(C.m), lower=True).T
-    width = hi - lo
+    if heteroscedastic:
+        het = HeteroscedasticError(obs_error.dense(), emu_err.dense(), (X - lo) / width, em.loo_residuals())
+        emu_info["heteroscedastic"] = het.describe()
+
+        def loglik(P, U):
+            quad, logdet = het.parts(em(P) - d, U)
+            return -0.5 * (quad + logdet) / lam
+    else:
+        # L^-1 once: the likelihood is then one matrix product per batch of walkers (a triangular solve
+        # per call costs more in SciPy's wrapper than the product)
+        Linv_T = linalg.solve_triangular(C.cholesky, np.eye(C.m), lower=True).T
+
+        def loglik(P, U):
+            w = (em(P) - d) @ Linv_T
+            return -0.5 * np.einsum("ij,ij->i", w, w)
 
     def log_prob(U):
         # U: (walkers, n) in the unit box; vectorised over walkers. Outside the box: prior zero.
@@ -126,8 +143,7 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
         lp = np.full(U.shape[0], -np.inf)
         inside = np.all((U >= 0.0) & (U <= 1.0), axis=1)
         if inside.any():
-            w = (em(lo + U[inside] * width) - d) @ Linv_T
-            lp[inside] = -0.5 * np.einsum("ij,ij->i", w, w)
+            lp[inside] = loglik(lo + U[inside] * width, U[inside])
         return lp
 
     P0 = np.array(X[latest] if start is None else start, float, ndmin=2)

@@ -149,3 +149,44 @@ def emulated_esmda_update(design_params, design_responses, latest, obs, obs_erro
                    for j, name in enumerate(names)},
     }
     return EmulatedAnalysis(P_next, jsonable(diagnostics), emu_err)
+
+
+def _gauss_logpdf(r: np.ndarray, C: np.ndarray) -> float:
+    L = np.linalg.cholesky(C)
+    w = np.linalg.solve(L, r)
+    return float(-0.5 * w @ w - np.sum(np.log(np.diag(L))) - 0.5 * r.size * math.log(2 * math.pi))
+
+
+def _modes_plus_ar1(R: np.ndarray, r: int, times, groups) -> np.ndarray:
+    """``U diag(s^2 / k) U^T`` of the residuals' ``r`` leading (uncentred) singular directions, plus the
+    AR(1) model of what they leave (dense)."""
+    if r == 0:
+        return emulator_error_model(R, times, groups)[0].dense()
+    U, s, _ = np.linalg.svd(R.T, full_matrices=False)
+    U, s = U[:, :r], s[:r]
+    rest = R - (R @ U) @ U.T
+    return (U * (s ** 2 / R.shape[0])) @ U.T + emulator_error_model(rest, times, groups)[0].dense()
+
+
+def modal_emulator_error(residuals: np.ndarray, times, groups=None, max_modes: int = 6,
+                         modes: int | None = None) -> tuple[DenseError, dict]:
+    """The emulator's error as a few whole-curve modes plus an AR(1) remainder (development, issue 30).
+
+    Why: an AR(1) with one correlation time counts a departure that moves a whole rise (a mesh
+    realization's stiffness) or a whole post-peak as many independent ones. The leading singular
+    directions of the leave-one-out residuals carry such departures with their own variance, counted
+    once. ``modes`` (default: chosen) is the number kept: the value in ``0 .. max_modes`` (at most
+    ``k - 3``) with the highest leave-one-residual-out Gaussian log density.
+    """
+    R = np.array(residuals, dtype=float, ndmin=2)
+    k = R.shape[0]
+    top = max(0, min(int(max_modes), k - 3))
+    scores = []
+    if modes is None:
+        for r in range(top + 1):
+            scores.append(sum(_gauss_logpdf(R[i], _modes_plus_ar1(np.delete(R, i, axis=0), r, times, groups))
+                              for i in range(k)))
+        modes = int(np.argmax(scores))
+    C = _modes_plus_ar1(R, int(modes), times, groups)
+    return DenseError(C, _symmetric=True), {"modes": int(modes), "cv_log_density": scores,
+                                            "rms": float(np.sqrt(np.mean(np.diag(C))))}

@@ -32,6 +32,7 @@ from scipy import linalg, optimize, stats
 from ._rng import RngLike, as_generator
 from .covariance import ObservationError
 from .emulator import CurveEmulator
+from .hetero import HeteroscedasticError
 from .sampling import latin_hypercube
 
 __all__ = ["pseudo_runs", "self_calibration"]
@@ -65,9 +66,28 @@ def pseudo_runs(X, Y, latest, obs_error: ObservationError, *, lower, upper, smoo
         yield i, em, C, Y[i] + L_R @ rng.standard_normal(Y.shape[1])
 
 
+def _deviance(em, C, R, C_em, X_keep, lo, hi, heteroscedastic: bool):
+    """``theta -> -2 log p(y | theta) + const`` of the emulated likelihood on ``em`` with covariance ``C``
+    (``R + C_em``), or ``R + a(theta) C_em`` (:class:`enkf.hetero.HeteroscedasticError`)."""
+    if heteroscedastic:
+        het = HeteroscedasticError(R, C_em(), (X_keep - lo) / (hi - lo), em.loo_residuals())
+
+        def dev(P, y):
+            P = np.atleast_2d(P)
+            quad, logdet = het.parts(em(P) - y, (P - lo) / (hi - lo))
+            return quad + logdet
+        return dev
+    L = linalg.cholesky(C, lower=True)
+
+    def chi2(P, y):
+        w = linalg.solve_triangular(L, (em(np.atleast_2d(P)) - y).T, lower=True)
+        return np.sum(w * w, axis=0)
+    return chi2
+
+
 def self_calibration(X, Y, latest, obs_error: ObservationError, *, lower, upper, smoothing: float,
                      error_model: Callable[[np.ndarray], ObservationError], rng: RngLike,
-                     search_points: int = 1000) -> dict:
+                     search_points: int = 1000, heteroscedastic: bool = False) -> dict:
     """``lambda`` and its evidence (module docstring).
 
     X, Y : (k, n) / (k, m) every run of the emulator's design; ``latest`` (k,) bool: the runs used as
@@ -77,6 +97,8 @@ def self_calibration(X, Y, latest, obs_error: ObservationError, *, lower, upper,
     smoothing : the analysis' RBF smoothing (kept fixed: choosing it anew per run would be another fit).
     error_model : ``residuals (j, m) -> C_em``, the analysis' model of the emulator's error.
     search_points : size of the Latin hypercube each minimum is searched from.
+    heteroscedastic : the likelihood with ``C_em`` scaled by the runs' local misfit
+        (:mod:`enkf.hetero`); ``delta`` is then the deviance's (log-determinant included).
     """
     X, Y = np.asarray(X, float), np.asarray(Y, float)
     latest = np.asarray(latest, bool)
@@ -88,14 +110,15 @@ def self_calibration(X, Y, latest, obs_error: ObservationError, *, lower, upper,
         raise ValueError(f"self-calibration needs at least 3 latest runs and {n + 3} runs; got {idx.size} "
                          f"and {X.shape[0]}")
     starts = np.vstack([latin_hypercube(lo, hi, search_points, rng), X[latest]])
-    deltas = []
+    deltas, R = [], obs_error.dense()
     for i, em, C, y in pseudo_runs(X, Y, latest, obs_error, lower=lo, upper=hi, smoothing=smoothing,
                                    error_model=error_model, rng=rng):
-        L = linalg.cholesky(C, lower=True)
+        keep = np.arange(X.shape[0]) != i
+        dev = _deviance(em, C, R, lambda em=em, keep=keep: error_model(em.loo_residuals()[latest[keep]]).dense(),
+                        X[keep], lo, hi, heteroscedastic)
 
-        def chi2(P, em=em, L=L, y=y):
-            w = linalg.solve_triangular(L, (em(np.atleast_2d(P)) - y).T, lower=True)
-            return np.sum(w * w, axis=0)
+        def chi2(P, dev=dev, y=y):
+            return dev(P, y)
 
         deltas.append(max(0.0, float(chi2(X[i])[0]) - _min_chi2(chi2, lo, hi, starts)))
     deltas = np.array(deltas)
