@@ -26,7 +26,9 @@ other seeds (``--seed``); the committed JSON is the default twin's, seeds 40 and
 ``posterior: emulator_mcmc`` with ``emulated.self_calibrate`` (:mod:`enkf.selfcal`); ``reported_posterior``
 in the JSON names it, and the table in the README is of that posterior (``summary_emulator_mcmc``), the
 last simulated ensemble scored beside it (``summary``). ``--no-self-calibrate`` scores the emulator
-posterior without the scaling (its own cache folder).
+posterior without the scaling and ``--emulator-error heteroscedastic`` with the emulator's error scaled
+across the box (:mod:`enkf.hetero`), each in its own cache folder; with ``--keep-runs`` both read the
+runs a first call pickled there, so that reported posteriors are compared on the same twins.
 
 Per set: coverage of the 50 % and 90 % intervals per parameter with Clopper-Pearson 95 % intervals;
 simulation-based-calibration ranks (the fraction of posterior members below the truth, randomised
@@ -55,6 +57,7 @@ import argparse
 import json
 import os
 import time
+from dataclasses import fields, replace
 
 # One BLAS thread per process: the pool's workers and the analysis share the cores, and threaded BLAS
 # on a busy machine made each small solve 100 times slower (an RBF fit of 100 runs: 113 ms against 0.9 ms).
@@ -102,20 +105,34 @@ def _simulate(task):
     return curve_on_grid(out.columns["time_s"], out.columns["stress_Pa"], grid)
 
 
+def _same_spec(a, b) -> bool:
+    return all(np.array_equal(x, y) if isinstance(x, np.ndarray) else x == y
+               for x, y in ((getattr(a, f.name), getattr(b, f.name)) for f in fields(a)))
+
+
 def run_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: str, approx=None,
              keep: Path | None = None) -> dict:
     """One twin through the workflow's analysis steps, with the workflow's mesh realizations (the
     truth on its own, the members per ``simulation.mesh_realizations``) and replicates at each
     iteration's ensemble mean; the reported posterior's numbers. ``approx``: ``(offset, M, info)`` of
     :func:`approximation_pairs`, applied to the twin's data (None: the data as observed). ``keep``: a
-    file to pickle the twin's runs to (``(spec, params, responses, analyses, obs)``), so that another
-    reported posterior can be scored on the same runs without simulating them again."""
-    spec, params, responses, analyses, obs = simulate_twin(pool, exp, truth, seed, data_preset, approx)
-    if keep is not None:
-        import pickle
+    file to pickle the twin's runs to (``(spec, params, responses, analyses, obs)``); where it exists the
+    runs are read from it instead (another reported posterior scored on the same runs: only the settings
+    the loop does not read, ``self_calibrate`` and ``emulator_error``, may differ from the runs' own)."""
+    import pickle
 
-        keep.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write_bytes(keep, pickle.dumps((spec, params, responses, analyses, obs)))
+    if keep is not None and keep.is_file():
+        spec, params, responses, analyses, obs = pickle.loads(keep.read_bytes())
+        # only what the loop does not read may differ from the runs' own settings
+        spec = replace(spec, self_calibrate=exp.get("emulated", {}).get("self_calibrate", False),
+                       emulator_error=exp.get("emulated", {}).get("emulator_error", "ar1"))
+        if not _same_spec(spec, ExperimentSpec.from_config(EXPERIMENT, {**exp, "seed": seed})):
+            raise SystemExit(f"{keep}: its runs were made with another loop than this twin's")
+    else:
+        spec, params, responses, analyses, obs = simulate_twin(pool, exp, truth, seed, data_preset, approx)
+        if keep is not None:
+            keep.parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_bytes(keep, pickle.dumps((spec, params, responses, analyses, obs)))
     names = list(spec.names)
     R, P, alive = reported_ensemble(spec, analyses, params)
     rec = _twin_record(spec, truth, seed, data_preset, P[names].to_numpy(float)[alive], analyses, R)
@@ -354,10 +371,14 @@ def main(argv=None) -> dict:
     ap.add_argument("--coarse-variability", choices=["subtracted", "counted"], default="subtracted",
                     help="observations.model_error.approximation_error.coarse_variability (enkf.approximation); "
                          "counted: the form before 2026-11-28b, whose twins are in <cache>/approx-<n>/")
+    ap.add_argument("--emulator-error", choices=["ar1", "heteroscedastic"], default=None,
+                    help="override emulated.emulator_error (the reported posterior's emulator error, enkf.hetero)")
     ap.add_argument("--keep-runs", default=None,
-                    help="folder to pickle each simulated twin's runs to (scoring another posterior on them)")
+                    help="folder of each twin's runs: pickled there when simulated, read from there when present "
+                         "(another reported posterior scored on the same runs)")
     ap.add_argument("--score-only", action="store_true",
-                    help="score the cached twins without simulating the missing ones (a partial result says so)")
+                    help="score the cached twins (and those whose runs --keep-runs holds) without simulating the "
+                         "missing ones (a partial result says so)")
     args = ap.parse_args(argv)
     exp = twin_experiment()
     if args.mesh:
@@ -370,11 +391,14 @@ def main(argv=None) -> dict:
                            "smoothing": "loo" if args.smoothing == "loo" else float(args.smoothing)}
     if args.no_self_calibrate:
         exp["emulated"] = {**exp.get("emulated", {}), "self_calibrate": False}
+    if args.emulator_error is not None:
+        exp["emulated"] = {**exp.get("emulated", {}), "emulator_error": args.emulator_error}
     spec = ExperimentSpec.from_config(EXPERIMENT, exp)
     # a development run's overrides name its own cache folder, so that it never mixes with the default's
     tag = "_".join(f"{k}-{v}" for k, v in (("mesh", args.mesh), ("replicates", args.replicates),
                                             ("smoothing", args.smoothing),
-                                            ("selfcal", "off" if args.no_self_calibrate else None)) if v is not None)
+                                            ("selfcal", "off" if args.no_self_calibrate else None),
+                                            ("emulator_error", args.emulator_error)) if v is not None)
     # the pairs' curves do not depend on coarse_variability: one file per seed in approx-<n>/, the counted
     # form's twins beside them (its folder from before the subtracted form), the subtracted form's in their own
     approx_tag = f"approx-{args.approximation_pairs}" if args.approximation_pairs else ""
@@ -384,7 +408,7 @@ def main(argv=None) -> dict:
     # the small misspecified set first, so that a run cut short has both
     sets = {"misspecified": (args.misspecified, "standard", args.seed + 1),
             "well_specified": (args.twins, "fast", args.seed)}
-    started, simulated, result = time.time(), 0, {}
+    started, simulated, rescored, result = time.time(), 0, 0, {}
     with get_context("spawn").Pool(max(1, args.cores)) as pool:
         for name, (n, data_preset, seed) in sets.items():
             if n == 0:
@@ -410,13 +434,15 @@ def main(argv=None) -> dict:
                                          "with (add twins on another --seed instead)")
                     records.append(rec)
                     continue
-                if args.score_only:
-                    continue
                 keep = Path(args.keep_runs) / f"{name}_{seed}_{i:03d}.pkl" if args.keep_runs else None
+                if args.score_only and not (keep is not None and keep.is_file()):
+                    continue
+                reused = keep is not None and keep.is_file()
                 rec = run_twin(pool, exp, truth, 1000 * seed + i, data_preset, approx, keep)
                 atomic_write_text(path, json.dumps(rec, default=float))
                 records.append(rec)
-                simulated += 1
+                simulated += not reused
+                rescored += reused
                 print(f"{name} {i + 1}/{n}: {rec['stop_reason']}", file=__import__("sys").stderr, flush=True)
             result[name] = {"planned": n, "complete": len(records) == n,
                             "summary": score(records, spec.lower, spec.upper, spec.names) if records else None,
@@ -431,10 +457,12 @@ def main(argv=None) -> dict:
            "mesh_realizations": exp["simulation"].get("mesh_realizations"),
            "emulator_smoothing": (exp.get("emulated") or {}).get("smoothing", "loo"),
            "self_calibrate": bool((exp.get("emulated") or {}).get("self_calibrate", False)),
+           "emulator_error": (exp.get("emulated") or {}).get("emulator_error", "ar1"),
            "reported_posterior": exp.get("posterior", "ensemble"), "cores": os.cpu_count(),
            "approximation_pairs": args.approximation_pairs,
            "coarse_variability": args.coarse_variability if args.approximation_pairs else None,
            "pool_workers": args.cores, "twins_simulated_this_call": simulated,
+           "twins_scored_from_kept_runs_this_call": rescored,
            "wall_s_this_call": time.time() - started, **result}
     return emit_json(out, args.out)
 

@@ -4,7 +4,7 @@
 The emulated likelihood ``N(d; em(theta), B + C_em)`` (``B = R + D``) models the emulator's leave-one-out
 error at the latest runs as an AR(1) with one correlation time (``ar1``, today's); ``enkf.selfcal`` then
 scales the covariance by one ``lambda``. Two alternatives: ``modes``
-(:func:`enkf.emulated.modal_emulator_error`: the residuals' leading whole-curve modes, their number chosen
+(:func:`modal_emulator_error`: the residuals' leading whole-curve modes, their number chosen
 by leave-one-residual-out likelihood, with an AR(1) remainder) and ``hetero``
 (:class:`enkf.hetero.HeteroscedasticError`: ``C_em`` scaled by a local average of every run's own
 leave-one-out misfit, so the simulator's scatter may differ across the box). Per kept twin and per error
@@ -23,6 +23,7 @@ model, on a ``GRID`` x ``GRID`` grid of the box (uniform prior, exact for the em
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import pickle
 import time
@@ -36,13 +37,55 @@ from scipy import linalg, stats
 
 from calibration.experiment import all_runs
 from calibration.model_error import stored_error
-from enkf.emulated import emulator_error_model, modal_emulator_error
+from enkf.covariance import DenseError
+from enkf.emulated import emulator_error_model
 from enkf.emulator import CurveEmulator, smoothed_emulator
 from enkf.hetero import HeteroscedasticError
 from shpb.atomic import emit_json
 
 GRID = 81
 BENCHMARK_SEEDS = (40, 41, 43, 45, 49, 53, 55)
+
+
+def _gauss_logpdf(r: np.ndarray, C: np.ndarray) -> float:
+    L = np.linalg.cholesky(C)
+    w = np.linalg.solve(L, r)
+    return float(-0.5 * w @ w - np.sum(np.log(np.diag(L))) - 0.5 * r.size * math.log(2 * math.pi))
+
+
+def _modes_plus_ar1(R: np.ndarray, r: int, times, groups) -> np.ndarray:
+    """``U diag(s^2 / k) U^T`` of the residuals' ``r`` leading (uncentred) singular directions, plus the
+    AR(1) model of what they leave (dense)."""
+    if r == 0:
+        return emulator_error_model(R, times, groups)[0].dense()
+    U, s, _ = np.linalg.svd(R.T, full_matrices=False)
+    U, s = U[:, :r], s[:r]
+    rest = R - (R @ U) @ U.T
+    return (U * (s ** 2 / R.shape[0])) @ U.T + emulator_error_model(rest, times, groups)[0].dense()
+
+
+def modal_emulator_error(residuals: np.ndarray, times, groups=None, max_modes: int = 6,
+                         modes: int | None = None) -> tuple[DenseError, dict]:
+    """The emulator's error as a few whole-curve modes plus an AR(1) remainder (the ``modes`` variant).
+
+    Why: an AR(1) with one correlation time counts a departure that moves a whole rise (a mesh
+    realization's stiffness) or a whole post-peak as many independent ones. The leading singular
+    directions of the leave-one-out residuals carry such departures with their own variance, counted
+    once. ``modes`` (default: chosen) is the number kept: the value in ``0 .. max_modes`` (at most
+    ``k - 3``) with the highest leave-one-residual-out Gaussian log density.
+    """
+    R = np.array(residuals, dtype=float, ndmin=2)
+    k = R.shape[0]
+    top = max(0, min(int(max_modes), k - 3))
+    scores = []
+    if modes is None:
+        for r in range(top + 1):
+            scores.append(sum(_gauss_logpdf(R[i], _modes_plus_ar1(np.delete(R, i, axis=0), r, times, groups))
+                              for i in range(k)))
+        modes = int(np.argmax(scores))
+    C = _modes_plus_ar1(R, int(modes), times, groups)
+    return DenseError(C, _symmetric=True), {"modes": int(modes), "cv_log_density": scores,
+                                            "rms": float(np.sqrt(np.mean(np.diag(C))))}
 
 
 def _gaussian(C_em_of):
