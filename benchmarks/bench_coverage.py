@@ -398,7 +398,10 @@ def main(argv=None) -> dict:
     tag = "_".join(f"{k}-{v}" for k, v in (("mesh", args.mesh), ("replicates", args.replicates),
                                             ("smoothing", args.smoothing),
                                             ("selfcal", "off" if args.no_self_calibrate else None),
-                                            ("emulator_error", args.emulator_error)) if v is not None)
+                                            # the heteroscedastic form's twins in a folder of their own
+                                            # (the records beside the tag-less ones are ar1's)
+                                            ("emulator_error", "heteroscedastic" if spec.emulator_error
+                                             == "heteroscedastic" else None)) if v is not None)
     # the pairs' curves do not depend on coarse_variability: one file per seed in approx-<n>/, the counted
     # form's twins beside them (its folder from before the subtracted form), the subtracted form's in their own
     approx_tag = f"approx-{args.approximation_pairs}" if args.approximation_pairs else ""

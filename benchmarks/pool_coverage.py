@@ -25,7 +25,7 @@ from shpb.atomic import emit_json  # noqa: E402
 
 SETTINGS = ("experiment", "method", "ensemble_size", "window_s", "model_error", "mesh_realizations",
             "emulator_smoothing", "self_calibrate", "reported_posterior", "approximation_pairs",
-            "coarse_variability")
+            "coarse_variability", "emulator_error")
 
 
 def setting(bench: dict, key: str):
@@ -33,6 +33,8 @@ def setting(bench: dict, key: str):
     (2026-11-28, seeds 41 and 43) is the form that code had: ``counted``."""
     if key == "coarse_variability" and key not in bench and bench.get("approximation_pairs"):
         return "counted"
+    if key == "emulator_error" and key not in bench:
+        return "ar1"  # the only form before 2026-11-28d
     if key == "model_error" and bench.get(key):
         # the twin block's approximation_error is off in every set (the bench sets it per set: the keys
         # approximation_pairs and coarse_variability); JSONs made before 2026-11-28c recorded it with

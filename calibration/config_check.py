@@ -113,6 +113,10 @@ def _semantic_errors(config: Mapping, base: Path) -> list[str]:
         if (exp.get("emulated") or {}).get("self_calibrate") and exp.get("posterior") != "emulator_mcmc":
             errors.append(f"{where}.emulated.self_calibrate: true scales the reported emulator posterior's "
                           f"likelihood and needs posterior: emulator_mcmc (got {exp.get('posterior', 'ensemble')})")
+        if (exp.get("emulated") or {}).get("emulator_error", "ar1") != "ar1" and exp.get("posterior") != "emulator_mcmc":
+            errors.append(f"{where}.emulated.emulator_error: {exp['emulated']['emulator_error']} models the reported "
+                          f"emulator posterior's error and needs posterior: emulator_mcmc "
+                          f"(got {exp.get('posterior', 'ensemble')})")
         obs = exp.get("observations", {})
         sim = exp.get("simulation", {})
         t0, t1 = obs.get("t_start", 0.0), obs.get("t_end")
