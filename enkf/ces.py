@@ -14,7 +14,9 @@ with ``f_em`` the interpolating emulator of every successful run (:class:`enkf.e
 runs of the last iteration (where the posterior is), per time with AR(1) correlation
 (:func:`enkf.emulated.emulator_error_model`). ``C_em`` also carries the simulator's own ruggedness (the
 scatter of neighbouring runs), so the intervals admit what no smooth model can fit. The prior is the
-uniform box of the calibration (the LHS prior).
+uniform box of the calibration (the LHS prior). With ``heteroscedastic`` the emulator's error is
+``a(theta) C_em``, scaled by the runs' own local misfit (:mod:`enkf.hetero`): the simulator's
+scatter differs across the box.
 
 Sampler: ``emcee``'s affine-invariant ensemble sampler (Foreman-Mackey et al. 2013), in unit-box
 coordinates (so no parameter's units dominate), walkers started from the last ensemble. The chain is
@@ -120,7 +122,8 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
                 error_model=lambda r: emulator_error_model(r, times, groups)[0], rng=rng,
                 heteroscedastic=heteroscedastic)
             lam = emu_info["self_calibration"]["lambda"]
-        C = DenseError(lam * (obs_error.dense() + emu_err.dense()), _symmetric=True)
+        if not heteroscedastic:
+            C = DenseError(lam * (obs_error.dense() + emu_err.dense()), _symmetric=True)
     if heteroscedastic:
         het = HeteroscedasticError(obs_error.dense(), emu_err.dense(), (X - lo) / width, em.loo_residuals())
         emu_info["heteroscedastic"] = het.describe()

@@ -20,6 +20,8 @@ posterior's learning rate ``1 / lambda`` so that its credible regions cover (Syr
 with the simulator's own runs as the replicates of known truth. The median, not the mean or a high
 quantile: 25 runs give it to about +-30 % and a run at the box's edge (a truncated region) does not move
 it. ``lambda`` is never below 1: a likelihood that looks too wide on 25 runs is left as it is.
+With the heteroscedastic likelihood (:mod:`enkf.hetero`, ``C_em`` scaled by ``a(theta)``) ``delta`` is the
+deviance's, log-determinant included, and ``1 / lambda`` multiplies the whole log-likelihood.
 """
 
 from __future__ import annotations

@@ -38,27 +38,38 @@ def reported(bench: dict, name: str) -> dict:
     return bench[name]["summary_emulator_mcmc"] if mcmc else bench[name]["summary"]
 
 
+def _form(entry: dict) -> str:
+    """The reported posterior's emulator error (``ar1``, the only form before the key existed)."""
+    return entry.get("emulator_error") or "ar1"
+
+
 def _label(entry: dict) -> str:
     if entry.get("set") is None:
-        return entry["name"].replace("_", "-")
+        seeds = sorted({t["seed"] // 1000 for t in entry["twins"]})
+        return f"{entry['name'].replace('_', '-')}, seed{'s' * (len(seeds) > 1)} {', '.join(map(str, seeds))}, {_form(entry)}"
     seeds = sorted({s // 1000 for v in entry["sources"].values() for s in v["twin_seeds"]})
     extra = ""
     if entry.get("approximation_pairs"):
         # a pooled JSON from before coarse_variability existed holds the form that code had
         extra = (f" + approximation error ({entry['approximation_pairs']} pairs, "
                  f"{entry.get('coarse_variability') or 'counted'})")
-    return f"{entry['set']}{extra}, seeds {', '.join(map(str, seeds))}"
+    return f"{entry['set']}{extra}, seeds {', '.join(map(str, seeds))}, {_form(entry)}"
 
 
 def _sets(bench: dict, pooled: list) -> list:
     """``[(label, reported summary, ensemble summary, planned-note)]``: the bench's well-specified set and
-    either its misspecified set or, given pooled JSONs (``benchmarks/pool_coverage.py``), those."""
+    either its misspecified set or, given pooled JSONs (``benchmarks/pool_coverage.py``), those; a further
+    bench_coverage JSON among ``pooled`` adds its well-specified set (another seed or emulator error)."""
     out = []
-    for name in ("well_specified", "misspecified"):
-        if name not in bench or not bench[name]["twins"] or (name == "misspecified" and pooled):
-            continue
-        done = "" if bench[name].get("complete", True) else f" of {bench[name]['planned']} planned"
-        out.append((_label({"name": name}), reported(bench, name), bench[name]["summary"], done))
+    extra = [b for b in pooled if b.get("benchmark") == "bench_coverage"]
+    pooled = [b for b in pooled if b.get("benchmark") != "bench_coverage"]
+    for b, names in ((bench, ("well_specified", "misspecified")), *((b, ("well_specified",)) for b in extra)):
+        for name in names:
+            if name not in b or not b[name]["twins"] or (name == "misspecified" and pooled):
+                continue
+            done = "" if b[name].get("complete", True) else f" of {b[name]['planned']} planned"
+            out.append((_label({"name": name, "twins": b[name]["twins"], "emulator_error": b.get("emulator_error")}),
+                        reported(b, name), b[name]["summary"], done))
     for entry in pooled:
         mcmc = entry.get("reported_posterior") == "emulator_mcmc"
         out.append((_label(entry), entry["summary_emulator_mcmc"] if mcmc else entry["summary"], entry["summary"], ""))
@@ -90,6 +101,7 @@ def table(bench: dict, source: str, pooled: list | None = None, pooled_sources: 
     posterior = bench.get("reported_posterior", "ensemble")
     if posterior == "emulator_mcmc":
         posterior += " with self-calibration" if bench.get("self_calibrate") else ""
+        posterior += "; a row's label ends with its emulator error, `ar1` or `heteroscedastic`"
     also = "".join(f", `{x}`" for x in pooled_sources)
     head = (f"From `{source}`{also} ({bench['method']}, N = {bench['ensemble_size']}, window "
             f"{bench['window_s'][0] * 1e6:.0f}-{bench['window_s'][1] * 1e6:.0f} us; reported posterior: {posterior}; "
@@ -140,7 +152,8 @@ def _reference_line(bench: dict, sets: list) -> str:
 
 def block(path: str, *pooled_paths: str) -> str:
     """The README block from the benchmark JSON ``path`` and, optionally, pooled misspecified sets
-    (``benchmarks/pool_coverage.py`` JSONs), which then replace the benchmark's own misspecified row."""
+    (``benchmarks/pool_coverage.py`` JSONs), which then replace the benchmark's own misspecified row, and
+    further bench_coverage JSONs whose well-specified sets are added as rows."""
     bench = json.loads((ROOT / path).read_text())
     pooled = [json.loads((ROOT / q).read_text()) for q in pooled_paths]
     return f"{START}\n{table(bench, path, pooled, pooled_paths)}\n{END}"
