@@ -200,3 +200,19 @@ def test_pooling_refuses_json_of_different_forms():
     b = dict(a, coarse_variability="counted")
     with pytest.raises(SystemExit, match=r"twin settings \['coarse_variability'\] differ"):
         pool("misspecified", {"a.json": a, "b.json": b})
+
+
+def test_kept_runs_are_reused_only_for_the_same_loop():
+    # bench_coverage --keep-runs scores another reported posterior on a twin's kept runs; a kept file of
+    # another loop (another seed, another ensemble size) is refused
+    from dataclasses import replace
+
+    from calibration.experiment import ExperimentSpec
+
+    from benchmarks import bench_coverage as bc
+
+    spec = ExperimentSpec.from_config(bc.EXPERIMENT, {**bc.twin_experiment(), "seed": 60003})
+    assert bc._same_spec(spec, replace(spec))
+    assert not bc._same_spec(spec, replace(spec, seed=60004))
+    assert not bc._same_spec(spec, replace(spec, ensemble_size=24))
+    assert not bc._same_spec(spec, replace(spec, lower=spec.lower * 1.01))

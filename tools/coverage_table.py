@@ -45,8 +45,9 @@ def _form(entry: dict) -> str:
 
 def _label(entry: dict) -> str:
     if entry.get("set") is None:
-        seeds = sorted({t["seed"] // 1000 for t in entry["twins"]})
-        return f"{entry['name'].replace('_', '-')}, seed{'s' * (len(seeds) > 1)} {', '.join(map(str, seeds))}, {_form(entry)}"
+        seeds = sorted({t["seed"] // 1000 for t in entry["twins"] if "seed" in t})
+        where = f", seed{'s' * (len(seeds) > 1)} {', '.join(map(str, seeds))}" if seeds else ""
+        return f"{entry['name'].replace('_', '-')}{where}, {_form(entry)}"
     seeds = sorted({s // 1000 for v in entry["sources"].values() for s in v["twin_seeds"]})
     extra = ""
     if entry.get("approximation_pairs"):
