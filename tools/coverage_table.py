@@ -44,32 +44,39 @@ def _form(entry: dict) -> str:
 
 
 def _label(entry: dict) -> str:
-    if entry.get("set") is None:
-        seeds = sorted({t["seed"] // 1000 for t in entry["twins"] if "seed" in t})
-        where = f", seed{'s' * (len(seeds) > 1)} {', '.join(map(str, seeds))}" if seeds else ""
-        return f"{entry['name'].replace('_', '-')}{where}, {_form(entry)}"
-    seeds = sorted({s // 1000 for v in entry["sources"].values() for s in v["twin_seeds"]})
     extra = ""
     if entry.get("approximation_pairs"):
         # a pooled JSON from before coarse_variability existed holds the form that code had
         extra = (f" + approximation error ({entry['approximation_pairs']} pairs, "
                  f"{entry.get('coarse_variability') or 'counted'})")
+    if entry.get("set") is None:
+        seeds = sorted({t["seed"] // 1000 for t in entry["twins"] if "seed" in t})
+        where = f", seed{'s' * (len(seeds) > 1)} {', '.join(map(str, seeds))}" if seeds else ""
+        return f"{entry['name'].replace('_', '-')}{extra}{where}, {_form(entry)}"
+    seeds = sorted({s // 1000 for v in entry["sources"].values() for s in v["twin_seeds"]})
     return f"{entry['set']}{extra}, seeds {', '.join(map(str, seeds))}, {_form(entry)}"
 
 
 def _sets(bench: dict, pooled: list) -> list:
     """``[(label, reported summary, ensemble summary, planned-note)]``: the bench's well-specified set and
     either its misspecified set or, given pooled JSONs (``benchmarks/pool_coverage.py``), those; a further
-    bench_coverage JSON among ``pooled`` adds its well-specified set (another seed or emulator error)."""
+    bench_coverage JSON among ``pooled`` adds its well-specified set (another seed or emulator error), or
+    its misspecified set when it ran no well-specified twins."""
     out = []
     extra = [b for b in pooled if b.get("benchmark") == "bench_coverage"]
     pooled = [b for b in pooled if b.get("benchmark") != "bench_coverage"]
-    for b, names in ((bench, ("well_specified", "misspecified")), *((b, ("well_specified",)) for b in extra)):
-        for name in names:
-            if name not in b or not b[name]["twins"] or (name == "misspecified" and pooled):
+    for b in (bench, *extra):
+        for name in ("well_specified", "misspecified"):
+            # an extra JSON's misspecified set is a row of its own only in a misspecified-only run
+            # (--twins 0); otherwise the pooled misspecified JSONs hold it
+            only_mis = not (b.get("well_specified") or {}).get("twins")
+            if name not in b or not b[name]["twins"] or (name == "misspecified" and pooled
+                                                           and (b is bench or not only_mis)):
                 continue
             done = "" if b[name].get("complete", True) else f" of {b[name]['planned']} planned"
-            out.append((_label({"name": name, "twins": b[name]["twins"], "emulator_error": b.get("emulator_error")}),
+            approx = {k: b.get(k) for k in ("approximation_pairs", "coarse_variability")} if name == "misspecified" else {}
+            out.append((_label({"name": name, "twins": b[name]["twins"], "emulator_error": b.get("emulator_error"),
+                                **approx}),
                         reported(b, name), b[name]["summary"], done))
     for entry in pooled:
         mcmc = entry.get("reported_posterior") == "emulator_mcmc"
@@ -154,7 +161,7 @@ def _reference_line(bench: dict, sets: list) -> str:
 def block(path: str, *pooled_paths: str) -> str:
     """The README block from the benchmark JSON ``path`` and, optionally, pooled misspecified sets
     (``benchmarks/pool_coverage.py`` JSONs), which then replace the benchmark's own misspecified row, and
-    further bench_coverage JSONs whose well-specified sets are added as rows."""
+    further bench_coverage JSONs whose sets are added as rows."""
     bench = json.loads((ROOT / path).read_text())
     pooled = [json.loads((ROOT / q).read_text()) for q in pooled_paths]
     return f"{START}\n{table(bench, path, pooled, pooled_paths)}\n{END}"
