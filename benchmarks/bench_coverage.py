@@ -56,6 +56,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import pickle
 import time
 from dataclasses import fields, replace
 
@@ -119,14 +120,11 @@ def run_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: str, ap
     file to pickle the twin's runs to (``(spec, params, responses, analyses, obs)``); where it exists the
     runs are read from it instead (another reported posterior scored on the same runs: only the settings
     the loop does not read, ``self_calibrate`` and ``emulator_error``, may differ from the runs' own)."""
-    import pickle
-
     if keep is not None and keep.is_file():
-        spec, params, responses, analyses, obs = pickle.loads(keep.read_bytes())
+        kept, params, responses, analyses, obs = pickle.loads(keep.read_bytes())
         # only what the loop does not read may differ from the runs' own settings
-        spec = replace(spec, self_calibrate=exp.get("emulated", {}).get("self_calibrate", False),
-                       emulator_error=exp.get("emulated", {}).get("emulator_error", "ar1"))
-        if not _same_spec(spec, ExperimentSpec.from_config(EXPERIMENT, {**exp, "seed": seed})):
+        spec = ExperimentSpec.from_config(EXPERIMENT, {**exp, "seed": seed})
+        if not _same_spec(replace(kept, self_calibrate=spec.self_calibrate, emulator_error=spec.emulator_error), spec):
             raise SystemExit(f"{keep}: its runs were made with another loop than this twin's")
     else:
         spec, params, responses, analyses, obs = simulate_twin(pool, exp, truth, seed, data_preset, approx)

@@ -40,7 +40,7 @@ from calibration.model_error import stored_error
 from enkf.covariance import DenseError
 from enkf.emulated import emulator_error_model
 from enkf.emulator import CurveEmulator, smoothed_emulator
-from enkf.hetero import HeteroscedasticError
+from enkf.hetero import emulated_deviance
 from shpb.atomic import emit_json
 
 GRID = 81
@@ -93,27 +93,19 @@ def _gaussian(C_em_of):
     def build(em, X, latest, B, lo, hi):
         L = linalg.cholesky(B + C_em_of(em.loo_residuals()[latest]).dense(), lower=True)
 
-        def parts(P, y):
-            out = []
-            for i in range(0, P.shape[0], 2000):
-                w = linalg.solve_triangular(L, (em(P[i:i + 2000]) - y).T, lower=True)
-                out.append(np.sum(w * w, axis=0))
-            quad = np.concatenate(out)
-            return quad, np.zeros_like(quad)
-        return parts, {}
+        def deviance(P, y):
+            w = linalg.solve_triangular(L, (em(np.atleast_2d(P)) - y).T, lower=True)
+            return np.sum(w * w, axis=0)
+        return deviance, {}
     return build
 
 
 def _hetero(times, groups):
+    """The workflow's heteroscedastic likelihood (:func:`enkf.hetero.emulated_deviance`)."""
     def build(em, X, latest, B, lo, hi):
         C_em = emulator_error_model(em.loo_residuals()[latest], times, groups)[0].dense()
-        h = HeteroscedasticError(B, C_em, (X - lo) / (hi - lo), em.loo_residuals())
-
-        def parts(P, y):
-            q, ld = zip(*(h.parts(em(P[i:i + 2000]) - y, (P[i:i + 2000] - lo) / (hi - lo))
-                          for i in range(0, P.shape[0], 2000)))
-            return np.concatenate(q), np.concatenate(ld)
-        return parts, {"bandwidth": h.bandwidth, "scale_range": [float(h.q.min()), float(h.q.max())]}
+        deviance, h = emulated_deviance(em, B, C_em, X, lo, hi)
+        return deviance, {"bandwidth": h.bandwidth, "scale_range": [float(h.q.min()), float(h.q.max())]}
     return build
 
 
@@ -159,19 +151,16 @@ def twin(spec, params, responses, analyses, obs, truth, seed):
             em_i = CurveEmulator(X[keep], Y[keep], lo, hi, smoothing=info["smoothing"])
             dev_i, _ = build(em_i, X[keep], latest[keep], B, lo, hi)
             y = Y[i] + L_B @ rng.standard_normal(Y.shape[1])
-            qd, ld = dev_i(G, y)
-            q0, l0 = dev_i(X[i][None, :], y)
-            runs.append((X[i], qd, ld, max(0.0, float(q0[0] + l0[0]) - float(np.min(qd + ld)))))
-        deltas = np.array([r[3] for r in runs])
+            dv = dev_i(G, y)
+            runs.append((X[i], dv, max(0.0, float(dev_i(X[i], y)[0]) - float(dv.min()))))
+        deltas = np.array([r[2] for r in runs])
         # lambda is a learning rate 1 / lambda on the whole log-likelihood (a generalized posterior: the
         # log-determinant's information is over-counted as much as the quadratic form's)
         lams = [max(1.0, float(np.median(np.delete(deltas, i)) / c50)) for i in range(len(runs))]
-        inside = [[c for c, _ in _inside(axes, (qd + ld) / lams[i], theta)]
-                  for i, (theta, qd, ld, _) in enumerate(runs)]
+        inside = [[c for c, _ in _inside(axes, dv / lams[i], theta)] for i, (theta, dv, _) in enumerate(runs)]
         lam = max(1.0, float(np.median(deltas) / c50))
         dev, extra = build(em, X, latest, B, lo, hi)
-        qd, ld = dev(G, obs.values)
-        tr = _inside(axes, (qd + ld) / lam, truth)
+        tr = _inside(axes, dev(G, obs.values) / lam, truth)
         out[label] = {"lambda": lam, "runs_inside_90": dict(zip(names, np.mean(inside, axis=0).tolist())),
                       "truth_inside_90": {p: tr[j][0] for j, p in enumerate(names)},
                       "width_90_over_box": {p: tr[j][1] / (hi[j] - lo[j]) for j, p in enumerate(names)}, **extra}

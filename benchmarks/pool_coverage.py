@@ -35,6 +35,8 @@ def setting(bench: dict, key: str):
         return "counted"
     if key == "emulator_error" and key not in bench:
         return "ar1"  # the only form before 2026-11-28d
+    if key == "approximation_pairs":
+        return bench.get(key) or 0  # absent before the option existed: none
     if key == "model_error" and bench.get(key):
         # the twin block's approximation_error is off in every set (the bench sets it per set: the keys
         # approximation_pairs and coarse_variability); JSONs made before 2026-11-28c recorded it with

@@ -110,13 +110,15 @@ def _semantic_errors(config: Mapping, base: Path) -> list[str]:
         if params and n_members <= len(params) and not auto:
             errors.append(f"{where}.ensemble_size: {n_members} members cannot span {len(params)} parameters; "
                           f"use more than {len(params)}")
-        if (exp.get("emulated") or {}).get("self_calibrate") and exp.get("posterior") != "emulator_mcmc":
-            errors.append(f"{where}.emulated.self_calibrate: true scales the reported emulator posterior's "
-                          f"likelihood and needs posterior: emulator_mcmc (got {exp.get('posterior', 'ensemble')})")
-        if (exp.get("emulated") or {}).get("emulator_error", "ar1") != "ar1" and exp.get("posterior") != "emulator_mcmc":
-            errors.append(f"{where}.emulated.emulator_error: {exp['emulated']['emulator_error']} models the reported "
-                          f"emulator posterior's error and needs posterior: emulator_mcmc "
-                          f"(got {exp.get('posterior', 'ensemble')})")
+        emulated = exp.get("emulated") or {}
+        # settings of the reported emulator posterior alone: without it they would silently do nothing
+        for key, on, what in (("self_calibrate", emulated.get("self_calibrate"), "true scales the reported "
+                               "emulator posterior's likelihood"),
+                              ("emulator_error", emulated.get("emulator_error", "ar1") != "ar1",
+                               f"{emulated.get('emulator_error')} models the reported emulator posterior's error")):
+            if on and exp.get("posterior") != "emulator_mcmc":
+                errors.append(f"{where}.emulated.{key}: {what} and needs posterior: emulator_mcmc "
+                              f"(got {exp.get('posterior', 'ensemble')})")
         obs = exp.get("observations", {})
         sim = exp.get("simulation", {})
         t0, t1 = obs.get("t_start", 0.0), obs.get("t_end")

@@ -39,7 +39,7 @@ from .covariance import DenseError, ObservationError
 from .diagnostics import default_names, jsonable
 from .emulated import emulator_error_model
 from .emulator import design_arrays, smoothed_emulator
-from .hetero import HeteroscedasticError
+from .hetero import emulated_deviance
 from .selfcal import self_calibration
 
 __all__ = ["EmulatorPosterior", "emulator_posterior", "interval_summary", "QUANTILES"]
@@ -113,7 +113,7 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
     emu_info = {"n_residuals": 0}
     if heteroscedastic and not emulator_error:
         raise ValueError("heteroscedastic scales the emulator's error: it needs emulator_error")
-    C, lam, width = DenseError(obs_error.dense(), _symmetric=True), 1.0, hi - lo
+    lam, width, emu_err = 1.0, hi - lo, None
     if emulator_error:
         emu_err, emu_info = emulator_error_model(em.loo_residuals()[latest], times, groups)
         if self_calibrate:
@@ -122,21 +122,19 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
                 error_model=lambda r: emulator_error_model(r, times, groups)[0], rng=rng,
                 heteroscedastic=heteroscedastic)
             lam = emu_info["self_calibration"]["lambda"]
-        if not heteroscedastic:
-            C = DenseError(lam * (obs_error.dense() + emu_err.dense()), _symmetric=True)
     if heteroscedastic:
-        het = HeteroscedasticError(obs_error.dense(), emu_err.dense(), (X - lo) / width, em.loo_residuals())
+        deviance, het = emulated_deviance(em, obs_error.dense(), emu_err.dense(), X, lo, hi)
         emu_info["heteroscedastic"] = het.describe()
 
-        def loglik(P, U):
-            quad, logdet = het.parts(em(P) - d, U)
-            return -0.5 * (quad + logdet) / lam
+        def loglik(P):
+            return -0.5 * deviance(P, d) / lam
     else:
+        C = DenseError(lam * (obs_error.dense() + (0.0 if emu_err is None else emu_err.dense())), _symmetric=True)
         # L^-1 once: the likelihood is then one matrix product per batch of walkers (a triangular solve
         # per call costs more in SciPy's wrapper than the product)
         Linv_T = linalg.solve_triangular(C.cholesky, np.eye(C.m), lower=True).T
 
-        def loglik(P, U):
+        def loglik(P):
             w = (em(P) - d) @ Linv_T
             return -0.5 * np.einsum("ij,ij->i", w, w)
 
@@ -146,7 +144,7 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
         lp = np.full(U.shape[0], -np.inf)
         inside = np.all((U >= 0.0) & (U <= 1.0), axis=1)
         if inside.any():
-            lp[inside] = loglik(lo + U[inside] * width, U[inside])
+            lp[inside] = loglik(lo + U[inside] * width)
         return lp
 
     P0 = np.array(X[latest] if start is None else start, float, ndmin=2)

@@ -149,4 +149,3 @@ def emulated_esmda_update(design_params, design_responses, latest, obs, obs_erro
                    for j, name in enumerate(names)},
     }
     return EmulatedAnalysis(P_next, jsonable(diagnostics), emu_err)
-

@@ -30,7 +30,7 @@ import math
 import numpy as np
 from scipy import linalg
 
-__all__ = ["BANDWIDTHS", "HeteroscedasticError", "local_scale"]
+__all__ = ["BANDWIDTHS", "HeteroscedasticError", "emulated_deviance", "local_scale"]
 
 #: Kernel bandwidths tried, in unit-box coordinates; ``inf`` is one constant scale over the box.
 BANDWIDTHS = (0.05, 0.1, 0.2, 0.4, math.inf)
@@ -107,3 +107,17 @@ class HeteroscedasticError:
                 "loo_log_density": self.scores,
                 "misfit_q": {"min": float(self.q.min()), "median": float(np.median(self.q)),
                              "max": float(self.q.max())}}
+
+
+def emulated_deviance(em, B, C_em, X, lower, upper):
+    """``(deviance, het)``: ``deviance(P, y)`` (p,) is ``-2 log p(y | theta) + const`` at parameters ``P``
+    (p, n) for the emulator ``em`` (callable on ``P``, with ``loo_residuals()`` at its runs ``X``) under
+    ``B + a(theta) C_em``; ``het`` the :class:`HeteroscedasticError` (its ``describe()`` for the record)."""
+    lo, hi = np.asarray(lower, float), np.asarray(upper, float)
+    het = HeteroscedasticError(B, C_em, (np.asarray(X, float) - lo) / (hi - lo), em.loo_residuals())
+
+    def deviance(P, y):
+        P = np.atleast_2d(P)
+        quad, logdet = het.parts(em(P) - y, (P - lo) / (hi - lo))
+        return quad + logdet
+    return deviance, het

@@ -34,7 +34,7 @@ from scipy import linalg, optimize, stats
 from ._rng import RngLike, as_generator
 from .covariance import ObservationError
 from .emulator import CurveEmulator
-from .hetero import HeteroscedasticError
+from .hetero import emulated_deviance
 from .sampling import latin_hypercube
 
 __all__ = ["pseudo_runs", "self_calibration"]
@@ -70,15 +70,9 @@ def pseudo_runs(X, Y, latest, obs_error: ObservationError, *, lower, upper, smoo
 
 def _deviance(em, C, R, C_em, X_keep, lo, hi, heteroscedastic: bool):
     """``theta -> -2 log p(y | theta) + const`` of the emulated likelihood on ``em`` with covariance ``C``
-    (``R + C_em``), or ``R + a(theta) C_em`` (:class:`enkf.hetero.HeteroscedasticError`)."""
+    (``R + C_em``), or ``R + a(theta) C_em`` (:func:`enkf.hetero.emulated_deviance`)."""
     if heteroscedastic:
-        het = HeteroscedasticError(R, C_em(), (X_keep - lo) / (hi - lo), em.loo_residuals())
-
-        def dev(P, y):
-            P = np.atleast_2d(P)
-            quad, logdet = het.parts(em(P) - y, (P - lo) / (hi - lo))
-            return quad + logdet
-        return dev
+        return emulated_deviance(em, R, C_em(), X_keep, lo, hi)[0]
     L = linalg.cholesky(C, lower=True)
 
     def chi2(P, y):
