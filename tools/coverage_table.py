@@ -2,7 +2,7 @@
 
     python tools/coverage_table.py benchmarks/results/bench_coverage_<date>.json          # print it
     python tools/coverage_table.py benchmarks/results/bench_coverage_<date>.json --readme  # rewrite README's block
-    python tools/coverage_table.py bench.json pooled_a.json pooled_b.json --readme  # pooled misspecified sets
+    python tools/coverage_table.py bench.json pooled_a.json pooled_b.json --readme  # pooled sets (well-specified: the first row)
 
 The block sits between ``<!-- coverage-table:start -->`` and ``<!-- coverage-table:end -->`` in
 README.md; ``tests/test_docs_tables.py`` checks that it equals what this tool makes from the JSON named
@@ -54,12 +54,13 @@ def _label(entry: dict) -> str:
         where = f", seed{'s' * (len(seeds) > 1)} {', '.join(map(str, seeds))}" if seeds else ""
         return f"{entry['name'].replace('_', '-')}{extra}{where}, {_form(entry)}"
     seeds = sorted({s // 1000 for v in entry["sources"].values() for s in v["twin_seeds"]})
-    return f"{entry['set']}{extra}, seeds {', '.join(map(str, seeds))}, {_form(entry)}"
+    return f"{entry['set'].replace('_', '-')}{extra}, seeds {', '.join(map(str, seeds))}, {_form(entry)}"
 
 
 def _sets(bench: dict, pooled: list) -> list:
-    """``[(label, reported summary, ensemble summary, planned-note)]``: the bench's well-specified set and
-    either its misspecified set or, given pooled JSONs (``benchmarks/pool_coverage.py``), those; a further
+    """``[(label, reported summary, ensemble summary, planned-note)]``: pooled well-specified sets
+    (``benchmarks/pool_coverage.py``) first, then the bench's well-specified set and either its
+    misspecified set or, given pooled misspecified JSONs, those; a further
     bench_coverage JSON among ``pooled`` adds its well-specified set (another seed or emulator error), or
     its misspecified set when it ran no well-specified twins."""
     out = []
@@ -78,10 +79,13 @@ def _sets(bench: dict, pooled: list) -> list:
             out.append((_label({"name": name, "twins": b[name]["twins"], "emulator_error": b.get("emulator_error"),
                                 **approx}),
                         reported(b, name), b[name]["summary"], done))
+    lead = []
     for entry in pooled:
         mcmc = entry.get("reported_posterior") == "emulator_mcmc"
-        out.append((_label(entry), entry["summary_emulator_mcmc"] if mcmc else entry["summary"], entry["summary"], ""))
-    return out
+        row = (_label(entry), entry["summary_emulator_mcmc"] if mcmc else entry["summary"], entry["summary"], "")
+        # a pooled well-specified set is the headline: the most twins of the reported form
+        (lead if entry["set"] == "well_specified" else out).append(row)
+    return lead + out
 
 
 def table(bench: dict, source: str, pooled: list | None = None, pooled_sources: tuple = ()) -> str:
@@ -159,9 +163,10 @@ def _reference_line(bench: dict, sets: list) -> str:
 
 
 def block(path: str, *pooled_paths: str) -> str:
-    """The README block from the benchmark JSON ``path`` and, optionally, pooled misspecified sets
-    (``benchmarks/pool_coverage.py`` JSONs), which then replace the benchmark's own misspecified row, and
-    further bench_coverage JSONs whose sets are added as rows."""
+    """The README block from the benchmark JSON ``path`` and, optionally, pooled sets
+    (``benchmarks/pool_coverage.py`` JSONs: a well-specified one leads the table, misspecified ones
+    replace the benchmark's own misspecified row) and further bench_coverage JSONs whose sets are added
+    as rows."""
     bench = json.loads((ROOT / path).read_text())
     pooled = [json.loads((ROOT / q).read_text()) for q in pooled_paths]
     return f"{START}\n{table(bench, path, pooled, pooled_paths)}\n{END}"
