@@ -280,6 +280,14 @@ def reference_coverage(members, a: float, b: float) -> float:
     return float(np.mean((n - 1.0) * (b - a) / (n + 1.0))) if n.size else float("nan")
 
 
+def _by_third(t, inside, lower: float, upper: float) -> list:
+    """90 % coverage of the twins whose truth lies in each third of the box (low to high): where in the
+    box a shortfall lives. A diagnostic, not a bar: even a calibrated posterior covers a truth near a
+    box end less often than one in the middle (its central interval leaves the end out)."""
+    third = np.clip(((t - lower) / (upper - lower) * 3).astype(int), 0, 2)
+    return [{"twins": int(np.sum(third == k)), "covered": int(np.sum(inside & (third == k)))} for k in range(3)]
+
+
 def score(records: list, lower, upper, names) -> dict:
     """Coverage, SBC, widths and the restated bar over a set of twins."""
     n = len(records)
@@ -315,6 +323,7 @@ def score(records: list, lower, upper, names) -> dict:
             # which side the truth falls on: a biased posterior misses on one side only
             "mean_over_truth_median": float(np.median(mean / t)),
             "misses_90": {"truth_above": int(np.sum(t > hi90)), "truth_below": int(np.sum(t < lo90))},
+            "coverage_90_by_box_third": _by_third(t, inside, lower[j], upper[j]),
             "bar": {"within_bar": int(np.sum(near)), "wider_and_covers": int(np.sum(~near & wide & inside)),
                     "fraction_met": float(np.mean(near | (wide & inside)))},
         })

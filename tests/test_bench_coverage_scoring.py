@@ -239,3 +239,23 @@ def test_a_pooled_well_specified_set_leads_the_readme_table():
     assert rows[2].startswith("| well-specified, seed 62, heteroscedastic | 10 |")
     k = pooled["summary_emulator_mcmc"]["params"]["sigma_t"]["coverage_90"]["fraction"]
     assert rows[1].split("|")[4].strip().startswith(f"{100 * k:.0f} %")
+
+
+def test_coverage_by_box_third_finds_where_the_misses_are():
+    """``coverage_90_by_box_third`` counts twins and covered truths per third of the box: shifting the
+    intervals of the twins whose truth lies in the lowest third away from it leaves that third uncovered
+    and the other two as they were."""
+    recs = _records("calibrated", n=300, seed=5)
+    base = score(recs, LOWER, UPPER, NAMES)["params"]["E_t"]["coverage_90_by_box_third"]
+    low = LOWER[1] + (UPPER[1] - LOWER[1]) / 3
+    moved = []
+    for r in recs:
+        q = r["params"]["E_t"]
+        if r["truth"]["E_t"] < low:  # the interval moved wholly above the truth
+            shift = r["truth"]["E_t"] - q["q05"] + 1.0
+            q = {k: (v + shift if k.startswith("q") or k == "mean" else v) for k, v in q.items()}
+        moved.append({**r, "params": {**r["params"], "E_t": q}})
+    out = score(moved, LOWER, UPPER, NAMES)["params"]["E_t"]["coverage_90_by_box_third"]
+    assert [c["twins"] for c in out] == [c["twins"] for c in base] and sum(c["twins"] for c in out) == 300
+    assert out[0]["twins"] > 0 and out[0]["covered"] == 0
+    assert out[1:] == base[1:] and base[0]["covered"] / base[0]["twins"] > 0.6
