@@ -46,8 +46,15 @@ sys.path.insert(0, str(ROOT))
 
 CANDIDATES = ("shipped", "log_Et", "lam_q90", "geo", "bw_ge_0.2", "t10", "prior_pseudo")
 CACHE = ROOT / "benchmarks" / "cache" / "coverage_v3" / "emulator_error-heteroscedastic"
-LOWER = {"sigma_t": 4e6, "E_t": 200.0}  # the twin's Table 2 box
-UPPER = {"sigma_t": 6e7, "E_t": 2400.0}
+
+
+def twin_box() -> tuple[dict, dict]:
+    """``(lower, upper)`` per parameter: the default twin's prior box, from the config."""
+    from benchmarks.bench_coverage import EXPERIMENT, twin_experiment
+    from calibration.experiment import ExperimentSpec
+
+    spec = ExperimentSpec.from_config(EXPERIMENT, twin_experiment())
+    return dict(zip(spec.names, map(float, spec.lower))), dict(zip(spec.names, map(float, spec.upper)))
 
 
 def _log_inputs(flags):
@@ -83,24 +90,9 @@ def _lam_q90():
 def _geo():
     import enkf.hetero as H
 
-    def local_scale(U, Uj, q, h):
-        U = np.atleast_2d(U)
-        if h is None:
-            return np.ones(U.shape[0])
-        w = H._weights(U, Uj, h)
+    def geometric(w, q):
         return np.exp(w @ np.log(q) / np.maximum(w.sum(axis=1), 1e-300))
-
-    def _loo_score(self, h, m, logdet_em):
-        if h is None:
-            a = np.ones(self.q.size)
-        else:
-            w = H._weights(self.U, self.U, h)
-            np.fill_diagonal(w, 0.0)
-            a = np.exp(w @ np.log(self.q) / np.maximum(w.sum(axis=1), 1e-300))
-        a = np.maximum(a, 1e-3)
-        return float(np.sum(-0.5 * (m * self.q / a + m * np.log(a) + logdet_em)))
-    H.local_scale = local_scale
-    H.HeteroscedasticError._loo_score = _loo_score
+    H._average = geometric
 
 
 def _bandwidth_at_least(h0: float):
@@ -128,37 +120,15 @@ def _student_t(nu: float):
 
 def _prior_pseudo(n_first: int):
     """The self-calibration with the first ``n_first`` design rows (iteration 0, the prior's hypercube:
-    ``all_runs`` stacks iterations in order) as pseudo-data; ``C_em`` still from the last iteration."""
-    from scipy import linalg, stats
-
+    ``all_runs`` stacks iterations in order) as pseudo-data (``enkf.selfcal``'s ``pseudo``); ``C_em``
+    still from the last iteration."""
     import enkf.ces as C
     import enkf.selfcal as SC
-    from enkf.emulator import CurveEmulator
-    from enkf.sampling import latin_hypercube
 
-    def self_calibration_p(X, Y, latest, obs_error, *, lower, upper, smoothing, error_model, rng,
-                           search_points=1000, heteroscedastic=False):
-        X, Y, latest = np.asarray(X, float), np.asarray(Y, float), np.asarray(latest, bool)
-        lo, hi = np.asarray(lower, float), np.asarray(upper, float)
-        pseudo = np.zeros(X.shape[0], bool)
+    def self_calibration_p(X, Y, latest, obs_error, **kw):
+        pseudo = np.zeros(np.shape(X)[0], bool)
         pseudo[:n_first] = True
-        starts = np.vstack([latin_hypercube(lo, hi, search_points, rng), X[latest]])
-        R = obs_error.dense()
-        L_R = linalg.cholesky(R, lower=True)
-        deltas = []
-        for i in np.flatnonzero(pseudo):
-            keep = np.arange(X.shape[0]) != i
-            em = CurveEmulator(X[keep], Y[keep], lo, hi, smoothing=smoothing)
-            Cv = R + error_model(em.loo_residuals()[latest[keep]]).dense()
-            y = Y[i] + L_R @ rng.standard_normal(Y.shape[1])
-            dev = SC._deviance(em, Cv, R, lambda em=em, keep=keep: error_model(em.loo_residuals()[latest[keep]]).dense(),
-                               X[keep], lo, hi, heteroscedastic)
-
-            def chi2(P, dev=dev, y=y):
-                return dev(P, y)
-            deltas.append(max(0.0, float(chi2(X[i])[0]) - SC._min_chi2(chi2, lo, hi, starts)))
-        deltas = np.array(deltas)
-        return {"lambda": max(1.0, float(np.median(deltas) / stats.chi2.median(lo.size))), "delta_chi2": deltas.tolist()}
+        return SC.self_calibration(X, Y, latest, obs_error, pseudo=pseudo, **kw)
     C.self_calibration = self_calibration_p
 
 
@@ -189,20 +159,21 @@ def run(candidate: str, runs: Path, seed: int, twins: int) -> list:
     return rows
 
 
-def summarise(rows: list) -> dict:
+def summarise(rows: list, lower: dict, upper: dict) -> dict:
     """90 % and 50 % coverage, per third of the box (bench_coverage's thirds), width over the prior's
-    90 % width, and the side of the misses, per parameter."""
+    90 % width, and the side of the misses, per parameter of the box ``lower`` / ``upper``. (Not
+    ``bench_coverage.score``: the rows keep quantiles only, no sample for the SBC ranks.)"""
     from benchmarks.bench_coverage import _by_third, _ci
 
     out = {"n_twins": len(rows)}
-    for p in LOWER:
+    for p in lower:
         t = np.array([r["truth"][p] for r in rows])
         q = {k: np.array([r[p][k] for r in rows]) for k in ("q05", "q25", "q75", "q95")}
         inside = (q["q05"] <= t) & (t <= q["q95"])
         k50 = int(np.sum((q["q25"] <= t) & (t <= q["q75"])))
         out[p] = {"covered_90": int(inside.sum()), "ci95_90": _ci(int(inside.sum()), t.size), "covered_50": k50,
-                  "coverage_90_by_box_third": _by_third(t, inside, LOWER[p], UPPER[p]),
-                  "width_over_prior_median": float(np.median((q["q95"] - q["q05"]) / (0.9 * (UPPER[p] - LOWER[p])))),
+                  "coverage_90_by_box_third": _by_third(t, inside, lower[p], upper[p]),
+                  "width_over_prior_median": float(np.median((q["q95"] - q["q05"]) / (0.9 * (upper[p] - lower[p])))),
                   "misses_90": {"truth_above": int(np.sum(t > q["q95"])), "truth_below": int(np.sum(t < q["q05"]))}}
     return out
 
@@ -229,10 +200,11 @@ def main(argv=None) -> dict | None:
                                                       "wall_s": time.time() - started, "rows": rows}))
         return None
     out = {"benchmark": "posterior_candidates", "cores": os.cpu_count(), "candidates": {}}
+    box = twin_box()
     for path in args.rows:
         doc = json.loads(Path(path).read_text())
         out["seed"] = doc["seed"]
-        out["candidates"][doc["candidate"]] = {"wall_s": doc.get("wall_s"), **summarise(doc["rows"]),
+        out["candidates"][doc["candidate"]] = {"wall_s": doc.get("wall_s"), **summarise(doc["rows"], *box),
                                                "rows": doc["rows"]}
     return emit_json(out, args.out)
 

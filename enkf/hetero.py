@@ -43,14 +43,19 @@ def _weights(U: np.ndarray, Uj: np.ndarray, h: float) -> np.ndarray:
     return np.exp(-0.5 * d2 / h ** 2)
 
 
+def _average(w: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """The kernel average of the misfits ``q`` (k,) with weights ``w`` (p, k), one per row: the scale's
+    estimator, in one place for the scale and its bandwidth's score."""
+    return w @ q / np.maximum(w.sum(axis=1), 1e-300)
+
+
 def local_scale(U, Uj, q, h: float | None) -> np.ndarray:
     """``a`` at unit-box points ``U`` (p, n) from the runs at ``Uj`` (k, n) with misfits ``q`` (k,);
     ``h`` None: 1 everywhere."""
     U = np.atleast_2d(U)
     if h is None:
         return np.ones(U.shape[0])
-    w = _weights(U, Uj, h)
-    return w @ q / np.maximum(w.sum(axis=1), 1e-300)
+    return _average(_weights(U, Uj, h), q)
 
 
 class HeteroscedasticError:
@@ -87,7 +92,7 @@ class HeteroscedasticError:
         else:
             w = _weights(self.U, self.U, h)
             np.fill_diagonal(w, 0.0)
-            a = w @ self.q / np.maximum(w.sum(axis=1), 1e-300)
+            a = _average(w, self.q)
         a = np.maximum(a, 1e-3)
         return float(np.sum(-0.5 * (m * self.q / a + m * np.log(a) + logdet_em)))
 

@@ -50,18 +50,19 @@ def _min_chi2(chi2: Callable[[np.ndarray], np.ndarray], lo, hi, starts: np.ndarr
 
 
 def pseudo_runs(X, Y, latest, obs_error: ObservationError, *, lower, upper, smoothing: float,
-                error_model: Callable[[np.ndarray], ObservationError], rng: RngLike):
-    """Each latest run as data of known parameters: yields ``(i, em, C, y)``, ``em`` the emulator of the
-    other runs, ``C = R + C_em`` (``C_em`` from ``em``'s leave-one-out residuals at the other latest runs,
-    as the analysis measures it) and ``y`` run ``i``'s curve plus a draw of ``R`` (one draw per run, in
-    the order of the runs)."""
+                error_model: Callable[[np.ndarray], ObservationError], rng: RngLike, pseudo=None):
+    """Each latest run (each run ``pseudo`` flags, where given) as data of known parameters: yields
+    ``(i, em, C, y)``, ``em`` the emulator of the other runs, ``C = R + C_em`` (``C_em`` from ``em``'s
+    leave-one-out residuals at the other latest runs, as the analysis measures it) and ``y`` run ``i``'s
+    curve plus a draw of ``R`` (one draw per run, in the order of the runs)."""
     X, Y = np.asarray(X, float), np.asarray(Y, float)
     latest = np.asarray(latest, bool)
+    pseudo = latest if pseudo is None else np.asarray(pseudo, bool)
     lo, hi = np.asarray(lower, float), np.asarray(upper, float)
     rng = as_generator(rng)
     R = obs_error.dense()
     L_R = linalg.cholesky(R, lower=True)
-    for i in np.flatnonzero(latest):
+    for i in np.flatnonzero(pseudo):
         keep = np.arange(X.shape[0]) != i
         em = CurveEmulator(X[keep], Y[keep], lo, hi, smoothing=smoothing)
         C = R + error_model(em.loo_residuals()[latest[keep]]).dense()
@@ -83,7 +84,7 @@ def _deviance(em, C, R, C_em, X_keep, lo, hi, heteroscedastic: bool):
 
 def self_calibration(X, Y, latest, obs_error: ObservationError, *, lower, upper, smoothing: float,
                      error_model: Callable[[np.ndarray], ObservationError], rng: RngLike,
-                     search_points: int = 1000, heteroscedastic: bool = False) -> dict:
+                     search_points: int = 1000, heteroscedastic: bool = False, pseudo=None) -> dict:
     """``lambda`` and its evidence (module docstring).
 
     X, Y : (k, n) / (k, m) every run of the emulator's design; ``latest`` (k,) bool: the runs used as
@@ -95,20 +96,24 @@ def self_calibration(X, Y, latest, obs_error: ObservationError, *, lower, upper,
     search_points : size of the Latin hypercube each minimum is searched from.
     heteroscedastic : the likelihood with ``C_em`` scaled by the runs' local misfit
         (:mod:`enkf.hetero`); ``delta`` is then the deviance's (log-determinant included).
+    pseudo : (k,) bool, other runs as the pseudo-data (default ``latest``; ``C_em`` is still measured at
+        ``latest``), e.g. the prior's hypercube for truths from the whole box
+        (``benchmarks/posterior_candidates.py``).
     """
     X, Y = np.asarray(X, float), np.asarray(Y, float)
     latest = np.asarray(latest, bool)
+    pseudo = latest if pseudo is None else np.asarray(pseudo, bool)
     lo, hi = np.asarray(lower, float), np.asarray(upper, float)
     n = lo.size
     rng = as_generator(rng)
-    idx = np.flatnonzero(latest)
+    idx = np.flatnonzero(pseudo)
     if idx.size < 3 or X.shape[0] - 1 < n + 2:
-        raise ValueError(f"self-calibration needs at least 3 latest runs and {n + 3} runs; got {idx.size} "
+        raise ValueError(f"self-calibration needs at least 3 pseudo-data runs and {n + 3} runs; got {idx.size} "
                          f"and {X.shape[0]}")
     starts = np.vstack([latin_hypercube(lo, hi, search_points, rng), X[latest]])
     deltas, R = [], obs_error.dense()
     for i, em, C, y in pseudo_runs(X, Y, latest, obs_error, lower=lo, upper=hi, smoothing=smoothing,
-                                   error_model=error_model, rng=rng):
+                                   error_model=error_model, rng=rng, pseudo=pseudo):
         keep = np.arange(X.shape[0]) != i
         dev = _deviance(em, C, R, lambda em=em, keep=keep: error_model(em.loo_residuals()[latest[keep]]).dense(),
                         X[keep], lo, hi, heteroscedastic)

@@ -1,6 +1,6 @@
 """benchmarks/posterior_candidates.py's summary: coverage counts, sides and thirds on planted rows."""
 
-from benchmarks.posterior_candidates import summarise
+from benchmarks.posterior_candidates import summarise, twin_box
 
 
 def _row(i, e_t, lo, hi):
@@ -14,7 +14,9 @@ def test_counts_misses_by_side_and_third():
             _row(1, 1200.0, 1000.0, 1500.0),  # middle third, covered
             _row(2, 2300.0, 900.0, 2100.0),   # top third, truth above
             _row(3, 2350.0, 2000.0, 2400.0)]  # top third, covered
-    s = summarise(rows)
+    lower, upper = twin_box()
+    assert (lower["E_t"], upper["E_t"]) == (200.0, 2400.0)  # the twin's Table 2 box, J/m^2
+    s = summarise(rows, lower, upper)
     assert s["sigma_t"]["covered_90"] == 4
     e = s["E_t"]
     assert e["covered_90"] == 2 and e["covered_50"] == 2
