@@ -142,3 +142,17 @@ def test_the_config_switch_is_on_in_the_default_twin_and_needs_the_emulator_post
     cfg["experiments"]["twin_ref"]["posterior"] = "ensemble"
     with pytest.raises(Exception, match="self_calibrate.*needs posterior: emulator_mcmc"):
         validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)
+
+
+def test_other_runs_as_pseudo_data_are_the_runs_it_takes():
+    # ``pseudo`` equal to ``latest`` is the default exactly; the design's first 30 runs (the hypercube
+    # over the box) give one delta each; fewer than 3 pseudo-data runs are refused by name
+    X, Y, latest, _, _, _ = stand_in(3, 0.4)
+    R = DiagonalError(np.full(M, NOISE))
+    kw = dict(lower=LO, upper=HI, smoothing=SMOOTHING, error_model=error_model, search_points=100)
+    base = self_calibration(X, Y, latest, R, rng=7, **kw)
+    assert self_calibration(X, Y, latest, R, rng=7, pseudo=latest, **kw) == base
+    spread = self_calibration(X, Y, latest, R, rng=7, pseudo=~latest, **kw)
+    assert spread["runs"] == 30 and len(spread["delta_chi2"]) == 30
+    with pytest.raises(ValueError, match="at least 3 pseudo-data runs"):
+        self_calibration(X, Y, latest, R, rng=7, pseudo=np.r_[np.ones(2, bool), np.zeros(40, bool)], **kw)
