@@ -75,7 +75,7 @@ from scipy.stats import qmc
 from calibration.experiment import (ExperimentSpec, analysis_step, initial_ensemble, mesh_seed, params_frame,
                                     reported_ensemble, rng_for, run_mesh_seed)
 from enkf import prediction_interval_dict
-from calibration.posterior import sample_posterior
+from calibration.posterior import refine_design, sample_posterior
 from shpb.atomic import atomic_write_bytes, atomic_write_text, emit_json
 from calibration.observations import curve_on_grid, observation_grid, twin_observations, with_approximation_error
 from calibration.workflow_io import load_yaml, validate_config
@@ -119,12 +119,14 @@ def run_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: str, ap
     :func:`approximation_pairs`, applied to the twin's data (None: the data as observed). ``keep``: a
     file to pickle the twin's runs to (``(spec, params, responses, analyses, obs)``); where it exists the
     runs are read from it instead (another reported posterior scored on the same runs: only the settings
-    the loop does not read, ``self_calibrate`` and ``emulator_error``, may differ from the runs' own)."""
+    the loop does not read, ``self_calibrate``, ``emulator_error`` and the refinement's, may differ from the
+    runs' own; the refinement batch is pickled beside them, ``<keep>.refine.pkl``)."""
     if keep is not None and keep.is_file():
         kept, params, responses, analyses, obs = pickle.loads(keep.read_bytes())
         # only what the loop does not read may differ from the runs' own settings
         spec = ExperimentSpec.from_config(EXPERIMENT, {**exp, "seed": seed})
-        if not _same_spec(replace(kept, self_calibrate=spec.self_calibrate, emulator_error=spec.emulator_error), spec):
+        if not _same_spec(replace(kept, self_calibrate=spec.self_calibrate, emulator_error=spec.emulator_error,
+                                  refine_runs=spec.refine_runs, refine_temper=spec.refine_temper), spec):
             raise SystemExit(f"{keep}: its runs were made with another loop than this twin's")
     else:
         spec, params, responses, analyses, obs = simulate_twin(pool, exp, truth, seed, data_preset, approx)
@@ -134,10 +136,33 @@ def run_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: str, ap
     names = list(spec.names)
     R, P, alive = reported_ensemble(spec, analyses, params)
     rec = _twin_record(spec, truth, seed, data_preset, P[names].to_numpy(float)[alive], analyses, R)
-    rec["emulator_mcmc"] = _mcmc_record(spec, truth, seed, params, responses, analyses, obs)
+    refine = None
+    if spec.refine_runs:
+        refine = refinement_runs(pool, exp, spec, params, responses, analyses, obs,
+                                 None if keep is None else keep.with_suffix(".refine.pkl"))
+        rec["refine"] = {"runs": int(len(refine[0])), "failed": int(np.sum(~np.all(np.isfinite(refine[1]), axis=1))),
+                         "temper": spec.refine_temper}
+    rec["emulator_mcmc"] = _mcmc_record(spec, truth, seed, params, responses, analyses, obs, refine)
     if approx is not None:
         rec["approximation_error"] = {k: v for k, v in approx[2].items() if k != "sd_Pa"}
     return rec
+
+
+def refinement_runs(pool, exp: dict, spec, params, responses, analyses, obs, keep: Path | None):
+    """``(P, Y)`` of the twin's refinement batch as the workflow makes it (``emulated.refine_runs``:
+    :func:`calibration.posterior.refine_design`, each run on its own mesh realization), read from
+    ``keep`` where it exists, pickled there otherwise."""
+    if keep is not None and keep.is_file():
+        return pickle.loads(keep.read_bytes())
+    K = len(analyses) - 1
+    design = refine_design(spec, params[:K + 1], responses[:K + 1], analyses[K], obs)
+    exp = {**exp, "seed": spec.seed}
+    P = design[list(spec.names)].to_numpy(float)
+    Y = np.array(pool.map(_simulate, [twin_task(exp, list(spec.names), p, exp["preset"],
+                                                run_mesh_seed(exp, "refine", 0, j)) for j, p in enumerate(P)]))
+    if keep is not None:
+        atomic_write_bytes(keep, pickle.dumps((P, Y)))
+    return P, Y
 
 
 def twin_task(exp: dict, names, p, preset: str, ms) -> tuple:
@@ -219,12 +244,13 @@ def simulate_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: st
     return spec, params, responses, analyses, obs
 
 
-def _mcmc_record(spec, truth, seed, params, responses, analyses, obs) -> dict:
+def _mcmc_record(spec, truth, seed, params, responses, analyses, obs, refine=None) -> dict:
     """The same twin's ``posterior: emulator_mcmc`` (calibration.posterior.sample_posterior on the same
-    runs, seconds): its intervals are the sample's quantiles, scored beside the ensemble's."""
+    runs and the refinement batch ``refine``, seconds): its intervals are the sample's quantiles, scored
+    beside the ensemble's."""
     K = len(analyses) - 1
     try:
-        post = sample_posterior(spec, params[:K + 1], responses[:K + 1], analyses[K], obs)
+        post = sample_posterior(spec, params[:K + 1], responses[:K + 1], analyses[K], obs, refine)
     except (ValueError, RuntimeError) as exc:  # recorded, never silently dropped: the score counts them
         return {"error": f"{type(exc).__name__}: {exc}"}
     rng = np.random.default_rng(seed + 7)
@@ -380,6 +406,8 @@ def main(argv=None) -> dict:
                          "counted: the form before 2026-11-28b, whose twins are in <cache>/approx-<n>/")
     ap.add_argument("--emulator-error", choices=["ar1", "heteroscedastic"], default=None,
                     help="override emulated.emulator_error (the reported posterior's emulator error, enkf.hetero)")
+    ap.add_argument("--refine-runs", type=int, default=None,
+                    help="override emulated.refine_runs (0: the reported posterior on the loop's runs alone)")
     ap.add_argument("--keep-runs", default=None,
                     help="folder of each twin's runs: pickled there when simulated, read from there when present "
                          "(another reported posterior scored on the same runs)")
@@ -400,6 +428,8 @@ def main(argv=None) -> dict:
         exp["emulated"] = {**exp.get("emulated", {}), "self_calibrate": False}
     if args.emulator_error is not None:
         exp["emulated"] = {**exp.get("emulated", {}), "emulator_error": args.emulator_error}
+    if args.refine_runs is not None:
+        exp["emulated"] = {**exp.get("emulated", {}), "refine_runs": args.refine_runs}
     spec = ExperimentSpec.from_config(EXPERIMENT, exp)
     # a development run's overrides name its own cache folder, so that it never mixes with the default's
     tag = "_".join(f"{k}-{v}" for k, v in (("mesh", args.mesh), ("replicates", args.replicates),
@@ -408,7 +438,9 @@ def main(argv=None) -> dict:
                                             # the heteroscedastic form's twins in a folder of their own
                                             # (the records beside the tag-less ones are ar1's)
                                             ("emulator_error", "heteroscedastic" if spec.emulator_error
-                                             == "heteroscedastic" else None)) if v is not None)
+                                             == "heteroscedastic" else None),
+                                            # the refined form's twins in a folder of their own
+                                            ("refine", spec.refine_runs or None)) if v is not None)
     # the pairs' curves do not depend on coarse_variability: one file per seed in approx-<n>/, the counted
     # form's twins beside them (its folder from before the subtracted form), the subtracted form's in their own
     approx_tag = f"approx-{args.approximation_pairs}" if args.approximation_pairs else ""
@@ -468,6 +500,7 @@ def main(argv=None) -> dict:
            "emulator_smoothing": (exp.get("emulated") or {}).get("smoothing", "loo"),
            "self_calibrate": bool((exp.get("emulated") or {}).get("self_calibrate", False)),
            "emulator_error": (exp.get("emulated") or {}).get("emulator_error", "ar1"),
+           "refine_runs": spec.refine_runs, "refine_temper": spec.refine_temper if spec.refine_runs else None,
            "reported_posterior": exp.get("posterior", "ensemble"), "cores": os.cpu_count(),
            "approximation_pairs": args.approximation_pairs,
            "coarse_variability": args.coarse_variability if args.approximation_pairs else None,

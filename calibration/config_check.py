@@ -115,10 +115,15 @@ def _semantic_errors(config: Mapping, base: Path) -> list[str]:
         for key, on, what in (("self_calibrate", emulated.get("self_calibrate"), "true scales the reported "
                                "emulator posterior's likelihood"),
                               ("emulator_error", emulated.get("emulator_error", "ar1") != "ar1",
-                               f"{emulated.get('emulator_error')} models the reported emulator posterior's error")):
+                               f"{emulated.get('emulator_error')} models the reported emulator posterior's error"),
+                              ("refine_runs", emulated.get("refine_runs", 0) > 0,
+                               f"{emulated.get('refine_runs')} runs refine the reported emulator posterior")):
             if on and exp.get("posterior") != "emulator_mcmc":
                 errors.append(f"{where}.emulated.{key}: {what} and needs posterior: emulator_mcmc "
                               f"(got {exp.get('posterior', 'ensemble')})")
+        if 0 < emulated.get("refine_runs", 0) < len(params) + 2 and not auto:
+            errors.append(f"{where}.emulated.refine_runs: {emulated['refine_runs']} runs cannot measure the "
+                          f"emulator's error over {len(params)} parameters; use 0 (none) or at least {len(params) + 2}")
         obs = exp.get("observations", {})
         sim = exp.get("simulation", {})
         t0, t1 = obs.get("t_start", 0.0), obs.get("t_end")

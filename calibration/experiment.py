@@ -53,7 +53,7 @@ __all__ = ["PURPOSES", "MESH_STAGES", "rng_for", "mesh_seed", "run_mesh_seed", "
 #: Independent random streams of an experiment (the ``spawn_key`` of :func:`rng_for`).
 #: (``mesh``: the specimen-mesh realizations, :func:`calibration.model_error.mesh_seed`.)
 PURPOSES = {"lhs": 1, "noise": 2, "analysis": 3, "posterior": 4, "predictive": 5, "mesh": MESH_PURPOSE,
-            "approximation": 7}
+            "approximation": 7, "refine": 8}
 
 
 def rng_for(seed: int, purpose: str, k: int = 0) -> np.random.Generator:
@@ -92,6 +92,8 @@ class ExperimentSpec:
     smoothing: object = "loo"
     self_calibrate: bool = False
     emulator_error: str = "ar1"
+    refine_runs: int = 0
+    refine_temper: float = 4.0
 
     @classmethod
     def from_config(cls, name: str, exp: Mapping, sensitivity_report: Mapping | str | None = None) -> "ExperimentSpec":
@@ -130,7 +132,9 @@ class ExperimentSpec:
                    mesh_mode=mesh_mode(exp), replicates=replicate_count(exp),
                    smoothing=emulated.get("smoothing", cls.smoothing),
                    self_calibrate=bool(emulated.get("self_calibrate", cls.self_calibrate)),
-                   emulator_error=str(emulated.get("emulator_error", cls.emulator_error)))
+                   emulator_error=str(emulated.get("emulator_error", cls.emulator_error)),
+                   refine_runs=int(emulated.get("refine_runs", cls.refine_runs)),
+                   refine_temper=float(emulated.get("refine_temper", cls.refine_temper)))
 
     @property
     def transform(self) -> BoxTransform:
@@ -570,8 +574,10 @@ def experiment_outcome(*, name: str, exp: Mapping, params: Sequence[pd.DataFrame
     Yf = response_matrix([forecast_curves], obs)
     ok_fc = {rec: forecast_runs[rec].get("status") == "ok" for rec in obs.records}
     fc_misfit = {rec: (v if ok_fc[rec] else None) for rec, v in record_misfits(Yf, obs, np.ones(1, bool)).items()}
+    # the reported emulator posterior's refinement batch (calibration.posterior.refine_record)
+    refine = (posterior_sampler or {}).get("refine") or {}
     sim_wall = member_wall_s + sum(float(r.get("wall_s") or 0.0) for r in extra_runs) + sum(
-        float(r.get("wall_s") or 0.0) for r in forecast_runs.values())
+        float(r.get("wall_s") or 0.0) for r in forecast_runs.values()) + float(refine.get("wall_s") or 0.0)
     sens = {"initial_ensemble": linear_sensitivity(params[0], spec.names, spec.lower, spec.upper, responses[0], obs,
                                                    np.asarray(analyses[0]["alive"], bool))}
     if K > 0:
@@ -585,7 +591,7 @@ def experiment_outcome(*, name: str, exp: Mapping, params: Sequence[pd.DataFrame
     out = summary(spec=spec, exp=exp, analyses=analyses, decision=decision, final_params=params[K],
                   final_alive=alive, forecast_misfit=fc_misfit,
                   n_simulations=(K + 1) * (spec.ensemble_size + spec.replicates) * n_records + len(forecast_runs)
-                  + len(extra_runs),
+                  + len(extra_runs) + int(refine.get("runs") or 0) * n_records,
                   wall_s=None if started is None or finished is None else finished - started,
                   simulation_wall_s=sim_wall, sensitivity=sens, iteration_params=params,
                   posterior_samples=posterior_samples, posterior_sampler=posterior_sampler, predictive=predictive)

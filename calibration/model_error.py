@@ -82,7 +82,7 @@ def check_replicate_count(exp: Mapping) -> int:
 #: The spawn key of the mesh realizations' stream (``calibration.experiment.PURPOSES["mesh"]``) and what a
 #: simulation's realization is drawn for.
 MESH_PURPOSE = 6
-MESH_STAGES = {"member": 1, "truth": 2, "replicate": 3, "design": 4, "check": 5, "approximation": 6}
+MESH_STAGES = {"member": 1, "truth": 2, "replicate": 3, "design": 4, "check": 5, "approximation": 6, "refine": 7}
 
 
 def mesh_seed(seed: int, stage: str, k: int = 0, index: int = 0, record: int = 0) -> int:
@@ -100,7 +100,7 @@ def run_mesh_seed(exp: Mapping, stage: str, k: int = 0, index: int = 0, record: 
     unperturbed mesh) for the members, design and check runs of ``simulation.mesh_realizations:
     shared``. A twin's reference run and the replicates always get a realization of their own: the data
     of a real test never come from the model's mesh, and replicates measure what the mesh changes."""
-    if stage in ("member", "design", "check") and mesh_mode(exp) == "shared":
+    if stage in ("member", "design", "check", "refine") and mesh_mode(exp) == "shared":
         return None
     return mesh_seed(int(exp["seed"]), stage, k, index, record)
 

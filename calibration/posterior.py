@@ -7,6 +7,12 @@ walkers starting from the last ensemble. ``posterior.csv`` then holds the sample
 ``posterior`` its summary; the ensembles stay what was simulated (``iter_<k>/params.csv``), and the
 last one's summary is kept as ``posterior_ensemble``.
 
+With ``emulated.refine_runs`` > 0 (the default twin) the loop's runs first give a tempered emulator
+posterior, a batch of that many runs is simulated at its k-means centroids (:func:`refine_design`,
+:mod:`enkf.refine`; ``results/<exp>/refine/``), and the reported posterior is sampled on every run with
+the batch as its latest runs: the emulator's error and the self-calibration measured over the region the
+posterior may reach, not only at the loop's last ensemble.
+
 With ``posterior: ensemble`` (the default) the reported posterior is a simulated ensemble: the last, or
 the best when the last made the fit markedly worse (:func:`calibration.experiment.reported_ensemble`).
 """
@@ -18,20 +24,31 @@ import numpy as np
 import pandas as pd
 
 from enkf.ces import EmulatorPosterior, emulator_posterior
+from enkf.refine import refinement_design
 
 from .experiment import ExperimentSpec, all_runs, final_iteration, reported_ensemble, rng_for
 from .model_error import stored_error
 from .observations import Observations
 
-__all__ = ["POSTERIORS", "forecast_parameters", "sample_posterior", "samples_frame"]
+__all__ = ["POSTERIORS", "forecast_parameters", "refine_design", "refine_record", "sample_posterior", "samples_frame"]
 
 POSTERIORS = ("ensemble", "emulator_mcmc")
 
 
 def sample_posterior(spec: ExperimentSpec, params: Sequence[pd.DataFrame], responses: Sequence[np.ndarray],
-                     last_analysis: Mapping, obs: Observations) -> EmulatorPosterior:
-    """The emulator MCMC posterior from iterations ``0..K`` (``params``/``responses``) of the final loop."""
+                     last_analysis: Mapping, obs: Observations, refine: tuple | None = None, *,
+                     temper: float = 1.0) -> EmulatorPosterior:
+    """The emulator MCMC posterior from iterations ``0..K`` (``params``/``responses``) of the final loop;
+    ``refine``: ``(params (r, n) or frame, responses (r, m))`` of the refinement batch (failed runs NaN),
+    then the latest runs; ``temper``: :func:`enkf.ces.emulator_posterior`'s."""
     alive = np.asarray(last_analysis["alive"], bool)
+    if refine is not None:
+        P_ref, Y_ref = refine
+        P_ref = pd.DataFrame(np.asarray(P_ref, float) if not isinstance(P_ref, pd.DataFrame)
+                             else P_ref[list(spec.names)].to_numpy(float), columns=list(spec.names))
+        Y_ref = np.asarray(Y_ref, float)
+        params, responses = [*params, P_ref], [*responses, Y_ref]
+        alive = np.all(np.isfinite(Y_ref), axis=1)
     X, Y, latest = all_runs(spec, params, responses, alive)
     if X.shape[0] < len(spec.names) + 2 or latest.sum() < 2:
         raise ValueError(f"{spec.name}: the emulator posterior needs at least {len(spec.names) + 2} successful runs "
@@ -45,7 +62,28 @@ def sample_posterior(spec: ExperimentSpec, params: Sequence[pd.DataFrame], respo
                               rng=rng_for(spec.seed, "posterior"), start=X[latest], names=list(spec.names),
                               smoothing=spec.smoothing, loo_scale=terms.likelihood().std,
                               self_calibrate=spec.self_calibrate,
-                              heteroscedastic=spec.emulator_error == "heteroscedastic")
+                              heteroscedastic=spec.emulator_error == "heteroscedastic", temper=temper)
+
+
+def refine_record(spec: ExperimentSpec, status: pd.DataFrame, Y: np.ndarray) -> dict:
+    """``sampler.json``'s ``refine``: the batch's runs, failures, tempering and summed wall time (s), which
+    ``summary.json`` counts with the simulations."""
+    ok = (status["status"].to_numpy(str) == "ok") & np.all(np.isfinite(np.asarray(Y, float)), axis=1)
+    return {"runs": int(len(status)), "failed": int(np.sum(~ok)), "temper": float(spec.refine_temper),
+            "wall_s": float(pd.to_numeric(status["wall_s"], errors="coerce").fillna(0.0).sum())}
+
+
+def refine_design(spec: ExperimentSpec, params: Sequence[pd.DataFrame], responses: Sequence[np.ndarray],
+                  last_analysis: Mapping, obs: Observations) -> pd.DataFrame:
+    """``refine/params.csv``: ``spec.refine_runs`` points (``member`` + one column per parameter, SI) at
+    the k-means centroids of the loop's emulator posterior tempered by ``spec.refine_temper``."""
+    if spec.refine_runs < 1:
+        raise ValueError(f"{spec.name}: emulated.refine_runs is 0; there is no refinement batch to design")
+    tempered = sample_posterior(spec, params, responses, last_analysis, obs, temper=spec.refine_temper)
+    P = refinement_design(tempered.samples, spec.lower, spec.upper, spec.refine_runs, rng_for(spec.seed, "refine"))
+    df = pd.DataFrame(P, columns=list(spec.names))
+    df.insert(0, "member", np.arange(len(df)))
+    return df
 
 
 def samples_frame(post: EmulatorPosterior) -> pd.DataFrame:

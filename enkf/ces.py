@@ -80,7 +80,8 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
                        names: Sequence[str] | None = None, walkers: int = 32, min_steps: int = 2000,
                        max_steps: int = 40000, min_tau_multiple: float = 50.0, burn_tau: float = 5.0,
                        emulator_error: bool = True, smoothing="loo", loo_scale=None,
-                       self_calibrate: bool = False, heteroscedastic: bool = False) -> EmulatorPosterior:
+                       self_calibrate: bool = False, heteroscedastic: bool = False,
+                       temper: float = 1.0) -> EmulatorPosterior:
     """Sample ``p(theta | d)`` on the emulator of every run (module docstring).
 
     design_params, design_responses : (k, n) / (k, m) every successful run so far (finite curves).
@@ -97,7 +98,11 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
     heteroscedastic : ``C_em`` scaled by ``a(theta)``, the runs' local leave-one-out misfit
         (:class:`enkf.hetero.HeteroscedasticError`; the log-determinant enters the likelihood, and with
         ``self_calibrate`` the whole log-likelihood is divided by ``lambda``: a learning rate).
+    temper : the log-likelihood divided by this factor besides ``lambda``: a tempered posterior, wider
+        than the reported one (where :func:`enkf.refine.refinement_design` puts the refinement runs).
     """
+    if not temper >= 1.0:
+        raise ValueError(f"temper must be at least 1, got {temper}")
     X, Y, latest, d = design_arrays(design_params, design_responses, latest, obs)
     lo, hi = np.asarray(lower, float), np.asarray(upper, float)
     n = lo.size
@@ -122,6 +127,7 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
                 error_model=lambda r: emulator_error_model(r, times, groups)[0], rng=rng,
                 heteroscedastic=heteroscedastic)
             lam = emu_info["self_calibration"]["lambda"]
+    lam *= float(temper)
     if heteroscedastic:
         deviance, het = emulated_deviance(em, obs_error.dense(), emu_err.dense(), X, lo, hi)
         emu_info["heteroscedastic"] = het.describe()
@@ -177,7 +183,7 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
     diagnostics = {
         "method": "emcee on the emulator (calibrate-emulate-sample)",
         "design_points": int(X.shape[0]), "latest_points": int(latest.sum()),
-        "emulator_error": emu_info, "emulator": smoothing_info, "walkers": walkers, "steps": steps, "burn_in": burn, "thin": thin,
+        "emulator_error": emu_info, "emulator": smoothing_info, "temper": float(temper), "walkers": walkers, "steps": steps, "burn_in": burn, "thin": thin,
         "autocorr_time": dict(zip(names, tau.tolist())),
         "converged_chain": bool(steps >= min_tau_multiple * tau_max),
         "acceptance_fraction": float(np.mean(sampler.acceptance_fraction)),

@@ -20,7 +20,7 @@ wildcard_constraints:
     member="[0-9]+",
     record="[A-Za-z0-9][A-Za-z0-9_.-]*",
 
-localrules: lhs, propose, observations, aggregate, analysis, posterior_sample, forecast_params, plots, summary, diagnosis_design, diagnosis_heldout_observations, diagnosis_select, diagnosis_check, loro
+localrules: lhs, propose, observations, aggregate, analysis, refine_design, refine_aggregate, posterior_sample, forecast_params, plots, summary, diagnosis_design, diagnosis_heldout_observations, diagnosis_select, diagnosis_check, loro
 
 
 def records(exp):

@@ -22,4 +22,5 @@ def collect(out, folder_name, ids, numbers):
 members = pd.read_csv(snakemake.input.params)["member"].tolist()
 collect(snakemake.output.responses, "members", member_ids(len(members)), members)
 reps = list(snakemake.params.replicates)
-collect(snakemake.output.replicates, "replicates", reps, list(range(len(reps))))
+if "replicates" in snakemake.output.keys():  # the refinement batch (rule refine_aggregate) has none
+    collect(snakemake.output.replicates, "replicates", reps, list(range(len(reps))))

@@ -7,5 +7,7 @@ run_member(command=simulator_command(sim["command"]), geometry=sim["geometry"], 
            record=snakemake.params.record_file or None, t_end=sim["t_end"], sample_dt=sim["sample_dt"],
            curve_path=snakemake.output.curve, run_path=snakemake.output.run, log_path=snakemake.log[0],
            attempt=snakemake.resources.attempt, mesh_seed=snakemake.params.mesh_seed, time_limit_s=snakemake.resources.time_limit_s, max_attempts=snakemake.params.max_attempts,
-           extra_run={"member": int(snakemake.wildcards.member), "iteration": int(snakemake.wildcards.it),
+           # the refinement batch's runs (rule refine_member) have no loop iteration
+           extra_run={"member": int(snakemake.wildcards.member),
+                      "iteration": snakemake.params.get("iteration") or int(snakemake.wildcards.it),
                       "record": snakemake.wildcards.record})

@@ -89,14 +89,17 @@ def test_the_same_rng_gives_the_same_sample_and_bad_input_is_named():
 def test_the_workflow_reports_the_emulator_posterior_with_posterior_emulator_mcmc(tmp_path):
     """End to end with the stand-in simulator of tests/test_workflow.py (peak 0.8 sigma_t, decay set by
     E_t): posterior.csv is the MCMC sample, summary.json's posterior its summary, the forecast runs at
-    its mean, and the last ensemble is kept as posterior_ensemble."""
+    its mean, and the last ensemble is kept as posterior_ensemble. With ``emulated.refine_runs`` the
+    refinement batch is simulated after the loop (one job per run, on its own mesh), is the posterior's
+    latest runs and is counted with the simulations."""
     import json
 
     import pandas as pd
 
     from test_workflow import snakemake, twin_config, write_config, write_stand_in
 
-    cfg = twin_config(method="emulated_esmda", posterior="emulator_mcmc", ensemble_size=6, max_iterations=2)
+    cfg = twin_config(method="emulated_esmda", posterior="emulator_mcmc", ensemble_size=6, max_iterations=2,
+                      emulated={"refine_runs": 5})
     cfg["simulator"] = write_stand_in(tmp_path)
     write_config(tmp_path, cfg)
     out = snakemake(tmp_path, "--cores", "2")
@@ -116,3 +119,28 @@ def test_the_workflow_reports_the_emulator_posterior_with_posterior_emulator_mcm
     post, truth = summary["posterior"]["sigma_t"], summary["truth"]["sigma_t"]
     assert abs(post["mean"] - truth) < 3 * post["std"] and abs(summary["accuracy"]["sigma_t"]["rel_error"]) < 0.02
     assert set(summary["accuracy"]["E_t"]) == {"rel_error", "in_90_interval", "in_50_interval"}
+    design = pd.read_csv(res / "refine/params.csv")
+    assert list(design.columns) == ["member", "sigma_t", "E_t"] and len(design) == 5
+    runs = [json.loads((res / f"refine/members/{m:03d}/synthetic/run.json").read_text()) for m in range(5)]
+    assert [r["iteration"] for r in runs] == ["refine"] * 5 and all(r["status"] == "ok" for r in runs)
+    sampler = summary["posterior_sampler"]
+    assert sampler["refine"]["runs"] == 5 and sampler["refine"]["failed"] == 0 and sampler["refine"]["temper"] == 4.0
+    assert sampler["latest_points"] == 5 and sampler["design_points"] == 3 * 6 + 5
+    # 6 members and 3 replicates in each of 3 iterations, the truth, the forecast and the batch
+    assert summary["n_simulations"] == 3 * (6 + 3) + 1 + 1 + 5
+
+
+def test_a_tempered_posterior_of_a_linear_gaussian_problem_is_sqrt_temper_times_wider():
+    """``temper`` divides the log-likelihood: the Gaussian posterior's covariance is ``temper S`` around
+    the same ``mu`` (the refinement batch's design posterior, enkf.refine). Tolerances as above."""
+    t, A, b, d, R, mu, S, rng = _linear_problem(seed=2)
+    lo, hi = np.array([-6.0, -6.0]), np.array([8.0, 10.0])
+    X = latin_hypercube(lo, hi, 30, rng)
+    post = emulator_posterior(X, X @ A.T + b, np.ones(30, bool), d, R, lower=lo, upper=hi, times=t, rng=4,
+                              temper=4.0)
+    assert post.diagnostics["temper"] == 4.0 and post.diagnostics["effective_samples"] >= 1000
+    sd = 2.0 * np.sqrt(np.diag(S))
+    assert np.all(np.abs(post.samples.mean(axis=0) - mu) < 0.1 * sd)
+    assert post.samples.std(axis=0, ddof=1) == pytest.approx(sd, rel=0.07)
+    with pytest.raises(ValueError, match="temper must be at least 1, got 0.5"):
+        emulator_posterior(X, X @ A.T + b, np.ones(30, bool), d, R, lower=lo, upper=hi, times=t, rng=4, temper=0.5)

@@ -149,6 +149,8 @@ def test_shipped_configs_are_valid():
     assert set(cfg["run"]) <= set(cfg["experiments"])
     assert cfg["experiments"]["twin_ref"]["observations"]["truth"] == {"sigma_t": 45.0e6, "E_t": 500.0}
     assert cfg["experiments"]["twin_ref"]["ensemble_size"] == 25
+    # the reported posterior the coverage benchmark measures (benchmarks/bench_coverage.py)
+    assert cfg["experiments"]["twin_ref"]["emulated"]["refine_runs"] == 25
     # the default run closes the loop on measured data: a calibration on two records, one held out, the
     # catalogue's measurement and physical candidates (issue 17)
     # (the whole catalogue less what the config excludes, issue 32)
@@ -206,6 +208,11 @@ def test_shipped_configs_are_valid():
     (lambda c: c["experiments"]["twin"].update(method="emulated_esmda", localization={"E_t": [[0.0, 1.0e-5]]}),
      "experiments.twin.localization: emulated_esmda has no localization"),
     (lambda c: c["experiments"]["twin"].update(emulated={"temper_base": 0.5}), "experiments.twin.emulated.temper_base"),
+    (lambda c: c["experiments"]["twin"].update(emulated={"refine_runs": 25}),
+     "experiments.twin.emulated.refine_runs: 25 runs refine the reported emulator posterior and needs posterior: emulator_mcmc (got ensemble)"),
+    (lambda c: c["experiments"]["twin"].update(posterior="emulator_mcmc", emulated={"refine_runs": 3}),
+     "experiments.twin.emulated.refine_runs: 3 runs cannot measure the emulator's error over 2 parameters; use 0 (none) or at least 4"),
+    (lambda c: c["experiments"]["twin"].update(emulated={"refine_temper": 0.5}), "experiments.twin.emulated.refine_temper"),
     (lambda c: c["experiments"]["twin"].update(method="esmda", esmda={"alphas": [2.0, 3.0]}),
      "experiments.twin.esmda.alphas: sum of 1/alpha must be 1 (got 0.833333)"),
 ])
