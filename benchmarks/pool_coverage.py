@@ -25,7 +25,7 @@ from shpb.atomic import emit_json  # noqa: E402
 
 SETTINGS = ("experiment", "method", "ensemble_size", "window_s", "model_error", "mesh_realizations",
             "emulator_smoothing", "self_calibrate", "reported_posterior", "approximation_pairs",
-            "coarse_variability", "emulator_error")
+            "coarse_variability", "emulator_error", "refine_runs")
 
 
 def setting(bench: dict, key: str):
@@ -35,7 +35,7 @@ def setting(bench: dict, key: str):
         return "counted"
     if key == "emulator_error" and key not in bench:
         return "ar1"  # the only form before 2026-11-28d
-    if key == "approximation_pairs":
+    if key in ("approximation_pairs", "refine_runs"):
         return bench.get(key) or 0  # absent before the option existed: none
     if key == "model_error" and bench.get(key):
         # the twin block's approximation_error is off in every set (the bench sets it per set: the keys

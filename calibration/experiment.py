@@ -35,7 +35,6 @@ import pandas as pd
 from enkf import (BoxTransform, DenseError, EnsembleFailure, StopCriteria, check_stop, emulated_esmda_update, enkf_update,
                   esmda_alphas, esmda_update, jsonable, latin_hypercube, localization_mask, mean_misfit, misfit_table,
                   posterior_dict, prediction_interval_dict)
-
 from enkf.ces import interval_summary
 
 from .model_error import (MESH_PURPOSE, MESH_STAGES, analysis_error, discrepancy_kind, mesh_mode,  # noqa: F401
@@ -47,8 +46,7 @@ from .sensitivity import AUTO, selected_parameters
 from .verdict import calibration_verdict, member_chi2, reported_iteration
 
 __all__ = ["PURPOSES", "MESH_STAGES", "rng_for", "mesh_seed", "run_mesh_seed", "ExperimentSpec", "initial_ensemble", "analysis_step", "decide", "capped_truncation",
-           "all_runs",
-           "diagnosis_settings", "final_iteration", "final_verdict", "reported_ensemble", "linear_sensitivity", "record_misfits", "summary"]
+           "all_runs", "diagnosis_settings", "final_iteration", "final_verdict", "reported_ensemble", "linear_sensitivity", "record_misfits", "summary"]
 
 #: Independent random streams of an experiment (the ``spawn_key`` of :func:`rng_for`).
 #: (``mesh``: the specimen-mesh realizations, :func:`calibration.model_error.mesh_seed`.)
@@ -133,8 +131,7 @@ class ExperimentSpec:
                    smoothing=emulated.get("smoothing", cls.smoothing),
                    self_calibrate=bool(emulated.get("self_calibrate", cls.self_calibrate)),
                    emulator_error=str(emulated.get("emulator_error", cls.emulator_error)),
-                   refine_runs=int(emulated.get("refine_runs", cls.refine_runs)),
-                   refine_temper=float(emulated.get("refine_temper", cls.refine_temper)))
+                   refine_runs=int(emulated.get("refine_runs", 0)), refine_temper=float(emulated.get("refine_temper", 4.0)))
 
     @property
     def transform(self) -> BoxTransform:
@@ -574,8 +571,7 @@ def experiment_outcome(*, name: str, exp: Mapping, params: Sequence[pd.DataFrame
     Yf = response_matrix([forecast_curves], obs)
     ok_fc = {rec: forecast_runs[rec].get("status") == "ok" for rec in obs.records}
     fc_misfit = {rec: (v if ok_fc[rec] else None) for rec, v in record_misfits(Yf, obs, np.ones(1, bool)).items()}
-    # the reported emulator posterior's refinement batch (calibration.posterior.refine_record)
-    refine = (posterior_sampler or {}).get("refine") or {}
+    refine = (posterior_sampler or {}).get("refine") or {}  # the batch's calibration.posterior.refine_record
     sim_wall = member_wall_s + sum(float(r.get("wall_s") or 0.0) for r in extra_runs) + sum(
         float(r.get("wall_s") or 0.0) for r in forecast_runs.values()) + float(refine.get("wall_s") or 0.0)
     sens = {"initial_ensemble": linear_sensitivity(params[0], spec.names, spec.lower, spec.upper, responses[0], obs,

@@ -39,8 +39,10 @@ def reported(bench: dict, name: str) -> dict:
 
 
 def _form(entry: dict) -> str:
-    """The reported posterior's emulator error (``ar1``, the only form before the key existed)."""
-    return entry.get("emulator_error") or "ar1"
+    """The reported posterior's emulator error (``ar1``, the only form before the key existed), and
+    ``refined`` with the refinement batch (``refine_runs``, none before the key existed)."""
+    refined = f" refined ({entry['refine_runs']} runs)" if entry.get("refine_runs") else ""
+    return (entry.get("emulator_error") or "ar1") + refined
 
 
 def _label(entry: dict) -> str:
@@ -77,7 +79,7 @@ def _sets(bench: dict, pooled: list) -> list:
             done = "" if b[name].get("complete", True) else f" of {b[name]['planned']} planned"
             approx = {k: b.get(k) for k in ("approximation_pairs", "coarse_variability")} if name == "misspecified" else {}
             out.append((_label({"name": name, "twins": b[name]["twins"], "emulator_error": b.get("emulator_error"),
-                                **approx}),
+                                "refine_runs": b.get("refine_runs"), **approx}),
                         reported(b, name), b[name]["summary"], done))
     lead = []
     for entry in pooled:
@@ -113,7 +115,8 @@ def table(bench: dict, source: str, pooled: list | None = None, pooled_sources: 
     posterior = bench.get("reported_posterior", "ensemble")
     if posterior == "emulator_mcmc":
         posterior += " with self-calibration" if bench.get("self_calibrate") else ""
-        posterior += "; a row's label ends with its emulator error, `ar1` or `heteroscedastic`"
+        posterior += ("; a row's label ends with its emulator error, `ar1` or `heteroscedastic`, and `refined` "
+                      "where the reported posterior was measured at a refinement batch")
     also = "".join(f", `{x}`" for x in pooled_sources)
     head = (f"From `{source}`{also} ({bench['method']}, N = {bench['ensemble_size']}, window "
             f"{bench['window_s'][0] * 1e6:.0f}-{bench['window_s'][1] * 1e6:.0f} us; reported posterior: {posterior}; "
