@@ -173,6 +173,35 @@ def test_pooled_sets_count_every_twin_once():
         pool("misspecified", {"a.json": a, "c.json": _bench(41, "calibrated")})
     with pytest.raises(SystemExit, match="reported_posterior"):
         pool("misspecified", {"a.json": a, "b.json": {**b, "reported_posterior": "ensemble"}})
+    # twins with the refinement batch are another reported posterior than those without it
+    with pytest.raises(SystemExit, match="refine_runs"):
+        pool("misspecified", {"a.json": a, "b.json": {**b, "refine_runs": 25}})
+
+
+def test_the_table_leads_with_the_bench_when_a_pooled_set_is_of_another_form():
+    """tools/coverage_table.py: a pooled well-specified set leads only when it is of the bench's own
+    reported form; a refined bench's row comes before an unrefined pool's, each labelled by its form."""
+    from benchmarks.pool_coverage import pool
+    from tools.coverage_table import table
+
+    def well(seed, refine):
+        recs = _records("calibrated", n=10, seed=seed)
+        for i, r in enumerate(recs):
+            r.update(seed=1000 * seed + i, emulator_mcmc={"params": r["params"], "sampler": {"converged_chain": True}})
+        return {"experiment": "twin_ref", "method": "emulated_esmda", "ensemble_size": 25, "window_s": [0.0, 1.6e-4],
+                "reported_posterior": "emulator_mcmc", "emulator_error": "heteroscedastic", "refine_runs": refine,
+                "well_specified": {"twins": recs, "summary": score(recs, LOWER, UPPER, NAMES),
+                                   "summary_emulator_mcmc": score_mcmc(recs, LOWER, UPPER, NAMES)}}
+
+    from benchmarks.bench_coverage import score_mcmc
+    pooled = pool("well_specified", {"a.json": well(60, 0), "b.json": well(62, 0)})
+    rows = [line for line in table(well(64, 25), "x.json", [pooled], ("p.json",)).splitlines()
+            if line.startswith("| well-specified")]
+    assert rows[0].startswith("| well-specified, seed 64, heteroscedastic refined (25 runs) |")
+    assert rows[1].startswith("| well-specified, seeds 60, 62, heteroscedastic |")
+    rows = [line for line in table(well(64, 0), "x.json", [pooled], ("p.json",)).splitlines()
+            if line.startswith("| well-specified")]
+    assert rows[0].startswith("| well-specified, seeds 60, 62, heteroscedastic |")
 
 
 def test_pooling_compares_the_form_that_ran_and_refuses_to_mix_forms():

@@ -85,8 +85,10 @@ def _sets(bench: dict, pooled: list) -> list:
     for entry in pooled:
         mcmc = entry.get("reported_posterior") == "emulator_mcmc"
         row = (_label(entry), entry["summary_emulator_mcmc"] if mcmc else entry["summary"], entry["summary"], "")
-        # a pooled well-specified set is the headline: the most twins of the reported form
-        (lead if entry["set"] == "well_specified" else out).append(row)
+        # a pooled well-specified set of the bench's own form is the headline: the most twins of the
+        # reported form (one of another form, e.g. before the refinement batch, follows the bench's rows)
+        same = _form(entry) == _form({"emulator_error": bench.get("emulator_error"), "refine_runs": bench.get("refine_runs")})
+        (lead if entry["set"] == "well_specified" and same else out).append(row)
     return lead + out
 
 
