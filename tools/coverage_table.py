@@ -89,7 +89,8 @@ def _sets(bench: dict, pooled: list) -> list:
         # reported form (one of another form, e.g. before the refinement batch, follows the bench's rows)
         same = _form(entry) == _form({"emulator_error": bench.get("emulator_error"), "refine_runs": bench.get("refine_runs")})
         (lead if entry["set"] == "well_specified" and same else out).append(row)
-    return lead + out
+    # the well-specified rows first, then the misspecified ones, each in the order given
+    return lead + sorted(out, key=lambda row: row[0].startswith("misspecified"))
 
 
 def table(bench: dict, source: str, pooled: list | None = None, pooled_sources: tuple = ()) -> str:
