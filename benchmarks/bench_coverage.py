@@ -28,7 +28,11 @@ in the JSON names it, and the table in the README is of that posterior (``summar
 last simulated ensemble scored beside it (``summary``). ``--no-self-calibrate`` scores the emulator
 posterior without the scaling and ``--emulator-error heteroscedastic`` with the emulator's error scaled
 across the box (:mod:`enkf.hetero`), each in its own cache folder; with ``--keep-runs`` both read the
-runs a first call pickled there, so that reported posteriors are compared on the same twins.
+runs a first call pickled there, so that reported posteriors are compared on the same twins. With
+``emulated.refine_runs`` (the default twin: 25) each twin's refinement batch is designed and simulated
+after its loop as the workflow does it (:func:`calibration.posterior.refine_design`), pickled beside the
+kept runs, and the reported posterior is measured at it; ``--refine-runs 0`` scores without it (the
+twins of each in their own cache folder).
 
 Per set: coverage of the 50 % and 90 % intervals per parameter with Clopper-Pearson 95 % intervals;
 simulation-based-calibration ranks (the fraction of posterior members below the truth, randomised

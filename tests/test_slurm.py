@@ -27,7 +27,7 @@ CLUSTER = REPO / "tools" / "slurm" / "slurm_local_cluster.sh"
 PROFILES = REPO / "profiles"
 #: Rules that run one FDEM simulation each: the only ones a cluster run submits as Slurm jobs.
 #: ``replicate``: the runs at an iteration's ensemble mean that measure the simulator's own variability.
-SIMULATION_RULES = {"member", "replicate", "truth", "forecast", "diagnosis_member", "diagnosis_check_member",
+SIMULATION_RULES = {"member", "replicate", "refine_member", "truth", "forecast", "diagnosis_member", "diagnosis_check_member",
                     "sensitivity_member", "approximation_run"}
 
 sys.path.insert(0, str(REPO / "tools" / "slurm"))
