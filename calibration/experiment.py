@@ -571,7 +571,7 @@ def experiment_outcome(*, name: str, exp: Mapping, params: Sequence[pd.DataFrame
     Yf = response_matrix([forecast_curves], obs)
     ok_fc = {rec: forecast_runs[rec].get("status") == "ok" for rec in obs.records}
     fc_misfit = {rec: (v if ok_fc[rec] else None) for rec, v in record_misfits(Yf, obs, np.ones(1, bool)).items()}
-    refine = (posterior_sampler or {}).get("refine") or {}  # the batch's calibration.posterior.refine_record
+    refine = (posterior_sampler or {}).get("refine") or {}  # calibration.posterior.refine_batch
     sim_wall = member_wall_s + sum(float(r.get("wall_s") or 0.0) for r in extra_runs) + sum(
         float(r.get("wall_s") or 0.0) for r in forecast_runs.values()) + float(refine.get("wall_s") or 0.0)
     sens = {"initial_ensemble": linear_sensitivity(params[0], spec.names, spec.lower, spec.upper, responses[0], obs,

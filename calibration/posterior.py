@@ -30,7 +30,7 @@ from .experiment import ExperimentSpec, all_runs, final_iteration, reported_ense
 from .model_error import stored_error
 from .observations import Observations
 
-__all__ = ["POSTERIORS", "forecast_parameters", "refine_design", "refine_record", "sample_posterior", "samples_frame"]
+__all__ = ["POSTERIORS", "forecast_parameters", "refine_batch", "refine_design", "sample_posterior", "samples_frame"]
 
 POSTERIORS = ("ensemble", "emulator_mcmc")
 
@@ -65,12 +65,17 @@ def sample_posterior(spec: ExperimentSpec, params: Sequence[pd.DataFrame], respo
                               heteroscedastic=spec.emulator_error == "heteroscedastic", temper=temper)
 
 
-def refine_record(spec: ExperimentSpec, status: pd.DataFrame, Y: np.ndarray) -> dict:
-    """``sampler.json``'s ``refine``: the batch's runs, failures, tempering and summed wall time (s), which
-    ``summary.json`` counts with the simulations."""
-    ok = (status["status"].to_numpy(str) == "ok") & np.all(np.isfinite(np.asarray(Y, float)), axis=1)
-    return {"runs": int(len(status)), "failed": int(np.sum(~ok)), "temper": float(spec.refine_temper),
-            "wall_s": float(pd.to_numeric(status["wall_s"], errors="coerce").fillna(0.0).sum())}
+def refine_batch(spec: ExperimentSpec, params: pd.DataFrame, status: pd.DataFrame, Y: np.ndarray) -> tuple:
+    """``(refine, record)`` of the batch's ``refine/params.csv`` frame and ``refine/responses.csv``
+    (``status``, ``Y``): ``refine`` the ``sample_posterior`` argument, a failed run's curve NaN (no design
+    point); ``record`` ``sampler.json``'s ``refine``: runs, failures, tempering and summed wall time (s),
+    which ``summary.json`` counts with the simulations."""
+    Y = np.array(Y, float)
+    ok = (status["status"].to_numpy(str) == "ok") & np.all(np.isfinite(Y), axis=1)
+    Y[~ok] = np.nan
+    record = {"runs": int(len(status)), "failed": int(np.sum(~ok)), "temper": float(spec.refine_temper),
+              "wall_s": float(pd.to_numeric(status["wall_s"], errors="coerce").fillna(0.0).sum())}
+    return (params, Y), record
 
 
 def refine_design(spec: ExperimentSpec, params: Sequence[pd.DataFrame], responses: Sequence[np.ndarray],
