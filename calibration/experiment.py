@@ -184,7 +184,7 @@ def decide(spec: ExperimentSpec, k: int, misfit: Mapping, n_obs: int, spread, pr
         allow = True
     d = check_stop(k, chi2_per_obs=_nan(misfit.get("chi2_per_obs")), nrmse=_nan(misfit.get("nrmse")),
                    n_obs=n_obs, spread=spread, prior_spread=prior_spread, criteria=spec.criteria,
-                   allow_convergence=allow).to_dict()
+                   allow_convergence=allow, model_target=misfit.get("target")).to_dict()
     return d
 
 
@@ -398,13 +398,13 @@ def final_iteration(spec: ExperimentSpec, analyses: Sequence[Mapping]) -> tuple[
 
 
 def _misfit_for_decide(m: Mapping) -> dict:
-    # The median member against the full error model (R + the estimated discrepancy): the members must
-    # fit, not their mean (a blurred mean of step-like members can fit where none does). Also for
+    # The median member against the full error model (R + 2S + D), standardised, with its target: the members
+    # must fit, not their mean (a blurred mean of step-like members can fit where none does). Also for
     # emulated_esmda: its chi2_per_obs_model_error (+ the emulator's leave-one-out error) is recorded but
     # not a stop test, because on a sparse design that error is interpolation error and the test cannot
     # fail (docs/inference.md). Files written before the members were scored carry only the mean's.
     chi2 = m.get("stop_chi2_per_obs", m.get("chi2_per_obs"))
-    return {"rmse": m.get("rmse_Pa"), "nrmse": m.get("nrmse"), "chi2_per_obs": chi2}
+    return {"rmse": m.get("rmse_Pa"), "nrmse": m.get("nrmse"), "chi2_per_obs": chi2, "target": m.get("stop_target")}
 
 
 def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], decision: Mapping,

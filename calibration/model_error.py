@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from enkf import AR1Error, DenseError, ObservationError
-from enkf.diagnostics import member_misfit, mean_misfit
+from enkf.diagnostics import member_misfit, member_standardized_misfit, mean_misfit
 from enkf.discrepancy import combined_error, estimate_discrepancy, inflated_noise_factor, record_loglik, stored_term
 from enkf.predictive import predictive_coverage
 from enkf.variability import simulator_variability
@@ -247,7 +247,11 @@ def misfit_block(Y: np.ndarray, obs: Observations, noise: ObservationError, term
     plots and for comparison); ``median_chi2_per_obs`` and ``best_chi2_per_obs``: the members against
     ``R``; ``median_chi2_per_obs_simulator``: the median member against ``R + 2 S`` (what a member misses
     by when the model lacks nothing but the mesh); ``*_total``: the members against the stop test's
-    model (:meth:`ErrorModel.stop`); ``stop_chi2_per_obs``: the median member against it.
+    model (:meth:`ErrorModel.stop`), whitened by it. The stop test: ``stop_chi2_per_obs``, the median
+    member against the stop test's model standardised by its variances, and ``stop_target``, that
+    statistic's mean plus two sd under the model (:func:`enkf.diagnostics.member_standardized_misfit`);
+    ``standardized_chi2_per_obs_simulator`` / ``standardized_target_simulator``: the same against
+    ``R + 2 S`` (the verdict's ``misfit_unexplained``).
     """
     mean = mean_misfit(Y, obs.values, noise, alive)
     mem = member_misfit(Y, obs.values, noise, alive)
@@ -256,10 +260,14 @@ def misfit_block(Y: np.ndarray, obs: Observations, noise: ObservationError, term
            "median_rmse_Pa": mem["median_rmse"], "median_nrmse": mem["median_nrmse"]}
     sim = member_misfit(Y, obs.values, terms.simulator_only(), alive)
     tot = member_misfit(Y, obs.values, terms.stop(), alive)
+    stop = member_standardized_misfit(Y, obs.values, terms.stop(), alive)
+    sim_std = member_standardized_misfit(Y, obs.values, terms.simulator_only(), alive)
     out.update({"median_chi2_per_obs_simulator": sim["median_chi2_per_obs"],
                 "median_chi2_per_obs_total": tot["median_chi2_per_obs"],
                 "best_chi2_per_obs_total": tot["best_chi2_per_obs"],
-                "stop_chi2_per_obs": tot["median_chi2_per_obs"]})
+                "stop_chi2_per_obs": stop["median"], "stop_target": stop["target"],
+                "standardized_chi2_per_obs_simulator": sim_std["median"],
+                "standardized_target_simulator": sim_std["target"]})
     return out
 
 

@@ -14,10 +14,11 @@ Flags, in this order; the verdict is the first that applies:
   its intervals are not yet a posterior.
 - ``box_limited``: a posterior mean lies within ``PIN_FRACTION`` of its box width from a bound.
 - ``not_converged``: the stop rule was not met (iteration budget spent or ensemble collapse).
-- ``misfit_unexplained``: the median member's chi^2 per observation against the error model without
+- ``misfit_unexplained``: the median member's misfit per observation against the error model without
   the estimated discrepancy (``R + 2 S``: the instrument noise and the simulator's own variability
-  between two mesh realizations, :mod:`calibration.model_error`) exceeds the noise level by more than
-  its own sampling uncertainty: the fit needs model error to be explained, and the intervals are only
+  between two mesh realizations, :mod:`calibration.model_error`), standardised by its variances,
+  exceeds 1 by more than two of its own sampling sd under that model
+  (:func:`enkf.diagnostics.member_standardized_misfit`): the fit needs model error to be explained, and the intervals are only
   as good as the discrepancy model (``summary.json``'s ``discrepancy`` gives its size).
 - ``uninformative``: a parameter's 90 % interval covers more than ``UNINFORMATIVE_FRACTION`` of its prior
   box: the data did not constrain it (the posterior is the prior's).
@@ -120,12 +121,17 @@ def member_chi2(m: Mapping) -> float:
     return float(v) if v is not None else math.nan
 
 
-def member_chi2_simulator(m: Mapping) -> float:
-    """The median member's chi^2 per observation against ``R + 2 S`` of its own iteration (the noise and
-    the simulator's variability between two mesh realizations), against ``R`` where ``S`` was not
-    measured: the absolute test of ``misfit_unexplained``."""
+def member_chi2_simulator(m: Mapping) -> tuple[float, float | None]:
+    """``(statistic, target)``: the median member's misfit per observation against ``R + 2 S`` of its own
+    iteration (the noise and the simulator's variability between two mesh realizations), standardised
+    by its variances, and that statistic's own target (:func:`enkf.diagnostics.member_standardized_misfit`):
+    the absolute test of ``misfit_unexplained``. Files written before the standardised statistic carry
+    the whitened one (target None: the caller's noise level)."""
+    v = m.get("standardized_chi2_per_obs_simulator")
+    if v is not None:
+        return float(v), m.get("standardized_target_simulator")
     v = m.get("median_chi2_per_obs_simulator")
-    return float(v) if v is not None else member_chi2(m)
+    return (float(v) if v is not None else member_chi2(m)), None
 
 
 def calibration_verdict(*, misfits: Sequence[Mapping], decision: Mapping, posterior: Mapping[str, Mapping],
@@ -145,9 +151,11 @@ def calibration_verdict(*, misfits: Sequence[Mapping], decision: Mapping, poster
     best_chi2, best = min(finite) if finite else (math.nan, len(chi2) - 1)
     reported = reported_iteration(chi2)
     prior, last, final = chi2[0], chi2[-1], chi2[reported]
-    final_sim = member_chi2_simulator(misfits[reported])
+    final_sim, sim_target = member_chi2_simulator(misfits[reported])
     target = (decision.get("values") or {}).get("chi2_target")
     noise_target = 1.0 + 2.0 * math.sqrt(2.0 / n_obs) if n_obs else (float(target) if target else math.nan)
+    if sim_target is not None:
+        noise_target = float(sim_target)
     pinned = pinned_parameters(posterior, lower, upper, names)
     wide = uninformative_parameters(posterior, lower, upper, names)
     checks = {

@@ -4,11 +4,14 @@ Checked after each ensemble of simulations (``iteration`` = number of analyses d
 prior ensemble), in this order:
 
 1. ``"discrepancy"`` (converged): the members fit the data to the level of the error model,
-   ``chi2_per_obs <= chi2_target``, where the callers pass the median member's chi^2 per observation
+   ``chi2_per_obs <= chi2_target``, where the callers pass the median member's misfit per observation
    against the full error model (noise plus any model error): a blurred mean of step-like members can
    fit where no member does. The discrepancy principle: iterating further fits the noise and
    collapses the ensemble. Default target ``1 + 2 sqrt(2/m)``: the chi-square of pure noise has mean
-   ``m`` and std ``sqrt(2m)``, so at the truth ``chi2/m`` exceeds this only ~2% of the time.
+   ``m`` and std ``sqrt(2m)``, so at the truth ``chi2/m`` exceeds this only ~2% of the time. Callers
+   whose statistic is standardised by a correlated model's variances
+   (:func:`enkf.diagnostics.member_standardized_misfit`) pass its own mean-plus-two-sd as
+   ``model_target``, used where the criteria set none.
 2. ``"tolerance"`` (converged): the user's tolerance on the normalised RMSE of the ensemble-mean
    response the caller passes (the median member's), ``nrmse <= nrmse_tol`` (the paper's
    ``|x_bar - y_o| < tol``); off by default.
@@ -47,8 +50,10 @@ class StopCriteria:
         if not 0.0 <= self.collapse_fraction < 1.0:
             raise ValueError("collapse_fraction must lie in [0, 1)")
 
-    def target(self, n_obs: int) -> float:
-        return self.chi2_target if self.chi2_target is not None else 1.0 + 2.0 * math.sqrt(2.0 / n_obs)
+    def target(self, n_obs: int, model_target: float | None = None) -> float:
+        if self.chi2_target is not None:
+            return self.chi2_target
+        return float(model_target) if model_target is not None else 1.0 + 2.0 * math.sqrt(2.0 / n_obs)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -71,18 +76,19 @@ class StopDecision:
 
 def check_stop(iteration: int, *, chi2_per_obs: float, nrmse: float, n_obs: int, spread=None,
                prior_spread=None, criteria: StopCriteria | None = None,
-               allow_convergence: bool = True) -> StopDecision:
+               allow_convergence: bool = True, model_target: float | None = None) -> StopDecision:
     """Decide whether to stop after ``iteration`` analyses.
 
     Parameters
     ----------
     chi2_per_obs, nrmse : misfit of the median member (:func:`enkf.diagnostics.member_misfit`).
     n_obs : number of observations (for the default chi-square target).
+    model_target : the statistic's own target where the criteria set no ``chi2_target`` (module docstring).
     spread, prior_spread : (n,) per-parameter std now and of the initial ensemble, unbounded space.
         The collapse guard is skipped if either is ``None``.
     """
     c = criteria or StopCriteria()
-    target = c.target(n_obs)
+    target = c.target(n_obs, model_target)
     ratio = None
     if spread is not None and prior_spread is not None:
         ratio = np.asarray(spread, float) / np.asarray(prior_spread, float)

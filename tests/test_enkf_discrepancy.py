@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from enkf import AR1Error, DiagonalError
-from enkf.diagnostics import member_misfit
+from enkf.diagnostics import member_misfit, member_standardized_misfit
 from enkf.discrepancy import (ar1_covariance, combined_error, estimate_discrepancy, fit_record_discrepancy,
                               inflated_noise_factor, record_loglik)
 from enkf.predictive import predictive_coverage
@@ -137,6 +137,11 @@ def test_member_based_misfit_does_not_pass_step_members_whose_mean_fits():
     assert mm["mean_curve_chi2_per_obs"] < 1.5           # the blurred mean nearly passes
     assert mm["median_chi2_per_obs"] > 10.0 * target     # the members do not
     assert mm["best_chi2_per_obs"] > target
+    # the stop test's standardised statistic, against white noise and against an error correlated over
+    # 10 samples (whose target is wider): the members still fail it
+    for model in (err, AR1Error(0.05, t, 0.05)):
+        ms = member_standardized_misfit(Y, d, model)
+        assert ms["median"] > 10.0 * ms["target"] and ms["best"] > ms["target"]
 
 
 def test_predictive_coverage_is_calibrated_with_the_full_error_model_and_not_without_it():

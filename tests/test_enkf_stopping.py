@@ -57,3 +57,59 @@ def test_convergence_can_be_suspended_until_a_schedule_ends_and_decision_is_json
     d = _check(2, math.nan, nrmse=math.nan)
     blob = json.loads(json.dumps(d.to_dict(), allow_nan=False))
     assert blob["values"]["chi2_per_obs"] is None and blob["reason"] == "continue"
+
+
+def test_a_model_target_replaces_the_default_but_not_the_users():
+    assert StopCriteria().target(200, model_target=1.9) == 1.9
+    assert StopCriteria(chi2_target=1.5).target(200, model_target=1.9) == 1.5
+    d = _check(3, 1.6, model_target=1.9)
+    assert (d.converged, d.reason, d.values["chi2_target"]) == (True, "discrepancy", 1.9)
+    assert _check(3, 1.6).reason == "continue"  # against 1 + 2 sqrt(2/200) = 1.2
+
+
+def _standardized_draws(C_true, C_model, n, seed):
+    """The standardised and the whitened misfit per observation of ``n`` residuals drawn from ``C_true``
+    scored against the model ``C_model``."""
+    from enkf import DenseError
+    from enkf.diagnostics import chi2_per_obs, standardized_chi2_per_obs
+
+    rng = np.random.default_rng(seed)
+    r = (np.linalg.cholesky(C_true) @ rng.standard_normal((C_true.shape[0], n))).T
+    model = DenseError(C_model)
+    return standardized_chi2_per_obs(r, 0.0, model), chi2_per_obs(r, 0.0, model)
+
+
+def test_the_standardized_statistic_has_the_mean_and_sd_its_target_assumes():
+    """Residuals drawn from the model itself: the statistic's mean is 1 and its sd sqrt(2 tr P^2)/m, the
+    numbers the target 1 + 2 sd is made of (4,000 draws: the mean to +-0.01, the sd to +-3 %, 4 se)."""
+    from enkf import AR1Error, DiagonalError
+    from enkf.diagnostics import standardized_target
+
+    m = 161
+    t = np.arange(m) * 1e-6
+    sd = np.where(t > 100e-6, 6.0, 1.0)  # heteroscedastic: large after a "peak", like R + 2S
+    model = AR1Error(sd, t, 20e-6)
+    C = model.dense()
+    P = C / np.outer(sd, sd)
+    sd_stat = math.sqrt(2.0 * np.sum(P * P)) / m
+    assert standardized_target(model) == pytest.approx(1.0 + 2.0 * sd_stat, rel=1e-12)
+    assert standardized_target(DiagonalError(np.full(m, 3.0))) == pytest.approx(1.0 + 2.0 * math.sqrt(2.0 / m))
+    s, _ = _standardized_draws(C, C, 4000, 1)
+    assert s.mean() == pytest.approx(1.0, abs=4 * sd_stat / math.sqrt(4000))
+    assert s.std(ddof=1) == pytest.approx(sd_stat, rel=0.03 * 4 / 3)
+    assert np.mean(s <= standardized_target(model)) > 0.95
+
+
+def test_a_wrong_correlation_model_inflates_the_whitened_misfit_but_not_the_standardized_one():
+    """The stop test's reason for standardising: departures rougher than the model's AR(1) assumes (the
+    same variances, a correlation time of 2 us against the model's 50 us, as a crack path's jumps make
+    them) score a whitened chi^2 per observation far above its target, the standardised one about 1
+    (its mean is tr(D^-1 C_true)/m = 1 exactly)."""
+    from enkf import AR1Error
+
+    m = 161
+    t = np.arange(m) * 1e-6
+    sd = np.full(m, 2.0)
+    s, w = _standardized_draws(AR1Error(sd, t, 2e-6).dense(), AR1Error(sd, t, 50e-6).dense(), 2000, 2)
+    assert np.median(w) > 3.0            # the whitened statistic rejects residuals of the right size
+    assert np.mean(s) == pytest.approx(1.0, abs=0.05)
