@@ -33,8 +33,8 @@ def analysis_line(analysis: Mapping) -> str:
     ``twin_ref iteration 2: median member chi2/obs 1.55 (stop at 1.22; 260 against the noise alone),
     25/25 members ok -> continue``.
 
-    The first number is the stop test's statistic (the median member's chi^2 per observation against
-    the noise plus the estimated model discrepancy), with the target the stop rule compares it with;
+    The first number is the stop test's statistic (the median member's misfit per observation against
+    the stop test's error model, standardised by its variances), with the target the stop rule compares it with;
     the second the same member's against the noise alone; then the members that ran, and the decision
     this analysis took (the final rules re-take it with the current stopping rule).
     """
