@@ -52,8 +52,8 @@ NEXT_STEP = {
                          "data carry; {diagnosis}"),
     "box_limited": "the data push {params} against the prior box: widen the box beyond {bounds}, or run the "
                    "diagnosis if the value is not physical",
-    "not_converged": ("the stop rule was not met ({reason}): chi^2 per observation {chi2:.4g} against the "
-                      "target {target:.4g}; more iterations will not close a gap this size if the best "
+    "not_converged": ("the stop rule was not met ({reason}): the median member's misfit per observation "
+                      "{chi2:.4g} against the stop target {stop_target:.4g}; more iterations will not close a gap this size if the best "
                       "iteration is not the last; check the noise model or run the diagnosis"),
     "mcmc_not_converged": ("the MCMC chain did not reach its autocorrelation rule ({chain}): raise the "
                            "sampler's steps before reading its intervals"),
@@ -172,7 +172,7 @@ def calibration_verdict(*, misfits: Sequence[Mapping], decision: Mapping, poster
         diagnosis=DIAGNOSIS_STEP[bool(diagnosed)], params=", ".join(pinned),
         bounds=", ".join(f"its {side} bound" if len(pinned) == 1 else f"{p}'s {side} bound" for p, side in pinned.items()),
         reason=decision.get("reason"), chi2=float((decision.get("values") or {}).get("chi2_per_obs") or last),
-        target=noise_target, chi2_noise=final_sim,
+        target=noise_target, chi2_noise=final_sim, stop_target=float(target) if target is not None else math.nan,
         chain=_chain_words(sampler), wide=", ".join(wide), discrepancy=_discrepancy_words(discrepancy))
     if reported != len(chi2) - 1:
         text += (f"; the posterior reported (and forecast) is iteration {reported}'s ensemble (median member chi^2 "

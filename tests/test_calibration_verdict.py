@@ -225,3 +225,22 @@ def test_the_verdict_scores_the_median_member_not_the_mean_curve():
     v = calibration_verdict(misfits=misfits, decision=_decision(False, "max_iterations"),
                             posterior=_post(45e6, 500.0), lower=LOWER, upper=UPPER, names=NAMES, n_obs=200)
     assert "misfit_unexplained" in v["flags"] and v["chi2_per_obs"]["final"] == 23.1
+
+
+def test_the_standardized_statistics_and_their_own_targets_decide_and_are_quoted():
+    """misfit_unexplained reads the standardised statistic against R + 2S with its own target (not the
+    whitened one against 1 + 2 sqrt(2/m)); not_converged quotes the stop test's target."""
+    def misfits(std_sim, target_sim):
+        m = _misfits(900.0, 40.0, 14.0)
+        m[-1].update({"median_chi2_per_obs_simulator": 5.0, "standardized_chi2_per_obs_simulator": std_sim,
+                      "standardized_target_simulator": target_sim})
+        return m
+
+    kw = dict(posterior=_post(30.7e6, 281.0), lower=LOWER, upper=UPPER, names=NAMES, n_obs=161)
+    v = calibration_verdict(misfits=misfits(1.5, 1.8), decision=_decision(True, target=1.8), **kw)
+    assert v["flags"] == []               # whitened 5.0 > 1.22, but standardised 1.5 <= its 1.8
+    assert v["chi2_per_obs"]["noise_level"] == 1.8
+    v = calibration_verdict(misfits=misfits(2.5, 1.3), decision=_decision(False, "max_iterations", target=2.34)
+                            | {"values": {"chi2_target": 2.34, "chi2_per_obs": 2.68}}, **kw)
+    assert v["flags"] == ["not_converged", "misfit_unexplained"]
+    assert "2.68 against the stop target 2.34" in v["next_step"]
