@@ -162,11 +162,11 @@ def member_standardized_misfit(responses, obs, obs_error: ObservationError, aliv
     """``{median, best, target}``: :func:`standardized_chi2_per_obs` of the median and the best alive
     member and :func:`standardized_target` of ``obs_error``: the stop test (:mod:`enkf.stopping`).
 
-    Why standardised and not whitened: with the simulator's variability in the error model, re-runs of
-    a twin's truth on other mesh realizations scored against ``R + 2 S`` whitened by its AR(1) model had
-    a median chi^2 per observation of 1.25 (and passed ``1 + 2 sqrt(2/m)`` in 47 % of 50 development
-    twins) while standardised by its variances alone they scored 1.01: the variances are right, the
-    AR(1) correlation of the departures after the peak is not (``benchmarks/stop_rule_dev.py``)."""
+    Why standardised and not whitened: re-runs of a twin's truth on mesh realizations of their own,
+    scored against ``R + 2 S``, are this test's null; whitened by the AR(1) model of ``S`` they fail
+    ``1 + 2 sqrt(2/m)`` more often than not, standardised by its variances they score about 1: the
+    variances are right, the AR(1) correlation of the departures after the peak is not (numbers in
+    docs/inference.md, Stopping; ``benchmarks/stop_rule_dev.py``)."""
     y = _rows(responses)
     alive = _alive_mask(y, alive)
     target = standardized_target(obs_error)

@@ -37,7 +37,8 @@ from .diagnostics import jsonable
 
 @dataclass(frozen=True)
 class StopCriteria:
-    """Stopping thresholds (see module docstring). ``chi2_target=None`` means ``1 + 2 sqrt(2/m)``."""
+    """Stopping thresholds (see module docstring). ``chi2_target=None`` means the caller's
+    ``model_target`` where it passes one, else ``1 + 2 sqrt(2/m)``."""
 
     chi2_target: float | None = None
     nrmse_tol: float | None = None
@@ -81,7 +82,8 @@ def check_stop(iteration: int, *, chi2_per_obs: float, nrmse: float, n_obs: int,
 
     Parameters
     ----------
-    chi2_per_obs, nrmse : misfit of the median member (:func:`enkf.diagnostics.member_misfit`).
+    chi2_per_obs, nrmse : misfit of the median member (:func:`enkf.diagnostics.member_misfit`, or
+        :func:`enkf.diagnostics.member_standardized_misfit` with its ``model_target``).
     n_obs : number of observations (for the default chi-square target).
     model_target : the statistic's own target where the criteria set no ``chi2_target`` (module docstring).
     spread, prior_spread : (n,) per-parameter std now and of the initial ensemble, unbounded space.
