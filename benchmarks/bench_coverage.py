@@ -279,6 +279,8 @@ def _twin_record(spec, truth, seed, data_preset, post: np.ndarray, analyses, R) 
            "reported_iteration": int(R), "stop_reason": analyses[-1]["decision"]["reason"],
            "converged": bool(analyses[-1]["decision"]["converged"]), "n_analyses": len(analyses) - 1,
            "stop_chi2_per_obs": analyses[-1]["misfit"]["stop_chi2_per_obs"],
+           # present since the standardised stop test (bdca62d); a record without it was scored by the whitened one
+           "stop_target": analyses[-1]["misfit"].get("stop_target"),
            "median_chi2_per_obs": analyses[R]["misfit"]["median_chi2_per_obs"],
            "median_chi2_per_obs_simulator": analyses[R]["misfit"].get("median_chi2_per_obs_simulator"),
            "discrepancy": me.get("discrepancy"), "simulator_variability": svar, "params": {}}

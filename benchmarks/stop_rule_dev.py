@@ -63,12 +63,13 @@ def rerun_curves(pool, seed: int, twins: int, reruns: int, cache: Path | None) -
 
 def statistics(Y: np.ndarray, d: np.ndarray, C) -> dict:
     """Both statistics of the rows ``Y`` against data ``d`` under the error model ``C``."""
+    from enkf import StopCriteria
     from enkf.diagnostics import chi2_per_obs, standardized_chi2_per_obs, standardized_target
 
     ok = np.all(np.isfinite(Y), axis=1)
     return {"whitened": np.atleast_1d(chi2_per_obs(Y[ok], d, C)).tolist(),
             "standardized": np.atleast_1d(standardized_chi2_per_obs(Y[ok], d, C)).tolist(),
-            "targets": {"whitened": 1.0 + 2.0 * np.sqrt(2.0 / d.size), "standardized": standardized_target(C)}}
+            "targets": {"whitened": StopCriteria().target(d.size), "standardized": standardized_target(C)}}
 
 
 def twin_row(path: Path, curves: np.ndarray) -> dict:

@@ -258,10 +258,11 @@ def misfit_block(Y: np.ndarray, obs: Observations, noise: ObservationError, term
     out = {"rmse_Pa": mean["rmse"], "nrmse": mean["nrmse"], "chi2_per_obs": mean["chi2_per_obs"],
            "median_chi2_per_obs": mem["median_chi2_per_obs"], "best_chi2_per_obs": mem["best_chi2_per_obs"],
            "median_rmse_Pa": mem["median_rmse"], "median_nrmse": mem["median_nrmse"]}
-    sim = member_misfit(Y, obs.values, terms.simulator_only(), alive)
-    tot = member_misfit(Y, obs.values, terms.stop(), alive)
-    stop = member_standardized_misfit(Y, obs.values, terms.stop(), alive)
-    sim_std = member_standardized_misfit(Y, obs.values, terms.simulator_only(), alive)
+    sim_err, stop_err = terms.simulator_only(), terms.stop()  # each a dense Cholesky: made once
+    sim = member_misfit(Y, obs.values, sim_err, alive)
+    tot = member_misfit(Y, obs.values, stop_err, alive)
+    stop = member_standardized_misfit(Y, obs.values, stop_err, alive)
+    sim_std = member_standardized_misfit(Y, obs.values, sim_err, alive)
     out.update({"median_chi2_per_obs_simulator": sim["median_chi2_per_obs"],
                 "median_chi2_per_obs_total": tot["median_chi2_per_obs"],
                 "best_chi2_per_obs_total": tot["best_chi2_per_obs"],

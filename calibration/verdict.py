@@ -153,9 +153,10 @@ def calibration_verdict(*, misfits: Sequence[Mapping], decision: Mapping, poster
     prior, last, final = chi2[0], chi2[-1], chi2[reported]
     final_sim, sim_target = member_chi2_simulator(misfits[reported])
     target = (decision.get("values") or {}).get("chi2_target")
-    noise_target = 1.0 + 2.0 * math.sqrt(2.0 / n_obs) if n_obs else (float(target) if target else math.nan)
     if sim_target is not None:
         noise_target = float(sim_target)
+    else:  # files written before the standardised statistic
+        noise_target = 1.0 + 2.0 * math.sqrt(2.0 / n_obs) if n_obs else (float(target) if target else math.nan)
     pinned = pinned_parameters(posterior, lower, upper, names)
     wide = uninformative_parameters(posterior, lower, upper, names)
     checks = {

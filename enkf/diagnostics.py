@@ -23,7 +23,7 @@ from collections.abc import Sequence
 import numpy as np
 import pandas as pd
 
-from .covariance import ObservationError
+from .covariance import DiagonalError, ObservationError
 
 
 def _rows(sim) -> np.ndarray:
@@ -143,8 +143,7 @@ def standardized_chi2_per_obs(sim, obs, obs_error: ObservationError):
     """``mean_k (sim_k - obs_k)^2 / C_kk``, the misfit standardised by the error model's variances alone
     (rows = members). Its mean is 1 for residuals drawn from ``C`` whatever ``C``'s correlations, so a
     correlation structure the model gets wrong cannot inflate it (:func:`standardized_target`)."""
-    r = _rows(sim) - np.asarray(obs, dtype=float)
-    return _squeeze(np.mean(r * r / np.square(obs_error.std), axis=1), sim)
+    return chi2_per_obs(sim, obs, DiagonalError(obs_error.std))
 
 
 def standardized_target(obs_error: ObservationError, n_sd: float = 2.0) -> float:

@@ -123,8 +123,7 @@ def table(bench: dict, source: str, pooled: list | None = None, pooled_sources: 
     also = "".join(f", `{x}`" for x in pooled_sources)
     head = (f"From `{source}`{also} ({bench['method']}, N = {bench['ensemble_size']}, window "
             f"{bench['window_s'][0] * 1e6:.0f}-{bench['window_s'][1] * 1e6:.0f} us; reported posterior: {posterior}; "
-            f"`converged`: the loops the stop test of the run ended, the whitened one for runs before "
-            f"2026-11-29 (docs/inference.md, Stopping); brackets: binomial 95 % intervals):")
+            f"`converged`: the loops ended by the stop test each run had; brackets: binomial 95 % intervals):")
     return "\n".join([head, "", *rows, "", _reference_line(bench, sets), *_ensemble_line(bench, sets)])
 
 
