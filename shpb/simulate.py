@@ -105,10 +105,10 @@ def _measured_incident(record):
     spec = freiburg_specimen(path)
     L, D = float(spec["length_m"]), float(spec["diameter_m"])
     red = reduce_record(raw, specimen_length_m=L, specimen_diameter_m=D)
-    lith = str(spec.get("lithology", path.parent.name))
-    rock = rock_properties(lith)
-    if np.isfinite(spec.get("E_Pa", np.nan)):
-        rock = dict(rock, E=float(spec["E_Pa"]))
+    # The specimen's elastic constants are the rock's (the lithology's mean), never the test row's E: the
+    # source lab took that E from the slope of this test's own stress-strain curve, so it is the record's
+    # response, and a held-out record's prediction may not use it (docs/closing-the-loop.md).
+    rock = rock_properties(str(spec.get("lithology", path.parent.name)))
     return {"reduced": red, "length": L, "diameter": D, "rock": rock, "bars": None, "geometry": "cylinder",
             "specimen": {"geometry": "cylinder", "length": L, "diameter": D}}
 

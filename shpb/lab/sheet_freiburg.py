@@ -4,8 +4,9 @@ specimen's row in ``Rae2021/<lith>.xlsx``, the rock in ``PetrophysicalProperties
 route as anybody's (``python -m shpb sheet-from-freiburg RAW --out SHEET``).
 
 The sheet carries exactly what today's Freiburg path uses: the bars and bridge constants of
-``FREIBURG_BAR``, the specimen's length and diameter from its spreadsheet row, the rock's E from that
-row where given (else the lithology's) and nu, rho of the lithology. Floats are written with
+``FREIBURG_BAR``, the specimen's length and diameter from its spreadsheet row, and E, nu, rho of the lithology
+(``PetrophysicalProperties.xlsx``). The row's own E, the slope of that test's stress-strain curve, is
+kept in ``metadata.test_modulus_Pa`` for the reader: a response of the record, never a model input. Floats are written with
 ``repr`` digits, so the sheet reproduces those numbers bit for bit.
 """
 from __future__ import annotations
@@ -31,7 +32,6 @@ def freiburg_sheet(raw_path: str | Path, sheet_dir: str | Path) -> dict:
     spec = freiburg_specimen(raw_path)
     lith = str(spec.get("lithology", raw_path.parent.name))
     rock = rock_properties(lith)
-    E = float(spec["E_Pa"]) if np.isfinite(spec.get("E_Pa", np.nan)) else rock["E"]
     ref = spec.get("reference_stress_Pa")
     meta = {"notes": f"generated from the Freiburg spreadsheets ({lith}.xlsx, PetrophysicalProperties.xlsx) "
                      f"by shpb.lab.sheet_freiburg"}
@@ -39,6 +39,10 @@ def freiburg_sheet(raw_path: str | Path, sheet_dir: str | Path) -> dict:
         meta["reference_stress_Pa"] = float(ref)
     if np.isfinite(spec.get("strain_rate_per_s", np.nan)):
         meta["strain_rate_per_s"] = float(spec["strain_rate_per_s"])
+    if np.isfinite(spec.get("E_Pa", np.nan)):
+        # kept for the reader only: the lab's slope of this test's own stress-strain curve (25-75 % of its
+        # peak), a response of the record; the model takes the rock's E (rock.E below)
+        meta["test_modulus_Pa"] = float(spec["E_Pa"])
     return {
         "name": m.group(1) if (m := re.match(r"^([A-Za-z]+_SHPB_\d+)(_|$)", raw_path.stem)) else raw_path.stem,
         "signals": {"file": os.path.relpath(raw_path.resolve(), Path(sheet_dir).resolve()),
@@ -46,7 +50,7 @@ def freiburg_sheet(raw_path: str | Path, sheet_dir: str | Path) -> dict:
         "bars": {"material": "titanium (Freiburg)", "E": 110.0e9, "rho": 4430.0, "nu": 0.32, "diameter": 0.050,
                  "gauge_distance_incident": 1.25, "gauge_distance_transmitted": 1.00},
         "specimen": {"geometry": "cylinder", "length": float(spec["length_m"]), "diameter": float(spec["diameter_m"])},
-        "rock": {"lithology": lith, "E": E, "nu": rock["nu"], "rho": rock["rho"]},
+        "rock": {"lithology": lith, "E": rock["E"], "nu": rock["nu"], "rho": rock["rho"]},
         "metadata": meta,
     }
 
