@@ -1,4 +1,4 @@
-"""Ensemble inference for model calibration (pure NumPy/SciPy; knows nothing about FDEM).
+"""Ensemble inference for model calibration (NumPy, SciPy, pandas, emcee; knows nothing about FDEM).
 
 Sees parameter matrices ``(N, n)`` and response matrices ``(N, m)``, one row per ensemble member.
 

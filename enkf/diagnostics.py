@@ -165,7 +165,7 @@ def member_standardized_misfit(responses, obs, obs_error: ObservationError, aliv
     scored against ``R + 2 S``, are this test's null; whitened by the AR(1) model of ``S`` they fail
     ``1 + 2 sqrt(2/m)`` more often than not, standardised by its variances they score about 1: the
     variances are right, the AR(1) correlation of the departures after the peak is not (numbers in
-    docs/inference.md, Stopping; ``benchmarks/stop_rule_dev.py``)."""
+    docs/inference.md, Stopping; ``studies/stop_rule_dev.py``)."""
     y = _rows(responses)
     alive = _alive_mask(y, alive)
     target = standardized_target(obs_error)

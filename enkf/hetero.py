@@ -6,7 +6,7 @@ re-loading; at a tough one they stay together. The emulated likelihood ``N(d; em
 (``B = R + D``) carries one ``C_em``, the leave-one-out error at the latest runs, whose members sit
 where the posterior is. A data set from a brittle point whose mesh happened to keep its post-peak high is
 then better fitted by a tougher point with a narrower scatter, and the truth falls out of the interval
-on one side (the development twins' ``E_t`` misses; ``benchmarks/emulator_error_hetero.py``).
+on one side (the development twins' ``E_t`` misses; ``studies/emulator_error_models.py``).
 
 The model here scales ``C_em`` by ``a(theta)``, a local average of the runs' own leave-one-out misfits:
 

@@ -98,7 +98,7 @@ def self_calibration(X, Y, latest, obs_error: ObservationError, *, lower, upper,
         (:mod:`enkf.hetero`); ``delta`` is then the deviance's (log-determinant included).
     pseudo : (k,) bool, other runs as the pseudo-data (default ``latest``; ``C_em`` is still measured at
         ``latest``), e.g. the prior's hypercube for truths from the whole box
-        (``benchmarks/posterior_candidates.py``).
+        (``studies/posterior_candidates.py``).
     """
     X, Y = np.asarray(X, float), np.asarray(Y, float)
     latest = np.asarray(latest, bool)

@@ -340,7 +340,7 @@ def test_the_replicated_comparison_holds_its_level_on_a_null_candidate():
 
 
 def test_replicates_on_common_meshes_confirm_a_gain_the_unpaired_test_refutes():
-    """The finding of the leave-one-record-out series (benchmarks/results/loro_2026-11-27): with one run per
+    """The finding of the leave-one-record-out series (benchmarks/results/loro_seen): with one run per
     point and the simulator's variability S put on each run as if independent (and on the data), a real
     gain is refuted; run on common meshes and measured in pairs, it is confirmed. Current model off by up
     to 6 MPa, candidate by 1.5 MPa, under a 1.5 MPa mesh scatter 90 % shared by the two models on a mesh;

@@ -1,10 +1,10 @@
 """The engine's speed tables in docs/engine.md, generated from the committed benchmark JSON.
 
-    python tools/engine_table.py benchmarks/results/bench_engine_<date>.json \
-        benchmarks/results/profile_engine_<date>.json [--docs]
+    python tools/engine_table.py benchmarks/results/bench_engine.json \
+        studies/results/profile_engine.json [--docs]
 
 prints (or with --docs writes between the markers of docs/engine.md) the before/after table of
-benchmarks/bench_engine.py and the profile of benchmarks/profile_engine.py, so the numbers are quoted
+benchmarks/bench_engine.py and the profile of studies/profile_engine.py, so the numbers are quoted
 from one source (tests/test_docs_tables.py checks it).
 """
 from __future__ import annotations
