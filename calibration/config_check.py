@@ -3,7 +3,9 @@
 * :func:`validate_config` checks the workflow config against ``config/schema.yaml`` (JSON Schema),
   fills in the schema's defaults and adds the checks a schema cannot express (prior box, truth inside
   the box, observation window inside the simulated window, records exist and their test sheets are
-  valid, the diagnosis block, the sensitivity blocks ...). Every problem is reported in one
+  valid, the diagnosis block, the sensitivity blocks ...) and the numbers' checks of
+  :mod:`calibration.config_ranges` (finite, the simulator's bounds, plausible magnitudes, each method's
+  smallest ensemble). Every problem is reported in one
   :class:`ConfigError` whose message names the key (``experiments.<name>.<key>``) and, given the
   merged files (:func:`calibration.config_files.config_sources`), the config file that set it.
 * :func:`coerce_yaml_floats`: YAML 1.1's ``4.0e6`` (a string) read as a number.
@@ -23,6 +25,7 @@ from pathlib import Path
 from shpb.lab.sheet import is_sheet
 from .contracts import ConfigError, known_parameters, record_name
 from .config_files import coerce_numbers, config_sources, error_origin, load_config_file  # noqa: F401
+from .config_ranges import nonfinite_errors, range_errors
 
 __all__ = ["ConfigError", "load_yaml", "load_config_file", "config_sources", "validate_config", "apply_defaults",
            "coerce_yaml_floats"]
@@ -342,10 +345,11 @@ def validate_config(config: Mapping, schema: Mapping | str | Path, *, base_dir: 
         cfg = coerce_numbers(cfg, schema)
     except TypeError as exc:
         raise ConfigError(f"{source}: a value is not plain YAML data (numbers, strings, lists, maps): {exc}") from exc
-    errors = _schema_errors(cfg, schema)
+    # NaN passes a schema's minimum (every comparison with it is false): refused first, anywhere
+    errors = nonfinite_errors(cfg) + _schema_errors(cfg, schema)
     if not errors:
         cfg = apply_defaults(cfg, schema)
-        errors = _semantic_errors(cfg, Path(base_dir))
+        errors = _semantic_errors(cfg, Path(base_dir)) + range_errors(cfg)
         if not errors:
             from .sensitivity import config_errors as sensitivity_errors  # on call: it loads pandas and enkf
             errors = sensitivity_errors(cfg)

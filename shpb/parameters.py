@@ -78,6 +78,12 @@ _BOUNDS = {
 }
 
 
+def bounds(name: str) -> tuple[float, float, bool]:
+    """``(lo, hi, closed_lo)``: the range :func:`resolve` accepts for ``name`` (``lo <= v`` if
+    ``closed_lo`` else ``lo < v``, and ``v < hi``). Raises KeyError for an unknown name."""
+    return _BOUNDS[name]
+
+
 def defaults(geometry: str) -> dict:
     if geometry == "brazilian_disc":
         return dict(BRAZILIAN_DEFAULTS)
