@@ -8,13 +8,18 @@
   digits is rebuilt uniform there, the record's notes say so);
 * ``csv``: any CSV with a header row, the columns and units named in the sheet. Its time axis must
   be uniform (within 1 % of a step) and no value may be missing: the reduction interpolates on the
-  sampling step, so a gap or a NaN would silently become a wrong stress.
+  sampling step, so a gap or a NaN would silently become a wrong stress. A scope's export starts with
+  lines of its own (model, record length, sample interval) before the column names:
+  ``signals.skip_rows`` skips that many lines and ``signals.comment`` (one character) drops every
+  line starting with it; a file whose first lines do not parse is reported with the line and the
+  ``skip_rows`` that would reach the row naming the sheet's columns, when one does.
 
 Every problem raises :class:`~shpb.lab.sheet.SheetError` naming the sheet, the field and what was
 expected; a reader's own message (with the signals file's name and line) is kept in it.
 """
 from __future__ import annotations
 
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -31,24 +36,68 @@ TIME_UNITS = {"s": 1.0, "ms": 1.0e-3, "us": 1.0e-6}
 SIGNAL_UNITS = {"V": ("V", 1.0), "mV": ("V", 1.0e-3), "strain": ("strain", 1.0), "microstrain": ("strain", 1.0e-6)}
 #: A time axis departing from ``t0 + i dt`` by more than this fraction of ``dt`` is not uniform.
 UNIFORM_TOL = 0.01
+#: Lines of a csv file searched for the row naming the sheet's columns (a scope's header is a few dozen).
+HEADER_SEARCH_LINES = 200
+#: Sheet fields of the csv reader only: another reader ignoring them would hide a wrong sheet.
+CSV_READER_FIELDS = ("skip_rows", "comment")
+
+
+def _header_line(path: Path, names: list[str], comment: str | None) -> int | None:
+    """The 0-based line of ``path`` (among its first :data:`HEADER_SEARCH_LINES`) whose comma-separated
+    fields hold every one of ``names``: the column row a scope's own header lines precede."""
+    try:
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            for i, line in zip(range(HEADER_SEARCH_LINES), fh):
+                if comment and line.startswith(comment):
+                    continue
+                fields = {f.strip().strip('"') for f in line.split(",")}
+                if all(n in fields for n in names):
+                    return i
+    except OSError:
+        return None
+    return None
+
+
+def _skip_hint(path: Path, names: list[str], sig: dict) -> str:
+    """The fix to name when the sheet's columns were not found where the reader looked."""
+    line = _header_line(path, names, sig.get("comment"))
+    if line is not None and line != sig.get("skip_rows", 0):
+        return (f"; the columns are named on line {line + 1} of {path.name}: set signals.skip_rows: {line} "
+                f"(the lines before it)")
+    return ("; if the file starts with lines of its own before the column names (a scope's header), set "
+            "signals.skip_rows to their number, or signals.comment to the character they start with")
+
+
+def _read_csv(sheet: Sheet, names: list[str]):
+    import pandas as pd
+
+    where, path, sig = str(sheet.path), sheet.signals_file, sheet.signals
+    skip, comment = int(sig.get("skip_rows", 0)), sig.get("comment")
+    try:
+        return pd.read_csv(path, skiprows=skip, comment=comment, skip_blank_lines=True)
+    except pd.errors.ParserError as exc:
+        m = re.search(r"Expected (\d+) fields in line (\d+), saw (\d+)", str(exc))
+        what = (f"line {m.group(2)} has {m.group(3)} fields where the header row (after signals.skip_rows: "
+                f"{skip}) has {m.group(1)}") if m else str(exc)
+        raise SheetError([f"{where}: signals.file: expected a CSV file with one header row then data rows, "
+                          f"{path.name}: {what}{_skip_hint(path, names, sig)}"]) from None
+    except (pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        raise SheetError([f"{where}: signals.file: expected a CSV file with a header row, {path} "
+                          f"cannot be read ({exc}){_skip_hint(path, names, sig)}"]) from None
 
 
 def _csv_record(sheet: Sheet) -> RawRecord:
     import pandas as pd
 
     where, path, sig = str(sheet.path), sheet.signals_file, sheet.signals
-    try:
-        df = pd.read_csv(path)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        raise SheetError([f"{where}: signals.file: expected a CSV file with a header row, {path} "
-                          f"cannot be read ({exc})"]) from None
-    have = [str(c) for c in df.columns]
     wanted = [("signals.time.column", sig["time"]["column"])]
     wanted += [(f"signals.{bar}.columns", c) for bar in ("incident", "transmitted") for c in sig[bar]["columns"]]
+    df = _read_csv(sheet, [c for _, c in wanted])
+    have = [str(c) for c in df.columns]
     problems = [f"{where}: {key}: expected a column of {path.name} ({have}), {c!r} not found"
                 for key, c in wanted if c not in have]
     if problems:
-        raise SheetError(problems)
+        raise SheetError([problems[0] + _skip_hint(path, [c for _, c in wanted], sig), *problems[1:]])
     values = {}
     for key, c in wanted:
         v = pd.to_numeric(df[c], errors="coerce").to_numpy(float)
@@ -108,6 +157,10 @@ def read_sheet_record(sheet: Sheet) -> RawRecord:
     where = str(sheet.path)
     if sheet.format == "csv":
         raw = _csv_record(sheet)
+    elif any(k in sheet.signals for k in CSV_READER_FIELDS):
+        key = next(k for k in CSV_READER_FIELDS if k in sheet.signals)
+        raise SheetError([f"{where}: signals.{key}: only format csv takes it (format {sheet.format!r} has a "
+                          f"reader of its own that knows the file's layout), got {sheet.signals[key]!r}"])
     else:
         try:
             raw = _lab_record(sheet)
