@@ -44,14 +44,13 @@ half-widths relative to the truth; the stop reasons. The same scores for each tw
 ``summary_emulator_mcmc``, a failed sampler counted as a miss), so that the ensemble and the reported
 posterior are compared on the same twins.
 
-Each twin's result is cached as JSON under ``--cache`` (default ``benchmarks/cache/coverage_v3``, committed;
-``coverage_v2`` holds the records of the ensemble-reported twin of 7d38e03),
-so an interrupted run resumes where it stopped; ``--score-only`` scores what is cached (``complete``
+Each twin's result is cached as JSON under ``--cache`` (default ``benchmarks/cache/coverage_v3``, not in
+git: the run that scores the twins makes it), so an interrupted run resumes where it stopped; ``--score-only`` scores what is cached (``complete``
 says whether every planned twin is in). Prints one JSON object (and writes it with ``--out``), with
 the wall time of the twins simulated in this call and the machine's core count.
 
 Run: ``python benchmarks/bench_coverage.py --cores 2 --seed 40 --out
-benchmarks/results/bench_coverage_<date>.json`` (about 1.5 min per twin on 2 cores: up to 125 fast
+benchmarks/results/coverage_well_specified.json`` (about 1.5 min per twin on 2 cores: up to 125 fast
 simulations each).
 """
 

@@ -4,7 +4,7 @@
 A calibration at the ``fast`` preset of data from a finer mesh (a twin made at ``standard``, or a lab's
 records, which have no mesh at all) carries the coarse mesh's resolution error into its parameters:
 the ``fast`` disc fails differently from the ``standard`` one at the same parameters
-(``studies/results/approximation_pairs_seed41_2026-11-28.png``). With
+(``studies/results/approximation_pairs.png``). With
 ``pairs: n`` the workflow runs, before any analysis, ``n`` design points of a Latin hypercube of the
 prior box at the finer ``preset`` (one run each) and at the experiment's own preset
 (``coarse_realizations`` runs each), every run on its own mesh realization, record by record with the

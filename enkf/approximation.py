@@ -27,7 +27,7 @@ of freedom per point, hence ``k >= 2``); the term left is what the data need bey
 given, floored at zero where the fine mesh scatters less than the coarse one. ``"counted"`` keeps the
 pairs' raw scatter: the coarse model's variability then enters ``1 + 1/k`` times more than it should
 (wider intervals: on the disc at ``fast`` against ``standard`` its 50 % intervals of ``sigma_t``
-over-cover, ``studies/results/bench_coverage_misspecified_approx_counted_pooled_41_43_45_49_2026-11-28.json``).
+over-cover, ``studies/results/coverage_misspecified_counted_pooled.json``).
 """
 
 from __future__ import annotations

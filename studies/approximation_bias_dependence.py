@@ -1,7 +1,7 @@
 """Does the approximation error's bias depend on the parameters? (Development diagnostic.)
 
     python studies/approximation_bias_dependence.py benchmarks/cache/coverage_v3/approx-24/pairs_*.json \
-        > benchmarks/results/approximation_bias_dependence_2026-11-28.json
+        > studies/results/approximation_bias_dependence.json
 
 The approximation error (:mod:`enkf.approximation`) subtracts the pairs' mean difference ``fine -
 coarse`` and carries their scatter about it as a covariance averaged over the prior. An *enhanced*

@@ -11,7 +11,7 @@ and 0.50; runs of one twin are not independent, so the binomial interval is a gu
 both parameters; a marginal interval (what the README reports) can under-cover in one direction while
 the joint region is calibrated.
 
-    python studies/selfcal_rules.py benchmarks/results/bench_emulated_likelihood_dev_seed50_2026-11-27.json
+    python studies/selfcal_rules.py studies/results/bench_emulated_likelihood_dev.json
 """
 
 from __future__ import annotations

@@ -119,14 +119,15 @@ def test_the_readme_table_shows_the_reported_posterior_with_failed_samplers_as_m
              "reported_posterior": "emulator_mcmc", "self_calibrate": True,
              "well_specified": {"planned": 20, "complete": True, "twins": records,
                                 "summary": score(records, LOWER, UPPER, NAMES), "summary_emulator_mcmc": mc}}
-    text = table(bench, "x.json")
-    row = next(line for line in text.splitlines() if line.startswith("| well-specified"))
+    text = table([("x.json", bench)])
+    row = next(line for line in text.splitlines() if line.startswith("| well-specified")).split("|")
     k = round(mc["params"]["sigma_t"]["coverage_90"]["fraction"] * 18)
-    assert row.split("|")[2].strip() == "20"
-    assert row.split("|")[4].strip().startswith(f"{100 * k / 20:.0f} %")
-    assert "reported posterior: emulator_mcmc with self-calibration" in text
-    assert "samplers failed 2" in text and "last simulated ensemble" in text
-    assert "quantiles of the emulator MCMC sample" in text
+    assert row[2].strip() == "`x.json`" and row[3].strip() == "20"
+    assert row[4].strip().startswith(f"{100 * k / 20:.0f} %")
+    ens = bench["well_specified"]["summary"]["params"]
+    assert row[7].strip() == " / ".join(f"{100 * ens[q]['coverage_90']['fraction']:.0f} %" for q in NAMES)
+    assert "reported posterior: `emulator_mcmc`, the 5-95 % and 25-75 % quantiles of the MCMC sample" in text
+    assert "a sampler that failed counts as a miss" in text
 
 
 def test_the_misses_are_counted_by_side_and_a_biased_posterior_misses_on_one_side():
@@ -178,30 +179,34 @@ def test_pooled_sets_count_every_twin_once():
         pool("misspecified", {"a.json": a, "b.json": {**b, "refine_runs": 25}})
 
 
-def test_the_table_leads_with_the_bench_when_a_pooled_set_is_of_another_form():
-    """tools/coverage_table.py: a pooled well-specified set leads only when it is of the bench's own
-    reported form; a refined bench's row comes before an unrefined pool's, each labelled by its form."""
-    from benchmarks.pool_coverage import pool
+def test_the_table_has_a_row_per_set_in_order_and_refuses_to_mix_settings():
+    """tools/coverage_table.py: one row per set with twins, in the order the JSONs are given, each naming
+    its file; JSONs of different twin settings (here with and without the refinement batch) are refused."""
+    from benchmarks.bench_coverage import score_mcmc
     from tools.coverage_table import table
 
-    def well(seed, refine):
+    def bench(seed, refine, name="well_specified"):
         recs = _records("calibrated", n=10, seed=seed)
         for i, r in enumerate(recs):
             r.update(seed=1000 * seed + i, emulator_mcmc={"params": r["params"], "sampler": {"converged_chain": True}})
         return {"experiment": "twin_ref", "method": "emulated_esmda", "ensemble_size": 25, "window_s": [0.0, 1.6e-4],
                 "reported_posterior": "emulator_mcmc", "emulator_error": "heteroscedastic", "refine_runs": refine,
-                "well_specified": {"twins": recs, "summary": score(recs, LOWER, UPPER, NAMES),
-                                   "summary_emulator_mcmc": score_mcmc(recs, LOWER, UPPER, NAMES)}}
+                "approximation_pairs": 24 if name == "misspecified" else 0,
+                name: {"twins": recs, "summary": score(recs, LOWER, UPPER, NAMES),
+                       "summary_emulator_mcmc": score_mcmc(recs, LOWER, UPPER, NAMES)}}
 
-    from benchmarks.bench_coverage import score_mcmc
-    pooled = pool("well_specified", {"a.json": well(60, 0), "b.json": well(62, 0)})
-    rows = [line for line in table(well(64, 25), "x.json", [pooled], ("p.json",)).splitlines()
-            if line.startswith("| well-specified")]
-    assert rows[0].startswith("| well-specified, seed 64, heteroscedastic refined (25 runs) |")
-    assert rows[1].startswith("| well-specified, seeds 60, 62, heteroscedastic |")
-    rows = [line for line in table(well(64, 0), "x.json", [pooled], ("p.json",)).splitlines()
-            if line.startswith("| well-specified")]
-    assert rows[0].startswith("| well-specified, seeds 60, 62, heteroscedastic |")
+    text = table([("b/well.json", bench(64, 25)), ("b/mis.json", bench(65, 25, "misspecified")),
+                  ("b/again.json", bench(66, 25))])
+    rows = [line.split("|") for line in text.splitlines() if line.startswith("| ") and "`" in line.split("|")[2]]
+    assert [(r[1].strip(), r[2].strip(), r[3].strip()) for r in rows] == [
+        ("well-specified", "`well.json`", "10"),
+        ("misspecified (data from the `standard` mesh, approximation error from 24 paired runs)", "`mis.json`", "10"),
+        ("well-specified", "`again.json`", "10")]
+    assert text.startswith("From `b/well.json`, `b/mis.json`, `b/again.json` (emulated_esmda, N = 25")
+    with pytest.raises(ValueError, match="b/old.json differs from b/well.json in refine_runs"):
+        table([("b/well.json", bench(64, 25)), ("b/old.json", bench(62, 0))])
+    with pytest.raises(ValueError, match="no benchmark JSON"):
+        table([])
 
 
 def test_pooling_compares_the_form_that_ran_and_refuses_to_mix_forms():
@@ -245,29 +250,6 @@ def test_kept_runs_are_reused_only_for_the_same_loop():
     assert not bc._same_spec(spec, replace(spec, seed=60004))
     assert not bc._same_spec(spec, replace(spec, ensemble_size=24))
     assert not bc._same_spec(spec, replace(spec, lower=spec.lower * 1.01))
-
-
-def test_a_pooled_well_specified_set_leads_the_readme_table():
-    """tools/coverage_table.py: a pooled well-specified set (the most twins of the reported form) is the
-    table's first row, labelled with its seeds and counting every pooled twin; the bench's own rows follow."""
-    from benchmarks.bench_coverage import score_mcmc
-    from benchmarks.pool_coverage import pool
-    from tools.coverage_table import table
-
-    sets = []
-    for seed, kind in ((60, "calibrated"), (62, "overconfident")):
-        b = _bench(seed, kind)
-        b["well_specified"] = b.pop("misspecified")
-        b["well_specified"]["summary_emulator_mcmc"] = score_mcmc(b["well_specified"]["twins"], LOWER, UPPER, NAMES)
-        b["well_specified"]["summary"] = score(b["well_specified"]["twins"], LOWER, UPPER, NAMES)
-        b.update(ensemble_size=25, window_s=[0.0, 1.6e-4], emulator_error="heteroscedastic")
-        sets.append(b)
-    pooled = pool("well_specified", {"a.json": sets[0], "b.json": sets[1]})
-    rows = [line for line in table(sets[1], "b.json", [pooled], ("p.json",)).splitlines() if line.startswith("| ")]
-    assert rows[1].startswith("| well-specified, seeds 60, 62, heteroscedastic | 20 |")
-    assert rows[2].startswith("| well-specified, seed 62, heteroscedastic | 10 |")
-    k = pooled["summary_emulator_mcmc"]["params"]["sigma_t"]["coverage_90"]["fraction"]
-    assert rows[1].split("|")[4].strip().startswith(f"{100 * k:.0f} %")
 
 
 def test_coverage_by_box_third_finds_where_the_misses_are():

@@ -1,36 +1,57 @@
-"""Numbers quoted in the README come from one generated source: the coverage table between its markers
-is exactly what tools/coverage_table.py makes from the benchmark JSON it names."""
+"""Numbers quoted in the README and docs come from one generated source: each block between its markers
+is exactly what its tool makes from the committed JSON it names, and the README's run time is the
+committed run.json's."""
 
+import json
 from pathlib import Path
 
-from tools import coverage_table, engine_table
+from tools import coverage_table, engine_table, loro_table, results_table
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_the_readme_coverage_table_is_generated_from_the_committed_benchmark_json():
-    tool = coverage_table
-    text = (ROOT / "README.md").read_text()
-    sources = tool.readme_block_sources(text)
-    assert sources and all((ROOT / s).is_file() for s in sources), sources
+def _block(text: str, tool) -> str:
     start, end = text.index(tool.START), text.index(tool.END) + len(tool.END)
-    assert text[start:end] == tool.block(*sources)
+    return text[start:end]
+
+
+def test_the_readme_coverage_table_is_generated_from_the_committed_benchmark_json():
+    text = (ROOT / "README.md").read_text()
+    sources = coverage_table.readme_block_sources(text)
+    assert sources and all((ROOT / s).is_file() for s in sources), sources
+    assert _block(text, coverage_table) == coverage_table.block(*sources)
+
+
+def test_the_readme_results_table_is_generated_from_the_newest_committed_default_run():
+    text = (ROOT / "README.md").read_text()
+    sources = results_table.readme_block_sources(text)
+    assert sources == [f"benchmarks/results/default_run/{e}/summary.json" for e in ("twin_ref", "marble_loop")]
+    assert _block(text, results_table) == results_table.block(*sources)
+
+
+def test_the_readme_quotes_the_default_runs_time_from_its_run_json():
+    run = json.loads((ROOT / "benchmarks" / "results" / "default_run" / "run.json").read_text())
+    text = (ROOT / "README.md").read_text()
+    assert run["exit_code"] == 0 and run["cores"] == 2
+    assert f"the default run took {run['run_s']} s, {run['fdem_runs']} FDEM runs" in " ".join(text.split())
+
+
+def test_the_workflow_docs_default_run_tables_are_the_tools_output():
+    text = (ROOT / "docs" / "workflow.md").read_text()
+    folder = ROOT / "benchmarks" / "results" / "default_run"
+    assert results_table.table(folder, ["twin_ref", "marble_loop"]) in text
+    assert results_table.diagnosis_table(folder, "marble_loop") in text
 
 
 def test_the_engine_speed_tables_are_generated_from_the_committed_benchmark_json():
-    tool = engine_table
     text = (ROOT / "docs" / "engine.md").read_text()
-    bench, prof = tool.doc_block_sources(text)
+    bench, prof = engine_table.doc_block_sources(text)
     assert (ROOT / bench).is_file() and (ROOT / prof).is_file(), (bench, prof)
-    start, end = text.index(tool.START), text.index(tool.END) + len(tool.END)
-    assert text[start:end] == tool.block(bench, prof)
+    assert _block(text, engine_table) == engine_table.block(bench, prof)
 
 
-def test_the_readme_loro_table_is_generated_from_the_committed_loro_summaries():
-    from tools import loro_table as tool
-
-    text = (ROOT / "README.md").read_text()
-    sources = tool.readme_block_sources(text)
+def test_the_loro_table_is_generated_from_the_committed_loro_summaries():
+    text = loro_table.DOC.read_text()
+    sources = loro_table.doc_block_sources(text)
     assert sources and all((ROOT / s).is_file() for s in sources), sources
-    start, end = text.index(tool.START), text.index(tool.END) + len(tool.END)
-    assert text[start:end] == tool.block(sources)
+    assert _block(text, loro_table) == loro_table.block(sources)

@@ -1,10 +1,11 @@
-"""The README's leave-one-record-out table, generated from the series' committed ``loro/summary.json``
-(one source for the numbers).
+"""The leave-one-record-out table of docs/closing-the-loop.md, generated from the series' committed
+``loro/summary.json`` (one source for the numbers).
 
-    python tools/loro_table.py benchmarks/results/loro_<date>/marble_loro.json [more series] [--readme]
+    python tools/loro_table.py benchmarks/results/loro_seen/marble_loro.json [more series] [--docs]
     python tools/loro_table.py --add-risk <series summary.json> <its folds' report.json ...>
 
-The block sits between ``<!-- loro-table:start -->`` and ``<!-- loro-table:end -->`` in README.md;
+The block sits between ``<!-- loro-table:start -->`` and ``<!-- loro-table:end -->`` in
+docs/closing-the-loop.md;
 ``tests/test_docs_tables.py`` checks that it equals what this tool makes from the JSON files named in it.
 """
 
@@ -82,7 +83,10 @@ def block(paths) -> str:
     return f"{START}\n{head}\n\n" + "\n".join(lines) + f"\n{END}"
 
 
-def readme_block_sources(text: str) -> list[str]:
+DOC = ROOT / "docs" / "closing-the-loop.md"
+
+
+def doc_block_sources(text: str) -> list[str]:
     inner = text.split(START, 1)[1].split(END, 1)[0]
     head = inner.strip().split("\n", 1)[0]
     return head.split("`")[1::2][: head.count("`") // 2]
@@ -94,11 +98,10 @@ def main(argv) -> int:
         add_risk(ROOT / paths[0], paths[1:])
         return 0
     text = block(paths)
-    if "--readme" in argv:
-        readme = ROOT / "README.md"
-        old = readme.read_text()
+    if "--docs" in argv:
+        old = DOC.read_text()
         a, b = old.index(START), old.index(END) + len(END)
-        readme.write_text(old[:a] + text + old[b:])
+        DOC.write_text(old[:a] + text + old[b:])
     else:
         print(text)
     return 0

@@ -1,6 +1,12 @@
 """The default run's results as a Markdown table, generated from its ``summary.json`` files (one source).
 
-    python tools/results_table.py results twin_ref marble_loop
+    python tools/results_table.py results twin_ref marble_loop          # the full table
+    python tools/results_table.py --readme benchmarks/results/default_run/twin_ref/summary.json \
+        benchmarks/results/default_run/marble_loop/summary.json           # rewrite README's block
+
+The README's block (between ``<!-- results-table:start -->`` and ``<!-- results-table:end -->``) is the
+short form for a user: verdict, stop, posterior and predictive check per experiment, and the closing
+of the loop where the experiment has one; ``tests/test_docs_tables.py`` checks it against the JSON it names.
 
 Per experiment: the verdict and its flags, how the loop stopped, the posterior mean with its 90 %
 interval per parameter (and the truth for twins), the estimated discrepancy per record (its RMS size
@@ -76,7 +82,55 @@ def diagnosis_table(folder: Path, name: str) -> str:
     return "\n".join(rows)
 
 
+ROOT = Path(__file__).resolve().parents[1]
+START, END = "<!-- results-table:start -->", "<!-- results-table:end -->"
+
+
+def _closing(summary_path: Path) -> str:
+    """The diagnosis's verdict (``confirmed`` with the effects added, or ``base_kept``), or "-"."""
+    check = summary_path.parent / "diagnosis" / "check.json"
+    if not check.is_file():
+        return "-"
+    c = json.loads(check.read_text())
+    return f"{c['verdict']}" + (f" ({', '.join(c['added'])})" if c["added"] else "")
+
+
+def readme_table(paths) -> str:
+    """The README's short table from ``summary.json`` paths (relative to the repository root)."""
+    rows = ["| experiment | verdict (flags) | stop | posterior mean [90 % interval] "
+            "| 90 % predictive coverage per record | closing the loop |", "|---|---|---|---|---|---|"]
+    for p in paths:
+        s = json.loads((ROOT / p).read_text())
+        v = s["verdict"]
+        params = "<br>".join(_param(q, s["posterior"][q], s.get("truth")) for q in s["posterior"])
+        rows.append(f"| `{s['experiment']}` | `{v['verdict']}` ({', '.join(v['flags']) or 'no flags'}) "
+                    f"| {s['stop_reason']} after {s['iterations']} analyses | {params} | {_check(s)} "
+                    f"| {_closing(ROOT / p)} |")
+    head = "From " + ", ".join(f"`{p}`" for p in paths) + " (the default run, `snakemake --cores 2`):"
+    return "\n".join([head, "", *rows])
+
+
+def block(*paths: str) -> str:
+    return f"{START}\n{readme_table(paths)}\n{END}"
+
+
+def readme_block_sources(text: str) -> list:
+    """The summary.json paths named in README's block, in order."""
+    head = text.split(START, 1)[1].split(END, 1)[0].strip().split("\n", 1)[0]
+    return [part for part in head.split("`")[1::2] if part.endswith(".json")]
+
+
+def _write_readme(paths) -> None:
+    readme = ROOT / "README.md"
+    text = readme.read_text()
+    a, b = text.index(START), text.index(END) + len(END)
+    readme.write_text(text[:a] + block(*paths) + text[b:])
+
+
 if __name__ == "__main__":
+    if sys.argv[1] == "--readme":
+        _write_readme(sys.argv[2:])
+        sys.exit(0)
     folder, names = Path(sys.argv[1]), sys.argv[2:]
     print(table(folder, names))
     for n in names:
