@@ -80,6 +80,15 @@ def test_a_missing_path_is_found_and_a_placeholder_is_not_checked():
     assert missing_paths(text, ROOT) == ["studies/no_such_study.py"]
 
 
+def test_the_readme_explains_every_verdict_the_code_can_give():
+    from calibration.verdict import FLAG_ORDER
+
+    text = (ROOT / "README.md").read_text()
+    rows = {line.split("|")[1].strip() for line in text.splitlines() if line.startswith("| `")}
+    assert {f"`{v}`" for v in (*FLAG_ORDER, "ok")} <= rows
+    assert "`confirmed`" in text and "`base_kept`" in text
+
+
 def test_the_readme_is_short_and_runs_the_ci_test_command():
     text = (ROOT / "README.md").read_text()
     assert len(text.splitlines()) <= 150

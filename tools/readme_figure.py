@@ -1,4 +1,5 @@
-"""The README's figure: a default run's paper-style ensemble plot above its forecast's curve and fracture.
+"""A default run's figure (``docs/img/default_run_twin_ref.png``): its paper-style ensemble plot above
+its forecast's curve and fracture.
 
 Run after ``snakemake --cores 2``:
 
