@@ -1,7 +1,8 @@
 """Command line: `python -m shpb simulate ...` runs one SHPB simulation into a folder
 (`python -m shpb --version`: the package version); `python -m shpb reduce SHEET.yaml` reduces a test
 sheet's record (curves.csv, force_balance.png, checks.json; docs/own-data.md); `python -m shpb
-sheet-from-freiburg RAW --out SHEET.yaml` writes the sheet of a Freiburg record.
+sheet-from-freiburg RAW --out SHEET.yaml` writes the sheet of a Freiburg record; `python -m shpb init-config
+SHEET... --out my.yaml` writes a calibration experiment from a lab's sheets (shpb.lab.init_config).
 
 simulate writes DIR/curve.csv and DIR/run.json (docs/workflow.md, "What goes where"). Exit codes: 0 ok, 3 the
 simulation failed numerically (run.json says why), 2 bad arguments or input files (a bad sheet).
@@ -91,7 +92,16 @@ def main(argv=None) -> int:
     fb = sub.add_parser("sheet-from-freiburg", help="write the test sheet of a Freiburg raw record")
     fb.add_argument("raw", help="Freiburg raw record Rae2021/SHPBdata/<lith>/<name>.txt")
     fb.add_argument("--out", required=True, help="the sheet to write (YAML)")
+    ic = sub.add_parser("init-config", help="write a calibration experiment from test sheets of one rock")
+    ic.add_argument("sheets", nargs="+", metavar="SHEET", help="test sheets (YAML) of one rock and geometry")
+    ic.add_argument("--out", required=True, help="the config to write (YAML; snakemake --configfile it)")
+    ic.add_argument("--name", help="the experiment's name (default: <lithology>_<geometry>)")
+    ic.add_argument("--diagnosis", action="store_true",
+                    help="close the loop: hold one record out (the last by test order) and predict it at the end")
+    ic.add_argument("--heldout", metavar="NAME", help="with --diagnosis: the sheet (file stem) to hold out")
     args = ap.parse_args(argv)
+    if args.command == "init-config":
+        return _init_config(args)
     if args.command == "reduce":
         return _reduce(args)
     if args.command == "sheet-from-freiburg":
@@ -137,7 +147,9 @@ def _reduce(args) -> int:
           f"(limit {fb['limit']}) {word[fb['ok']]}\n"
           f"  pulse alignment: best shift of F2 {al['best_shift_back_s'] * 1e6:+.2f} us "
           f"(limit +-{al['limit_s'] * 1e6:.2f} us) {word[al['ok']]}\n"
-          f"  noise: {nz['noise_over_peak']:.2%} of the peak (limit {nz['limit']:.0%}) {word[nz['ok']]}")
+          f"  noise: {nz['noise_over_peak']:.2%} of the peak (limit {nz['limit']:.0%}) {word[nz['ok']]}\n"
+          f"  validity: {checks['validity']['class']}"
+          + "".join(f"\n    {r}" for r in checks["validity"]["reasons"]))
     if sheet.reduction.get("dispersion_correction", False):
         print(f"  dispersion: bar signals corrected to the faces (Pochhammer-Chree, first mode, nu {sheet.bar_nu:g})")
     return contract.EXIT_OK
@@ -155,6 +167,25 @@ def _sheet_from_freiburg(args) -> int:
     write_sheet(doc, args.out, header=f"Test sheet of the Freiburg record {Path(args.raw).name}, generated from "
                                       f"its spreadsheets (python -m shpb sheet-from-freiburg)")
     print(f"{doc['name']} -> {args.out}")
+    return contract.EXIT_OK
+
+
+def _init_config(args) -> int:
+    from pathlib import Path
+
+    from .atomic import atomic_write_text
+    from .lab.init_config import InitConfigError, init_config
+    try:
+        text, doc = init_config(args.sheets, name=args.name, diagnosis=args.diagnosis, heldout=args.heldout)
+    except (ValueError, FileNotFoundError, InitConfigError) as exc:
+        print(f"python -m shpb init-config: error: {exc}", file=sys.stderr)
+        return contract.EXIT_BAD_INPUT
+    atomic_write_text(Path(args.out), text.replace("THIS_FILE", args.out))
+    (name, exp), = doc["experiments"].items()
+    obs = exp["observations"]
+    print(f"{name}: {exp['geometry']}, {len(obs['records'])} record(s), window 0-{obs['t_end'] * 1e6:.0f} us "
+          f"every {obs['dt'] * 1e6:g} us, sigma_t {exp['parameters']['sigma_t']} Pa, E_t {exp['parameters']['E_t']} "
+          f"J/m^2 -> {args.out}")
     return contract.EXIT_OK
 
 

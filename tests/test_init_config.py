@@ -1,0 +1,209 @@
+"""`python -m shpb init-config` (shpb.lab.init_config): a calibration experiment written from a lab's test
+sheets. The window holds every record's onset, peak and fall, dt gives 100-200 observations, the prior box
+is the rock class's (the marble cylinder's E_t reaches the ~26 kJ/m^2 its post-peak needs at `fast`, the
+granite disc keeps the Table 2 box), every choice carries its reason, and the written configs pass the
+workflow's validation and a Snakemake dry run; mixed or too small sets are refused with a message."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from calibration.config_check import validate_config
+from shpb.__main__ import main
+from shpb.lab.init_config import (InitConfigError, choose_dt, choose_window, init_config, record_times,
+                                  rock_box)
+from shpb.lab.sheet_freiburg import freiburg_sheet, write_sheet
+
+REPO = Path(__file__).resolve().parents[1]
+DISC = REPO / "data" / "examples" / "granite_disc" / "granite_disc.yaml"
+CAMA = REPO / "data" / "freiburg-rae-rock-shpb" / "Rae2021" / "SHPBdata" / "CaMa"
+DISC_NAME, MARBLE_NAME = "granite_godinez2021_brazilian_disc", "carrara_marble_cylinder"
+
+
+@pytest.fixture(scope="module")
+def written(tmp_path_factory):
+    """The configs of the granite disc and of config/config.yaml marble_loop's three marble records
+    (CaMa_SHPB_006 held out, as there), written from a folder outside the repository."""
+    tmp = tmp_path_factory.mktemp("init")
+    sheets = [REPO / "data/examples/sheets/CaMa_SHPB_004.yaml"]
+    for raw in ("CaMa_SHPB_014_Ti25_55b_Al12b_0_001.txt", "CaMa_SHPB_006_Ti25_70b_Al12b_0_001.txt"):
+        sheets.append(tmp / f"{raw[:13]}.yaml")
+        write_sheet(freiburg_sheet(CAMA / raw, tmp), sheets[-1])
+    cwd = os.getcwd()
+    os.chdir(tmp)
+    try:
+        disc = init_config([DISC])
+        marble = init_config(sheets, diagnosis=True, heldout="CaMa_SHPB_006")
+    finally:
+        os.chdir(cwd)
+    (tmp / "disc.yaml").write_text(disc[0])
+    (tmp / "marble.yaml").write_text(marble[0])
+    return tmp, disc, marble
+
+
+def _exp(doc):
+    (exp,) = doc["experiments"].values()
+    return exp
+
+
+def _header_times(text: str) -> dict[str, tuple[float, float, float]]:
+    """Onset / peak / fall [us] of each record, from the written file's header."""
+    out = {}
+    for ln in text.splitlines():
+        if ln.startswith("#   ") and " / " in ln:
+            name, rest = ln[4:].split(": ", 1)
+            parts = [p.split()[0] for p in rest.split(" / ")]
+            out[name] = tuple(float(p) for p in parts)
+    return out
+
+
+def test_the_granite_disc_gets_its_window_dt_and_table_2_box(written):
+    _, (text, doc), _ = written
+    exp = _exp(doc)
+    assert doc["run"] == [DISC_NAME] and exp["geometry"] == "brazilian_disc" and exp["kind"] == "measured"
+    # onset 29 us, peak 113 us, down to half the peak at 151 us: + 10 % = 166 us, rounded up to 170 us
+    assert _header_times(text)["granite_disc"] == (29.0, 113.0, 151.0)
+    obs = exp["observations"]
+    assert obs["t_start"] == 0.0 and obs["t_end"] == pytest.approx(170e-6) and obs["dt"] == pytest.approx(1e-6)
+    assert exp["simulation"]["t_end"] >= obs["t_end"]
+    assert exp["parameters"] == {"sigma_t": [4.0e6, 6.0e7], "E_t": [200.0, 2400.0]}
+    truth = {"sigma_t": 45e6, "E_t": 500.0}   # data/examples/granite_disc/truth.json: inside the box
+    assert all(lo < truth[p] < hi for p, (lo, hi) in exp["parameters"].items())
+    assert exp["method"] == "emulated_esmda" and exp["ensemble_size"] == 25 and "diagnosis" not in exp
+
+
+def test_the_marble_cylinder_gets_a_box_its_post_peak_fits_in_and_a_window_past_every_fall(written):
+    _, _, (text, doc) = written
+    exp = _exp(doc)
+    assert doc["run"] == [MARBLE_NAME] and exp["geometry"] == "cylinder"
+    lo, hi = exp["parameters"]["E_t"]
+    assert lo <= 200.0 and hi >= 40e3              # ~26 kJ/m^2 at `fast` (docs/closing-the-loop.md)
+    assert exp["parameters"]["sigma_t"] == [1.0e7, 1.2e8]
+    times = _header_times(text)
+    assert set(times) == {"CaMa_SHPB_004", "CaMa_SHPB_006", "CaMa_SHPB_014"}
+    window = exp["observations"]["t_end"] * 1e6
+    latest = max(f for _, _, f in times.values())
+    assert all(on < pk < f for on, pk, f in times.values())
+    assert latest < window <= 1.1 * latest + 10.0 + 1e-6 and window % 10 < 1e-6
+    n = window / (exp["observations"]["dt"] * 1e6)
+    assert 100 <= n <= 200 and abs(n - round(n)) < 1e-9
+    # --heldout: marble_loop's split; the held-out record is in diagnosis, not among the records
+    held = exp["diagnosis"]["heldout_records"]
+    assert [Path(p).stem for p in held] == ["CaMa_SHPB_006"] and exp["diagnosis"]["validation"] == "holdout"
+    assert [Path(p).stem for p in exp["observations"]["records"]] == ["CaMa_SHPB_004", "CaMa_SHPB_014"]
+    assert exp["method"] == "esmda" and exp["observations"]["model_error"] == {"simulator_replicates": 3}
+
+
+def test_every_choice_carries_its_reason(written):
+    for text in (written[1][0], written[2][0]):
+        lines = text.splitlines()
+        start = lines.index("experiments:")
+        bare = []
+        for i, ln in enumerate(lines[start + 2:], start + 2):
+            s = ln.strip()
+            if (not s or s.startswith(("#", "- ")) or s.endswith(":") or s == "description: >-"
+                    or lines[i - 1].strip() == "description: >-"):
+                continue
+            if "#" not in ln and not lines[i - 1].strip().startswith("#"):
+                bare.append(ln)
+        assert not bare, bare
+
+
+def test_the_written_configs_pass_the_validation_and_a_dry_run(written):
+    tmp, _, _ = written
+    for f in ("disc.yaml", "marble.yaml"):
+        validate_config(yaml.safe_load((tmp / f).read_text()), REPO / "config" / "schema.yaml", base_dir=tmp)
+    out = subprocess.run([sys.executable, "-m", "snakemake", "-n", "--snakefile", str(REPO / "Snakefile"),
+                          "--directory", str(tmp), "--workflow-profile", "none", "--cores", "2",
+                          "--configfile", str(tmp / "disc.yaml"), str(tmp / "marble.yaml"),
+                          "--config", f"run=[{DISC_NAME}, {MARBLE_NAME}]"],
+                         capture_output=True, text=True, timeout=300, env=dict(os.environ))
+    assert out.returncode == 0, out.stderr[-3000:]
+    jobs = dict(ln.split()[:2] for ln in out.stdout.splitlines() if ln.split()[:1] and ln.split()[0].isidentifier()
+                and len(ln.split()) == 2 and ln.split()[1].isdigit())
+    # 25 disc members + 8 members x 2 marble records in the first ensembles; the marble's diagnosis check
+    assert int(jobs["member"]) == 25 + 16 and int(jobs["diagnosis_check"]) == 1 and int(jobs["lhs"]) == 2
+    assert not (tmp / "results").exists()
+
+
+# --------------------------------------------------------------------------------------------------
+# the rules, on made-up curves
+# --------------------------------------------------------------------------------------------------
+def _triangle(peak_us: float, fall_us: float, end_us: float, name: str = "r"):
+    t = np.arange(0.0, end_us + 0.5, 0.5) * 1e-6
+    s = np.interp(t, [0.0, 50e-6, peak_us * 1e-6, fall_us * 1e-6, 1.0], [0.0, 0.0, 100e6, 0.0, 0.0])
+    return record_times(name, Path(f"{name}.yaml"), t, s)
+
+
+def test_the_window_is_the_latest_fall_plus_the_margin_rounded_up():
+    a, b = _triangle(200, 300, 500, "a"), _triangle(150, 250, 500, "b")
+    assert (a.onset, a.peak, a.fall) == pytest.approx((57.5e-6, 200e-6, 250e-6), abs=0.51e-6)   # 0.5 us samples
+    t_end, why = choose_window([a, b])                 # 250 + 25 = 275 -> 280 us
+    assert t_end == pytest.approx(280e-6) and "a: down to 50% of its peak at 250 us" in why
+    t_end, why = choose_window([_triangle(100, 140, 500)])   # 120 + 12 = 132 -> 140 us
+    assert t_end == pytest.approx(140e-6)
+    t_end, why = choose_window([_triangle(50.5, 60, 500)])   # a short fall: the 10 us minimum margin
+    assert t_end == pytest.approx(70e-6)
+
+
+def test_the_window_stops_where_the_shortest_record_does():
+    a, short = _triangle(200, 300, 500, "a"), _triangle(150, 250, 262, "short")
+    t_end, why = choose_window([a, short])
+    assert t_end == pytest.approx(260e-6) and "cut to 260 us, where short's reduced record ends" in why
+    never = _triangle(200, 2000, 400, "never")         # still above half its peak at the record's end
+    assert never.fall is None
+    t_end, why = choose_window([never])
+    assert t_end == pytest.approx(400e-6) and "['never'] do not fall that far" in why
+    with pytest.raises(InitConfigError, match="ends at 120 us, before the peak of another record"):
+        choose_window([a, _triangle(100, 110, 120, "cut")])
+
+
+@pytest.mark.parametrize("window_us, dt_us", [(170, 1.0), (280, 2.0), (390, 2.5), (3000, 20.0), (60, 0.5)])
+def test_dt_is_a_round_step_with_100_to_200_observations(window_us, dt_us):
+    dt = choose_dt(window_us * 1e-6)
+    assert dt == pytest.approx(dt_us * 1e-6) and 100 <= window_us / dt_us <= 200
+
+
+def test_a_rock_without_a_class_gets_the_stated_wide_box():
+    boxes, why = rock_box("Savonnieres_Limestone", "cylinder")
+    assert boxes == {"sigma_t": [4.0e6, 1.2e8], "E_t": [100.0, 5.0e4]} and "no rock class known" in why["sigma_t"]
+    boxes, _ = rock_box(None, "brazilian_disc")
+    assert boxes["E_t"] == [200.0, 2400.0]
+
+
+# --------------------------------------------------------------------------------------------------
+# refused sets
+# --------------------------------------------------------------------------------------------------
+def test_the_command_refuses_mixed_rocks_and_geometries(tmp_path, capsys):
+    code = main(["init-config", str(DISC), str(REPO / "data/examples/sheets/CaMa_SHPB_004.yaml"),
+                 "--out", str(tmp_path / "x.yaml")])
+    err = capsys.readouterr().err
+    assert code == 2 and not (tmp_path / "x.yaml").exists()
+    assert "python -m shpb init-config: error: the sheets mix specimen.geometry values" in err
+    assert "granite_disc.yaml" in err and "CaMa_SHPB_004.yaml" in err
+    assert "run init-config once per rock and geometry" in err
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"diagnosis": True}, "--diagnosis: expected at least 3 sheets"),
+    ({"heldout": "granite_disc"}, "--heldout: only with --diagnosis"),
+    ({"name": "2disc"}, "--name: expected letters"),
+])
+def test_a_set_that_cannot_make_the_experiment_is_refused(kwargs, message):
+    with pytest.raises(InitConfigError, match=message):
+        init_config([DISC], **kwargs)
+
+
+def test_an_unknown_heldout_name_is_refused(written):
+    tmp = written[0]
+    sheets = [REPO / "data/examples/sheets/CaMa_SHPB_004.yaml", tmp / "CaMa_SHPB_014.yaml", tmp / "CaMa_SHPB_006.yaml"]
+    with pytest.raises(InitConfigError, match=r"--heldout: expected the file stem of one of the sheets .*'CaMa_SHPB_4'"):
+        init_config(sheets, diagnosis=True, heldout="CaMa_SHPB_4")
+    text, doc = init_config(sheets, diagnosis=True)     # default: the last by test order
+    assert [Path(p).stem for p in _exp(doc)["diagnosis"]["heldout_records"]] == ["CaMa_SHPB_014"]
