@@ -183,9 +183,12 @@ def _init_config(args) -> int:
     atomic_write_text(Path(args.out), text.replace("THIS_FILE", args.out))
     (name, exp), = doc["experiments"].items()
     obs = exp["observations"]
-    print(f"{name}: {exp['geometry']}, {len(obs['records'])} record(s), window 0-{obs['t_end'] * 1e6:.0f} us "
-          f"every {obs['dt'] * 1e6:g} us, sigma_t {exp['parameters']['sigma_t']} Pa, E_t {exp['parameters']['E_t']} "
-          f"J/m^2 -> {args.out}")
+    (s_lo, s_hi), (e_lo, e_hi) = exp["parameters"]["sigma_t"], exp["parameters"]["E_t"]
+    held = (exp.get("diagnosis") or {}).get("heldout_records") or []
+    print(f"{name}: {exp['geometry']}, {len(obs['records'])} record(s)"
+          + (f" + {Path(held[0]).stem} held out" if held else "")
+          + f", window 0-{obs['t_end'] * 1e6:.0f} us every {obs['dt'] * 1e6:g} us, sigma_t {s_lo / 1e6:g}-{s_hi / 1e6:g} "
+          f"MPa, E_t {e_lo:g}-{e_hi:g} J/m^2 -> {args.out}")
     return contract.EXIT_OK
 
 

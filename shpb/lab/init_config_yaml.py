@@ -50,8 +50,9 @@ def line(indent: int, key: str, value=None, why: str = "") -> str:
 
 def record_path(path: Path) -> str:
     """The sheet's path as the workflow (run from the current folder) will find it."""
-    rel = os.path.relpath(Path(path).resolve(), Path.cwd())
-    return str(Path(path).resolve()) if rel.startswith("..") else rel
+    absolute = os.path.abspath(path)       # not resolve(): a path through a link stays as the user gave it
+    rel = os.path.relpath(absolute, os.getcwd())
+    return absolute if rel.startswith("..") else rel
 
 
 def _method_lines(heldout: str | None) -> list[str]:
