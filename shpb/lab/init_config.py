@@ -27,7 +27,6 @@ from pathlib import Path
 import numpy as np
 
 from .lab_reduce import reduce_sheet
-from .sheet import SheetError
 from .sheet_readers import check_sheet
 
 __all__ = ["RockClass", "ROCK_CLASSES", "WIDE_DEFAULT", "RecordTimes", "record_times", "choose_window",
@@ -202,7 +201,10 @@ def read_sheets(paths: list[str | Path]) -> tuple[list, list[RecordTimes]]:
 
 def init_config(paths: list[str | Path], *, name: str | None = None, diagnosis: bool = False,
                 heldout: str | None = None, seed: int = 31) -> tuple[str, dict]:
-    """``(YAML text with comments, the experiment as a dict)`` of one calibration experiment from ``paths``."""
+    """``(YAML text with comments, the same document as a dict)``: one calibration experiment from ``paths``.
+
+    The rock is compared by the sheets' ``rock.lithology``; sheets that give only E, nu, rho are taken
+    as one rock of no class (the wide default box)."""
     from .init_config_yaml import experiment_yaml
 
     if not paths:
