@@ -121,27 +121,29 @@ def _out_of_range(key: str, v: float, lo: float, hi: float, unit: str, what: str
             f"{_slip(v, lo, hi, unit, slips)}")
 
 
-def _param_value_error(key: str, name: str, v: float, label: str = "") -> str | None:
-    """The simulator's bound of parameter ``name`` (shpb.parameters.bounds), then its plausible range."""
+def _param_value_error(key: str, name: str, v: float, label: str = "", simulator: bool = True) -> str | None:
+    """The simulator's bound of parameter ``name`` (shpb.parameters.bounds), then its plausible range;
+    ``simulator=False``: a value outside the simulator's bound is left to the caller's own check."""
     try:
         lo, hi, closed_lo = simulator_bounds(name)
     except KeyError:  # an unknown name is reported by the semantic checks
         return None
     plo, phi, unit, what, slips = PARAM_RANGES.get(name, (lo, hi, "", "", ()))
     if not ((v >= lo if closed_lo else v > lo) and v < hi):
-        return (f"{key}: {label}{_num(v)} is outside the simulator's range of {name}: expected "
+        return None if not simulator else (f"{key}: {label}{_num(v)} is outside the simulator's range of {name}: expected "
                 f"{'>=' if closed_lo else '>'} {_num(lo)} and < {_num(hi)} (shpb.parameters)"
                 f"{_slip(v, max(lo, plo), min(hi, phi), unit, slips)}")
     return _out_of_range(key, v, plo, phi, unit, what, slips, label) if name in PARAM_RANGES else None
 
 
-def _box_errors(key: str, boxes: Mapping) -> list[str]:
+def _box_errors(key: str, boxes: Mapping, simulator: bool = True) -> list[str]:
     errors = []
     for name, box in (boxes or {}).items():
         if not (isinstance(box, list) and len(box) == 2 and all(_is_number(b) for b in box)):
             continue  # the schema reports its shape
         for end, v in zip(("lower", "upper"), box):
-            e = _param_value_error(f"{key}.{name}", name, v, f"the {end} end of [{_num(box[0])}, {_num(box[1])}], ")
+            e = _param_value_error(f"{key}.{name}", name, v, f"the {end} end of [{_num(box[0])}, {_num(box[1])}], ",
+                                   simulator)
             if e:
                 errors.append(e)
     return errors
@@ -167,7 +169,8 @@ def experiment_range_errors(where: str, exp: Mapping) -> list[str]:
         errors += _box_errors(f"{where}.parameters", exp["parameters"])
     errors += _values_errors(f"{where}.fixed", exp.get("fixed"))
     errors += _values_errors(f"{where}.observations.truth", (exp.get("observations") or {}).get("truth"))
-    errors += _box_errors(f"{where}.sensitivity.parameters", (exp.get("sensitivity") or {}).get("parameters"))
+    # the sensitivity checks (calibration.sensitivity, run next) name a box end the simulator rejects
+    errors += _box_errors(f"{where}.sensitivity.parameters", (exp.get("sensitivity") or {}).get("parameters"), False)
     errors += _values_errors(f"{where}.diagnosis.physical_upper", (exp.get("diagnosis") or {}).get("physical_upper"))
     for path, lo, hi, unit, what, slips in FIELD_RANGES:
         v = _get(exp, path)
