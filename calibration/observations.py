@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -41,7 +42,7 @@ from enkf.covariance import AR1Error, DenseError, ObservationError
 __all__ = [
     "OBS_COLUMNS", "ObservationFileError", "Observations", "observation_grid", "curve_on_grid", "read_curve",
     "twin_observations", "reduce_measured_record", "measured_observations", "check_record",
-    "read_observations", "response_matrix", "with_approximation_error",
+    "read_observations", "response_matrix", "with_approximation_error", "record_validity",
 ]
 
 #: Columns of ``obs.csv`` (SI units).
@@ -280,32 +281,55 @@ def twin_observations(truth_curve: pd.DataFrame, grid: np.ndarray, *, rng: np.ra
 # --------------------------------------------------------------------------------------------------
 # Measured records
 # --------------------------------------------------------------------------------------------------
-def reduce_measured_record(path: str | Path):
-    """Read and reduce a measured record: a test sheet (``.yaml``, :mod:`shpb.lab.sheet`: its signals,
-    bars and specimen) or a Freiburg raw record (its spreadsheet row and the Freiburg bars).
+@dataclass(frozen=True)
+class _Measured:
+    """A measured record read, checked and reduced once: the reduction, the sheet's or spreadsheet's
+    metadata, the noise estimate of the stress and the lab checks with the validity class."""
 
-    Returns ``(ReducedRecord, metadata, NoiseEstimate of the stress)``; metadata is the spreadsheet
-    row, or the sheet's ``metadata`` block. The noise estimate is taken from the pre-trigger part of
-    the averaged transmitted-bar signal (the one the specimen stress is made of), converted to Pa with
-    the reduction's own strain-to-stress factor.
-    """
-    path = Path(path)
+    red: object
+    meta: dict
+    noise: object
+    checks: dict
+
+
+def _stat_key(path: Path) -> tuple:
+    st = path.stat()
+    return str(path.resolve()), st.st_mtime_ns, st.st_size
+
+
+def _record_key(path: Path) -> tuple:
+    """(file, mtime, size) of the record, and of a sheet's signals file (a sheet is cheap to parse)."""
+    from shpb.lab.sheet import is_sheet, load_sheet
+
+    if not path.is_file():
+        raise FileNotFoundError(f"record file not found: {path}")
+    if not is_sheet(path):
+        return _stat_key(path)
+    signals = load_sheet(path).signals_file
+    return _stat_key(path) + (_stat_key(signals) if signals.is_file() else (str(signals),))
+
+
+def _measured(path: Path) -> _Measured:
+    """The record's :class:`_Measured`, cached per (file, mtime, size): the Snakefile checks every record at
+    parse time, and a job reads it again (docs/workflow.md)."""
+    return _measured_cached(_record_key(path), str(path))
+
+
+@lru_cache(maxsize=64)
+def _measured_cached(key: tuple, path_str: str) -> _Measured:
+    from shpb.lab.lab_reduce import lab_checks
     from shpb.lab.sheet import is_sheet
 
+    path = Path(path_str)
     if is_sheet(path):
-        from shpb.lab.lab_reduce import reduce_sheet
+        from shpb.lab.lab_reduce import reduce_sheet, transit_time
         from shpb.lab.sheet_readers import check_sheet
 
         sheet, raw = check_sheet(path)
-        red = reduce_sheet(sheet, raw)
-        spec = dict(sheet.metadata)
+        red = reduce_sheet(sheet, raw, check_stated=True)
+        spec, transit = dict(sheet.metadata), transit_time(sheet)
     else:
-        from shpb.lab.records import freiburg_specimen, read_freiburg_raw
-        from shpb.lab.reduction import FREIBURG_BAR, reduce_record
-
-        raw = read_freiburg_raw(path, bar=FREIBURG_BAR)
-        spec = freiburg_specimen(path)
-        red = reduce_record(raw, FREIBURG_BAR, float(spec["length_m"]), float(spec["diameter_m"]))
+        raw, spec, red, transit = _freiburg_record(path)
     bar = red.bar
     k_pa = bar.E * bar.area / (math.pi * red.specimen_diameter ** 2 / 4.0)
     if is_sheet(path) and sheet.geometry == "brazilian_disc":  # stress 2F/(pi D t), not F/(pi D^2/4)
@@ -316,23 +340,72 @@ def reduce_measured_record(path: str | Path):
     i_a = int(np.searchsorted(raw.time, red.arrival_time_gauge))
     i_pre = i_a - max(1, int(round(10.0e-6 / raw.dt)))
     noise = estimate_noise(k_pa * tra[:i_pre], raw.dt, model="ar1")
-    return red, spec, noise
+    return _Measured(red, spec, noise, lab_checks(red, transit))
 
 
-def check_record(path: str | Path, t_end: float | None = None) -> None:
-    """Read, look up and reduce a measured record; :class:`ObservationFileError` names the file and the
-    problem (unreadable or malformed file, no spreadsheet row, no pulse, window shorter than ``t_end``)."""
+def _freiburg_record(path: Path):
+    """A Freiburg raw record with the checks a sheet gets (:mod:`shpb.lab.checks`): (raw, spreadsheet row,
+    reduced record, the wave's transit through the specimen [s])."""
+    from shpb.lab.checks import freiburg_problems, stated_problems
+    from shpb.lab.records import freiburg_specimen, read_freiburg_raw
+    from shpb.lab.reduction import FREIBURG_BAR, reduce_record
+
+    raw = read_freiburg_raw(path, bar=FREIBURG_BAR)
+    spec = freiburg_specimen(path)
+    problems, rock = freiburg_problems(path, spec, FREIBURG_BAR)
+    if problems:
+        raise ValueError("\n".join(problems))
+    L = float(spec["length_m"])
+    red = reduce_record(raw, FREIBURG_BAR, L, float(spec["diameter_m"]))
+    problems = stated_problems(spec, red, str(path), prefix="spreadsheet ")
+    if problems:
+        raise ValueError("\n".join(problems))
+    return raw, spec, red, L * math.sqrt(rock["rho"] / rock["E"])
+
+
+def reduce_measured_record(path: str | Path):
+    """Read, check and reduce a measured record: a test sheet (``.yaml``, :mod:`shpb.lab.sheet`: its signals,
+    bars and specimen) or a Freiburg raw record (its spreadsheet row and the Freiburg bars), both with the
+    checks of :mod:`shpb.lab.checks` (finite channels, plausible and fitting specimen, known rock, stated
+    peak stress and strain rate against the reduction).
+
+    Returns ``(ReducedRecord, metadata, NoiseEstimate of the stress)``; metadata is the spreadsheet
+    row, or the sheet's ``metadata`` block. The noise estimate is taken from the pre-trigger part of
+    the averaged transmitted-bar signal (the one the specimen stress is made of), converted to Pa with
+    the reduction's own strain-to-stress factor. Cached per (file, mtime, size): treat the result as read-only.
+    """
+    m = _measured(Path(path))
+    return m.red, m.meta, m.noise
+
+
+def record_validity(path: str | Path) -> dict:
+    """The record's validity class with its metrics (:func:`shpb.lab.validity.classify`)."""
+    return _measured(Path(path)).checks["validity"]
+
+
+def check_record(path: str | Path, t_end: float | None = None, *, refuse_invalid: bool = False) -> None:
+    """Read, check and reduce a measured record; :class:`ObservationFileError` names the file and the
+    problem (unreadable or malformed file, non-finite samples, implausible or contradictory values, no
+    spreadsheet row, no pulse, window shorter than ``t_end``). ``refuse_invalid``: a test of validity class
+    ``invalid`` is refused too (a calibration record, unless the experiment sets
+    ``observations.allow_invalid: true``)."""
     path = Path(path)
     try:
-        red, _, _ = reduce_measured_record(path)
+        m = _measured(path)
     except (OSError, ValueError, KeyError) as exc:
-        msg = str(exc).strip("'\"")
+        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)  # KeyError's str() quotes it
         raise ObservationFileError(f"observation file {path}: {msg}") from exc
+    red = m.red
     if not np.all(np.isfinite(red.stress)):
         raise ObservationFileError(f"observation file {path}: the reduced specimen stress has non-finite values")
     if t_end is not None and red.time[-1] < t_end - 1e-12:
         raise ObservationFileError(f"observation file {path}: the reduced record ends at {red.time[-1]:.4g} s, "
                                    f"before the observation window's end {t_end:.4g} s")
+    validity = m.checks["validity"]
+    if refuse_invalid and validity["class"] == "invalid":
+        raise ObservationFileError(f"observation file {path}: the test is invalid as a calibration record ("
+                                   + "; ".join(validity["reasons"]) + "): expected a valid or questionable test; "
+                                   "set the experiment's observations.allow_invalid: true to use it anyway")
 
 
 def measured_observations(records: Mapping[str, str | Path], *, t_start: float, t_end: float, dt: float | None,
@@ -357,6 +430,8 @@ def measured_observations(records: Mapping[str, str | Path], *, t_start: float, 
                       "noise_estimate": noise.to_dict(), "peak_stress_Pa": red.peak_stress,
                       "peak_time_s": red.peak_time, "strain_rate_at_peak_per_s": red.strain_rate_at_peak,
                       "force_balance_at_peak": red.force_balance_at_peak, "notes": list(red.notes),
+                      "validity": record_validity(path)["class"],
+                      "validity_reasons": list(record_validity(path)["reasons"]),
                       "specimen_length_m": red.specimen_length, "specimen_diameter_m": red.specimen_diameter,
                       "spreadsheet_strength_Pa": _float_or_none(spec.get("reference_stress_Pa")),
                       # the incident bar face's travel before the specimen carries 2 % of its peak: the

@@ -21,6 +21,17 @@ The checks (limits are the usual SHPB practice; a failed check is reported, neve
    :math:`-\Delta x/c_0`.
 3. **Noise level**: the standard deviation of the pre-trigger specimen stress over its peak, at most
    2 % for the calibration's observation error to be a small part of the curve.
+4. **Stress uniformity**: the loading time from 10 % of the peak stress to the peak, in wave transits
+   through the specimen (at least about pi to four: :mod:`shpb.lab.validity`).
+
+From these the test gets a validity class, ``valid``, ``questionable`` or ``invalid``
+(:mod:`shpb.lab.validity`, with each threshold's source), written to ``checks.json``.
+
+:func:`reduce_sheet` refuses, as a :class:`~shpb.lab.sheet.SheetError` naming the sheet and its fields,
+a record with a non-finite sample on any channel or an implausible sampling interval
+(:mod:`shpb.lab.checks`), a record that cannot be reduced (no incident pulse, too short a record: the
+message names the sheet fields that set the sign or the window), and, asked to, a sheet whose stated peak
+stress or strain rate disagrees with its record beyond :data:`shpb.lab.checks.STATED_TOLERANCE`.
 """
 from __future__ import annotations
 
@@ -34,7 +45,10 @@ import numpy as np
 import pandas as pd
 
 from ..atomic import atomic_write_bytes, atomic_write_text
+from .checks import raw_problems, stated_problems
+from .errors import ReductionError
 from .reduction import ReducedRecord, reduce_record
+from .validity import classify
 
 __all__ = ["reduce_sheet", "brazilian", "lab_checks", "write_reduction", "REDUCED_COLUMNS",
            "BALANCE_LIMIT", "NOISE_LIMIT"]
@@ -58,15 +72,50 @@ def brazilian(red: ReducedRecord, diameter: float, thickness: float) -> ReducedR
                                       "over the diameter"])
 
 
-def reduce_sheet(sheet, raw=None, **overrides) -> ReducedRecord:
+#: Where a sheet sets each field a reduction error names (:class:`~shpb.lab.errors.ReductionError`).
+_SHEET_FIELDS = {"E": "bars.E", "rho": "bars.rho", "gauge_distance_incident": "bars.gauge_distance_incident",
+                 "gauge_distance_transmitted": "bars.gauge_distance_transmitted", "window_s": "reduction.window_s"}
+
+
+def _sheet_fields(sheet, fields: tuple[str, ...]) -> str:
+    csv = sheet.format == "csv"
+    names = {**_SHEET_FIELDS,
+             "compression_sign": "signals.compression_sign" if csv else f"signals.format ({sheet.format}: its sign)",
+             "time": "signals.time.unit" if csv else "signals.file (its time axis)"}
+    return ", ".join(names[f] for f in fields if f in names) or "signals.file"
+
+
+def reduce_sheet(sheet, raw=None, *, check_stated: bool = False, **overrides) -> ReducedRecord:
     """Reduce a sheet's record (``raw``: its :func:`~shpb.lab.sheet_readers.read_sheet_record`, read if None)
     with the sheet's bars, specimen and ``reduction`` settings (``overrides`` win); with
     ``dispersion_correction: true`` the bar signals are corrected for Pochhammer-Chree dispersion with the
-    bars' Poisson ratio (:mod:`shpb.lab.dispersion`)."""
+    bars' Poisson ratio (:mod:`shpb.lab.dispersion`). Every problem is a :class:`~shpb.lab.sheet.SheetError`
+    naming the sheet (module docstring); ``check_stated``: refuse a sheet whose metadata disagree with the
+    result (``python -m shpb reduce`` and a calibration's check do; off for a study of a changed sheet)."""
+    from .sheet import SheetError
+
     if raw is None:
         from .sheet_readers import read_sheet_record
 
         raw = read_sheet_record(sheet)
+    where = str(sheet.path)
+    problems = raw_problems(raw, where, "signals.time.unit" if sheet.format == "csv" else "signals.file")
+    if problems:
+        raise SheetError(problems)
+    try:
+        red = _reduce(sheet, raw, overrides)
+    except ReductionError as exc:
+        raise SheetError([f"{where}: {_sheet_fields(sheet, exc.fields)}: {exc} (signals file {sheet.signals_file})"]
+                         ) from None
+    except ValueError as exc:
+        raise SheetError([f"{where}: {exc} (signals file {sheet.signals_file})"]) from None
+    problems = stated_problems(sheet.metadata, red, where) if check_stated else []
+    if problems:
+        raise SheetError(problems)
+    return red
+
+
+def _reduce(sheet, raw, overrides: dict) -> ReducedRecord:
     opts = {"window_s": sheet.reduction.get("window_s"),
             "exclude_channels": tuple(sheet.reduction.get("exclude_channels", ())),
             "dispersion_nu": sheet.bar_nu if sheet.reduction.get("dispersion_correction", False) else None,
@@ -95,7 +144,8 @@ def _best_shift(red: ReducedRecord, rise: slice) -> float:
 
 
 def lab_checks(red: ReducedRecord, transit_s: float) -> dict:
-    """The three checks of the module docstring. ``transit_s``: the wave's transit through the specimen [s]."""
+    """The checks of the module docstring and the test's validity class (:func:`shpb.lab.validity.classify`,
+    under ``validity``). ``transit_s``: the wave's transit through the specimen [s]."""
     i_pk = red.peak_index
     half = np.flatnonzero(red.stress_back[: i_pk + 1] >= 0.5 * red.peak_stress)
     i0 = int(half[0]) if half.size else i_pk
@@ -106,7 +156,8 @@ def lab_checks(red: ReducedRecord, transit_s: float) -> dict:
     shift = _best_shift(red, slice(rise0, i_pk + 1))
     shift_limit = max(transit_s, 3.0 * red.dt)
     noise = red.noise_std_Pa["stress"] / red.peak_stress
-    return {
+    rise_time = red.peak_time - float(red.time[rise0])
+    checks = {
         "force_balance": {"mean_R_half_peak_to_peak": mean_R, "R_at_peak": red.force_balance_at_peak,
                           "from_s": float(red.time[i0]), "to_s": red.peak_time, "limit": BALANCE_LIMIT,
                           "ok": bool(mean_R <= BALANCE_LIMIT)},
@@ -114,9 +165,14 @@ def lab_checks(red: ReducedRecord, transit_s: float) -> dict:
                             "ok": bool(abs(shift) <= shift_limit)},
         "noise": {"stress_noise_Pa": red.noise_std_Pa["stress"], "peak_stress_Pa": red.peak_stress,
                   "noise_over_peak": noise, "limit": NOISE_LIMIT, "ok": bool(noise <= NOISE_LIMIT)},
+        "stress_uniformity": {"transits_to_peak": rise_time / transit_s if transit_s > 0 else float("nan"),
+                              "from_s": float(red.time[rise0]), "to_s": red.peak_time, "transit_s": transit_s},
         "peak_stress_Pa": red.peak_stress, "peak_time_s": red.peak_time,
-        "strain_rate_at_peak_per_s": red.strain_rate_at_peak, "notes": list(red.notes),
+        "strain_rate_at_peak_per_s": red.strain_rate_at_peak,
+        "strain_rate_loading_per_s": red.mean_strain_rate_loading(), "notes": list(red.notes),
     }
+    checks["validity"] = classify(checks)
+    return checks
 
 
 def transit_time(sheet) -> float:

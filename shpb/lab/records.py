@@ -146,6 +146,17 @@ def _parse_number(text: str, decimal: str) -> float:
     return float(t)
 
 
+def _check_finite(values: np.ndarray, linenos: list[int], path: Path) -> None:
+    """float() reads "nan" and "inf": a gap in the DAQ export must not become a curve."""
+    bad_rows, bad_cols = np.nonzero(~np.isfinite(values))
+    if bad_rows.size:
+        r, c = int(bad_rows[0]), int(bad_cols[0])
+        what = "time [s]" if c == 0 else f"channel {_FREIBURG_CHANNELS[c - 1]} " \
+            f"({'incident' if c < 3 else 'transmission'} bar gauge {2 - c % 2}) [V]"
+        raise ValueError(f"{path}: line {linenos[r]}: {what}: expected a finite number, got "
+                         f"{values[r, c]!r} ({bad_rows.size} non-finite value(s) in the data rows)")
+
+
 def read_freiburg_raw(path: str | Path, bar: BarSetup | None = FREIBURG_BAR) -> RawRecord:
     """Read one Freiburg DAQ record (``Rae2021/SHPBdata/<lith>/<name>.txt``).
 
@@ -234,6 +245,7 @@ def read_freiburg_raw(path: str | Path, bar: BarSetup | None = FREIBURG_BAR) -> 
                 f"(time [s], A1..A4 [V]), got {ln.strip()!r}"
             ) from None
 
+    _check_finite(values, [ln for ln, _ in data_lines], path)
     if "Blocklength" in header:
         try:
             block = int(header["Blocklength"].strip().rstrip(";"))

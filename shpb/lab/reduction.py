@@ -68,7 +68,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .bars import FREIBURG_BAR, BarSetup, bridge_strain_per_volt, freiburg_bar
-from .signals import cumulative_trapezoid, despike, detect_arrival, robust_std, saturation_onset, select_gauges, stuck_runs
+from .errors import ReductionError
+from .signals import (QUIET_PRETRIGGER, cumulative_trapezoid, despike, detect_arrival, pretrigger_ratio, robust_std,
+                      saturation_onset, select_gauges, stuck_runs)
 
 if TYPE_CHECKING:  # pragma: no cover
     import pandas as pd
@@ -315,7 +317,11 @@ def _first_arrival(name: str, ch: _Channels, dt: float, exclude_channels: tuple[
         except ValueError:
             continue
     if not arrivals:
-        raise ValueError(f"{name}: no incident pulse found on {ch.names_i}")
+        raise ReductionError(
+            f"{name}: no incident pulse found on {ch.names_i}: expected a compressive pulse rising {k_sigma:g} "
+            f"noise levels out of a quiet pre-trigger (the first {ch.n0} samples at noise level, no pulse in "
+            f"them); a flipped compression sign or a record that starts inside the pulse gives this",
+            ("compression_sign", "time"))
     return min(arrivals)
 
 
@@ -339,8 +345,14 @@ class _Timing:
         avail = (self.n - 1 - i_arr) * self.dt
         T = min(T, avail - self.t_refl, avail - self.t_tran)
         if T <= 10 * self.dt:
-            raise ValueError(f"{self.name}: record too short after the incident arrival for the reflected/"
-                             f"transmitted waves (window {T:.3g} s)")
+            raise ReductionError(
+                f"{self.name}: record too short after the incident arrival: the reflected wave comes "
+                f"2 x_I / c0 = {self.t_refl:.4g} s and the transmitted wave (x_I + x_T) / c0 = {self.t_tran:.4g} s "
+                f"after it (gauge distances x_I {self.x_i:.4g} m, c0 = sqrt(E/rho) {self.c0:.5g} m/s), the record "
+                f"holds {avail:.4g} s ({self.n} samples of {self.dt:.4g} s): expected at least 10 samples of "
+                f"window (got {T:.3g} s; a flipped compression sign takes the reflected wave for the incident one)",
+                ("gauge_distance_incident", "gauge_distance_transmitted", "E", "rho", "window_s", "time",
+                 "compression_sign"))
         return int(math.floor(T / self.dt + 1e-9)) + 1
 
 
@@ -407,8 +419,8 @@ def _baseline(name: str, inc: np.ndarray, tra: np.ndarray, eps: np.ndarray, i_a:
               guard_s: float) -> _Baselined:
     i_pre = i_a - max(1, int(round(guard_s / dt)))
     if i_pre < 20:
-        raise ValueError(f"{name}: only {max(i_pre, 0)} pre-trigger samples before the incident "
-                         f"arrival; need at least 20 for the baseline")
+        raise ReductionError(f"{name}: only {max(i_pre, 0)} pre-trigger samples before the incident arrival: "
+                             f"expected a quiet pre-trigger of at least 20 samples for the baseline", ("time",))
     pre = slice(0, i_pre)
     inc = inc - inc[pre].mean()
     tra = tra - tra[pre].mean()
@@ -523,6 +535,10 @@ def reduce_record(raw: "RawRecord", bar: BarSetup | None = None, specimen_length
     notes += gauge_notes
     i_a = _refined_arrival(inc, ch.n0, i_a, (n_w - 1) * dt, dt, k_sigma, threshold_fraction)
     b = _baseline(raw.name, inc, tra, ch.eps, i_a, dt, guard_s)                             # step 5
+    if (q := pretrigger_ratio(b.inc, b.pre, i_a, n_w)) > QUIET_PRETRIGGER:
+        raise ReductionError(f"{raw.name}: the incident bar moves by {q:.2g} x the incident pulse's peak before its "
+                             f"arrival: expected a quiet pre-trigger (at most {QUIET_PRETRIGGER:g}); a flipped "
+                             f"compression sign puts the tensile incident pulse there", ("compression_sign", "time"))
     n_g, overlap = _incident_span(b.inc, i_a, tm, b.sd_inc, k_sigma, threshold_fraction)
     if overlap:
         notes.append("incident pulse longer than 2 x_I / c0: it overlaps the reflected wave at the "

@@ -2,7 +2,8 @@
 need (docs/own-data.md): the signals file and its format, the bars, the specimen, the rock, metadata.
 
 :func:`load_sheet` validates a sheet against ``sheet_schema.json`` (shipped beside this module) and
-then checks what a schema cannot say: the signals file exists, the specimen fits the bar, the rock
+then checks what a schema cannot say: every number finite and within its field's plausible range (a
+unit slip is named, :mod:`shpb.lab.checks`), the signals file exists, the specimen fits the bar, the rock
 is known, the volts have their bridge constants; :func:`shpb.lab.sheet_readers.check_sheet` adds the
 signals themselves (columns present, a uniform time axis, no NaN). Every problem is one line of a :class:`SheetError`
 naming the sheet file, the field and what was expected, so a workflow can refuse a bad sheet before
@@ -21,6 +22,7 @@ from functools import lru_cache
 from pathlib import Path
 
 from .bars import BarSetup, bridge_strain_per_volt
+from .checks import nonfinite_problems, range_problems
 
 __all__ = ["Sheet", "SheetError", "load_sheet", "is_sheet", "lithology_table", "SHEET_SCHEMA", "WILDCARD_SAFE",
            "FORMATS"]
@@ -288,7 +290,9 @@ def load_sheet(path: str | Path) -> Sheet:
     doc = _numbers(_read_yaml(path))
     if not isinstance(doc, dict):
         raise SheetError([f"{where}: <top level>: expected a mapping of name, signals, bars, specimen, rock"])
-    problems = _schema_problems(doc, where)
+    # NaN and inf first: JSON schema's "number" takes them, and a NaN passes every bound
+    problems = nonfinite_problems(doc, where) or _schema_problems(doc, where)
+    problems = problems or range_problems(doc, where)
     if problems:
         raise SheetError(problems)
     sig, bars, spec = doc["signals"], doc["bars"], doc["specimen"]
