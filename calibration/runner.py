@@ -27,6 +27,7 @@ from pathlib import Path
 
 from shpb.contract import CURVE_COLUMNS as _SIM_CURVE_COLUMNS, EXIT_BAD_INPUT, EXIT_NUMERICAL, EXIT_OK
 from .contracts import atomic_write_json, atomic_write_text, read_json
+from .heal import child_dies_with_parent, write_manifest
 
 __all__ = ["CURVE_COLUMNS", "DEFAULT_SIMULATOR", "SimulatorCrash", "SimulatorRejected", "run_member",
            "simulator_command", "simulate_argv", "failed_curve_text", "failure_card"]
@@ -122,10 +123,16 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
     ``snapshots``: a count of fracture snapshots (``--snapshots``); their folder is moved next to the
     curve, replacing an older one, before the curve and run.json.
 
+    The simulator dies with the process calling this (:func:`calibration.heal.child_dies_with_parent`),
+    and nothing is moved into place once that process has lost its parent (a killed Snakemake), so a
+    killed run leaves no file written after the kill. ``manifest.json`` (the sha256 of ``curve.csv``
+    and ``run.json``, :func:`calibration.heal.write_manifest`) is written last, whatever the outcome.
+
     Returns the ``run.json`` dict written.
     """
     curve_path, run_path = Path(curve_path), Path(run_path)
     out = curve_path.parent
+    parent = os.getppid()
     out.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=".sim-", dir=out))
     argv = simulate_argv(command, geometry=geometry, preset=preset, params=params, out_dir=tmp, record=record,
@@ -135,10 +142,12 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
         try:
             proc = _run_with_limit(argv, time_limit_s)
         except subprocess.TimeoutExpired as exc:
+            _still_wanted(parent)
             return _timed_out(exc, argv=argv, wall=time.perf_counter() - t0, geometry=geometry, preset=preset,
                               params=params, curve_path=curve_path, run_path=run_path, log_path=log_path,
                               extra=dict(extra_run or {}, attempt=attempt, exit_code=None))
         wall = time.perf_counter() - t0
+        _still_wanted(parent)
         if log_path is not None:
             atomic_write_text(log_path, f"$ {shlex.join(argv)}\n# exit code {proc.returncode}, "
                                         f"attempt {attempt}/{max_attempts}, {wall:.1f} s\n"
@@ -152,7 +161,7 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
                 shutil.rmtree(out / "snapshots", ignore_errors=True)
                 os.replace(tmp / "snapshots", out / "snapshots")
             os.replace(curve_csv, curve_path)
-            atomic_write_json(run_path, _jsonable(run))
+            _write_run(run_path, run, curve_path)
             return run
         if proc.returncode == EXIT_BAD_INPUT:
             raise SimulatorRejected(f"the simulator rejected its arguments or input (exit code 2): "
@@ -164,7 +173,7 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
                         "preset": preset, "params": dict(params)}, **extra)
             run.setdefault("wall_s", wall)
             atomic_write_text(curve_path, failed_curve_text())
-            atomic_write_json(run_path, _jsonable(run))
+            _write_run(run_path, run, curve_path)
             return run
         what = (f"simulator exited with code {proc.returncode}" if proc.returncode >= 0
                 else f"simulator killed by signal {-proc.returncode}")
@@ -176,7 +185,7 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
         run = {"status": "failed", "reason": f"crashed on every attempt: {message}", "geometry": geometry,
                "preset": preset, "params": dict(params), "wall_s": wall, **extra}
         atomic_write_text(curve_path, failed_curve_text())
-        atomic_write_json(run_path, _jsonable(run))
+        _write_run(run_path, run, curve_path)
         return run
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -185,7 +194,8 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
 def _run_with_limit(argv, time_limit_s):
     """subprocess.run(argv, capture_output=True, text=True) that kills the simulator at the time limit
     and does not then wait for processes it may have started that still hold its pipes."""
-    with subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc:
+    with subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                          preexec_fn=child_dies_with_parent(os.getpid())) as proc:
         try:
             out, err = proc.communicate(timeout=time_limit_s)
         except subprocess.TimeoutExpired as exc:
@@ -213,8 +223,21 @@ def _timed_out(exc: subprocess.TimeoutExpired, *, argv, wall, geometry, preset, 
            "reason": f"time limit: the simulation ran longer than {exc.timeout:g} s (member_time_limit_s) "
                      f"and was stopped", **extra}
     atomic_write_text(curve_path, failed_curve_text())
-    atomic_write_json(run_path, _jsonable(run))
+    _write_run(run_path, run, curve_path)
     return run
+
+
+def _still_wanted(parent: int) -> None:
+    """Raise instead of writing outputs once the caller's parent has died (the job is an orphan of a
+    killed Snakemake: its outputs would appear finished to the next run without Snakemake's record)."""
+    if os.getppid() != parent:
+        raise SimulatorCrash(f"the job's parent process {parent} died (a killed run): no output written")
+
+
+def _write_run(run_path: Path, run: dict, curve_path: Path) -> None:
+    """run.json, then the member folder's manifest.json of both files (written last)."""
+    atomic_write_json(run_path, _jsonable(run))
+    write_manifest(run_path.parent, [curve_path, run_path])
 
 
 def _jsonable(obj):

@@ -339,7 +339,7 @@ def test_member_exit_codes_numerical_failure_is_recorded_and_a_crash_is_retried_
                       curve_path=tmp_path / "c/curve.csv", run_path=tmp_path / "c/run.json", attempt=2,
                       max_attempts=2)
     assert last["status"] == "failed" and "crashed on every attempt" in last["reason"] and "boom" in last["reason"]
-    assert sorted(p.name for p in (tmp_path / "c").iterdir()) == ["curve.csv", "run.json"]  # no temp left
+    assert sorted(p.name for p in (tmp_path / "c").iterdir()) == ["curve.csv", "manifest.json", "run.json"]  # no temp
     # exit 2 (arguments rejected, an input missing) is a configuration error: the job fails with the
     # simulator's message and nothing is left behind, so that a re-run after the fix runs the member
     os.environ["STAND_IN_REJECT"] = "rock properties file data/x.xlsx not found"
