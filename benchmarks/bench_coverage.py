@@ -42,7 +42,11 @@ truth, or a 90 % interval wider than that bar which contains the truth) and the 
 half-widths relative to the truth; the stop reasons. The same scores for each twin's
 ``posterior: emulator_mcmc`` (the emcee sample on the emulator of the same runs, seconds per twin;
 ``summary_emulator_mcmc``, a failed sampler counted as a miss), so that the ensemble and the reported
-posterior are compared on the same twins.
+posterior are compared on the same twins. Proper scores (:mod:`benchmarks.scores`): the weighted interval
+score over the prior box's on the same truths (``wis_over_prior``) and the share of twins the product
+would flag ``uninformative``, which a method that returns the prior cannot pass on coverage alone; each
+set's ``verdict`` names the bars its reported posterior meets and fails. ``--rescore FILE`` adds the
+scores to a JSON from its twins' records (no simulation; a stored number it does not reproduce is refused).
 
 Each twin's result is cached as JSON under ``--cache`` (default ``benchmarks/cache/coverage_v3``, not in
 git: the run that scores the twins makes it), so an interrupted run resumes where it stopped; ``--score-only`` scores what is cached (``complete``
@@ -60,6 +64,7 @@ import argparse
 import json
 import os
 import pickle
+import sys
 import time
 from dataclasses import fields, replace
 
@@ -84,6 +89,10 @@ from calibration.observations import curve_on_grid, observation_grid, twin_obser
 from calibration.workflow_io import load_yaml, validate_config
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # run as a script: the scores beside it are benchmarks.scores
+
+from benchmarks.scores import proper_scores, verdict, with_failures_as_prior  # noqa: E402
+
 EXPERIMENT = "twin_ref"
 BAR = {"sigma_t": 0.02, "E_t": 0.10}
 LEVELS = {"50": (0.25, 0.75), "90": (0.05, 0.95)}
@@ -262,6 +271,7 @@ def _mcmc_record(spec, truth, seed, params, responses, analyses, obs, refine=Non
         x = post.samples[:, j]
         below, ties = int(np.sum(x < truth[j])), int(np.sum(x == truth[j]))
         out["params"][p] = {"mean": summ[p]["mean"], **{k: summ[p][k] for k in ("q05", "q25", "q75", "q95")},
+                            "q50": float(np.median(x)),
                             "n": int(x.size), "sbc_u": float((below + rng.uniform(0, ties + 1)) / (x.size + 1))}
     d = post.diagnostics
     out["sampler"] = {k: d.get(k) for k in ("converged_chain", "effective_samples", "acceptance_fraction",
@@ -358,6 +368,8 @@ def score(records: list, lower, upper, names) -> dict:
             "bar": {"within_bar": int(np.sum(near)), "wider_and_covers": int(np.sum(~near & wide & inside)),
                     "fraction_met": float(np.mean(near | (wide & inside)))},
         })
+        # proper scores: the prior box covers as often as a posterior should, but not as sharply
+        res.update(proper_scores(rows, t, float(lower[j]), float(upper[j])))
         out["params"][p] = res
     return out
 
@@ -380,6 +392,10 @@ def score_mcmc(records: list, lower, upper, names) -> dict | None:
             k = round((c["fraction"] or 0.0) * len(rows))
             c["fraction_counting_failures_as_misses"] = k / n
             c["ci95_counting_failures_as_misses"] = _ci(k, n)
+        if failed and res.get("wis_over_prior") is not None:
+            j = list(names).index(p)
+            res["wis_over_prior_counting_failures_as_prior"] = with_failures_as_prior(
+                res, [r["truth"][p] for r in failed], float(lower[j]), float(upper[j]), len(rows))
     out["chains_converged"] = sum(bool(r["emulator_mcmc"]["sampler"]["converged_chain"]) for r in have
                                   if "error" not in r["emulator_mcmc"])
     lam = [r["emulator_mcmc"]["self_calibration_lambda"] for r in have
@@ -387,6 +403,63 @@ def score_mcmc(records: list, lower, upper, names) -> dict | None:
     out["self_calibration_lambda"] = ({"median": float(np.median(lam)), "min": float(np.min(lam)),
                                        "max": float(np.max(lam))} if lam else None)
     return out
+
+
+def set_verdict(result: dict, reported_posterior: str) -> dict | None:
+    """:func:`benchmarks.scores.verdict` of a set's reported posterior (``result``: the set's block)."""
+    summ = result.get("summary_emulator_mcmc" if reported_posterior == "emulator_mcmc" else "summary")
+    return verdict(summ) if summ and summ.get("params") else None
+
+
+def _merged(old, new, where: str):
+    """``new`` merged into ``old``: keys ``old`` lacks are added, the numbers it holds are kept and must
+    equal the rescored ones (else the stored scores are of another scoring, and rescoring would change them)."""
+    if isinstance(old, dict) and isinstance(new, dict):
+        return {**{k: _merged(v, new[k], f"{where}.{k}") if k in new else v for k, v in old.items()},
+                **{k: v for k, v in new.items() if k not in old}}
+    if isinstance(old, list) and isinstance(new, list) and len(old) == len(new):
+        return [_merged(a, b, f"{where}[{i}]") for i, (a, b) in enumerate(zip(old, new))]
+    same = (np.isclose(old, new, rtol=1e-9, atol=0.0)
+            if isinstance(old, (int, float)) and isinstance(new, (int, float)) and not isinstance(old, bool)
+            else old == new)
+    if not same:
+        raise SystemExit(f"{where}: stored {old!r}, rescored {new!r}: the stored scores are not this scoring's "
+                         "(rescoring adds keys and changes no number; nothing written)")
+    return old
+
+
+def rescore(path: Path, out: Path | None = None) -> dict:
+    """The bench_coverage JSON at ``path`` with the scores its twins' records give now (proper scores, the
+    uninformative share, each set's :func:`set_verdict`) added, no simulation run and no stored number
+    changed; written to ``out`` (default: ``path``). Returns ``{set: verdict}``."""
+    bench = json.loads(Path(path).read_text())
+    if bench.get("benchmark") != "bench_coverage" or bench.get("experiment") != EXPERIMENT:
+        raise SystemExit(f"{path}: benchmark {bench.get('benchmark')!r}, experiment {bench.get('experiment')!r}; "
+                         f"expected a bench_coverage JSON of {EXPERIMENT!r}")
+    spec = ExperimentSpec.from_config(EXPERIMENT, twin_experiment())
+    verdicts = {}
+    for name in ("misspecified", "well_specified"):
+        block = bench.get(name) or {}
+        twins = block.get("twins") or []
+        for i, r in enumerate(twins):
+            for j, p in enumerate(spec.names):
+                t = (r.get("truth") or {}).get(p)
+                if not isinstance(t, (int, float)) or not spec.lower[j] <= t <= spec.upper[j]:
+                    raise SystemExit(f"{path}: {name} twin {i}: truth {p} = {t!r}, expected a number in the twin's "
+                                     f"box [{spec.lower[j]:g}, {spec.upper[j]:g}] (config/config.yaml)")
+        if not twins:
+            continue
+        new = {"summary": score(twins, spec.lower, spec.upper, spec.names),
+               "summary_emulator_mcmc": score_mcmc(twins, spec.lower, spec.upper, spec.names)}
+        new = json.loads(json.dumps(new, default=lambda v: v.item() if hasattr(v, "item") else str(v)))
+        scored = {k: _merged(block[k], v, f"{path}: {name}.{k}") if block.get(k) is not None else v
+                  for k, v in new.items()}
+        verdicts[name] = set_verdict(scored, bench.get("reported_posterior", "ensemble"))
+        bench[name] = {**{k: v for k, v in block.items() if k != "twins"}, **scored, "verdict": verdicts[name],
+                       "twins": twins}
+    text = json.dumps(bench, indent=1, default=lambda v: v.item() if hasattr(v, "item") else str(v))
+    atomic_write_text(out or path, text)
+    return verdicts
 
 
 def main(argv=None) -> dict:
@@ -419,7 +492,13 @@ def main(argv=None) -> dict:
     ap.add_argument("--score-only", action="store_true",
                     help="score the cached twins (and those whose runs --keep-runs holds) without simulating the "
                          "missing ones (a partial result says so)")
+    ap.add_argument("--rescore", default=None, metavar="FILE",
+                    help="add the current scores (proper scores, uninformative share, the verdict's bars) to a "
+                         "bench_coverage JSON from its twins' records, simulating nothing and changing no stored "
+                         "number; written to --out or in place")
     args = ap.parse_args(argv)
+    if args.rescore:
+        return emit_json(rescore(Path(args.rescore), Path(args.out) if args.out else None))
     exp = twin_experiment()
     if args.mesh:
         exp["simulation"] = {**exp["simulation"], "mesh_realizations": args.mesh}
@@ -493,8 +572,9 @@ def main(argv=None) -> dict:
                 print(f"{name} {i + 1}/{n}: {rec['stop_reason']}", file=__import__("sys").stderr, flush=True)
             result[name] = {"planned": n, "complete": len(records) == n,
                             "summary": score(records, spec.lower, spec.upper, spec.names) if records else None,
-                            "summary_emulator_mcmc": score_mcmc(records, spec.lower, spec.upper, spec.names),
-                            "twins": records}
+                            "summary_emulator_mcmc": score_mcmc(records, spec.lower, spec.upper, spec.names)}
+            result[name]["verdict"] = set_verdict(result[name], exp.get("posterior", "ensemble"))
+            result[name]["twins"] = records
     out = {"benchmark": "bench_coverage", "experiment": EXPERIMENT, "method": exp["method"],
            "ensemble_size": exp["ensemble_size"], "window_s": [exp["observations"]["t_start"],
                                                                exp["observations"]["t_end"]],

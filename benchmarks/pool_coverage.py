@@ -4,7 +4,8 @@
 
 Each JSON is a ``benchmarks/bench_coverage.py`` output; the set's twins of all of them are scored
 together by the benchmark's own ``score`` / ``score_mcmc`` (coverage with Clopper-Pearson intervals,
-SBC, widths, the restated bar), and each JSON's own score is kept beside the pooled one. Refuses a
+SBC, widths, the restated bar, the proper scores of ``benchmarks/scores.py``) with the pooled set's
+``verdict`` (the harness's bars), and each JSON's own score is kept beside the pooled one. Refuses a
 twin seed met twice (the same twin counted twice) and JSONs of different twin settings. Prints one
 JSON object (and writes it with ``--out``).
 """
@@ -19,7 +20,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from benchmarks.bench_coverage import score, score_mcmc, twin_experiment  # noqa: E402
+from benchmarks.bench_coverage import score, score_mcmc, set_verdict, twin_experiment  # noqa: E402
 from calibration.experiment import ExperimentSpec  # noqa: E402
 from shpb.atomic import emit_json  # noqa: E402
 
@@ -59,12 +60,13 @@ def pool(name: str, benches: dict[str, dict]) -> dict:
         raise SystemExit(f"the same twin seed twice ({twice[:5]}...): those twins would count twice")
     spec = ExperimentSpec.from_config(first["experiment"], twin_experiment())
     twins = [r for b in benches.values() for r in b[name]["twins"]]
+    scored = {"summary": score(twins, spec.lower, spec.upper, spec.names),
+              "summary_emulator_mcmc": score_mcmc(twins, spec.lower, spec.upper, spec.names)}
     return {"benchmark": "pool_coverage", "set": name, "sources": {p: {"twin_seeds": seeds[p],
             "twins": len(b[name]["twins"]), "wall_s_this_call": b.get("wall_s_this_call"),
             "summary_emulator_mcmc": b[name]["summary_emulator_mcmc"]} for p, b in benches.items()},
             **{k: setting(first, k) for k in SETTINGS}, "n_twins": len(twins),
-            "summary": score(twins, spec.lower, spec.upper, spec.names),
-            "summary_emulator_mcmc": score_mcmc(twins, spec.lower, spec.upper, spec.names)}
+            **scored, "verdict": set_verdict(scored, setting(first, "reported_posterior") or "ensemble")}
 
 
 def main(argv=None) -> dict:

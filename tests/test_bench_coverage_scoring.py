@@ -270,3 +270,25 @@ def test_coverage_by_box_third_finds_where_the_misses_are():
     assert [c["twins"] for c in out] == [c["twins"] for c in base] and sum(c["twins"] for c in out) == 300
     assert out[0]["twins"] > 0 and out[0]["covered"] == 0
     assert out[1:] == base[1:] and base[0]["covered"] / base[0]["twins"] > 0.6
+
+
+def test_the_verdict_passes_a_sharp_calibrated_posterior_and_fails_the_prior_and_overconfidence():
+    """benchmarks.scores.verdict on the synthetic sets: a calibrated posterior 3 % wide meets every bar
+    (its WIS a few hundredths of the prior's); the prior fails the WIS bars (the prior on truths drawn
+    from the whole box: tests/test_harness_informative.py); the overconfident one fails coverage and ranks."""
+    from benchmarks.scores import verdict
+
+    cal = score(_records("calibrated"), LOWER, UPPER, NAMES)
+    v = verdict(cal)
+    assert v["passes"] and v["failed"] == [] and len(v["met"]) == 6
+    assert all(cal["params"][p]["wis_over_prior"] < 0.1 and cal["params"][p]["uninformative_share"] == 0.0
+               for p in NAMES)
+    prior = score(_records("prior"), LOWER, UPPER, NAMES)
+    # its truths in the middle 60 % of the box, it also over-covers and ranks in the middle: every bar fails
+    assert verdict(prior)["failed"] == [f"{bar} {p}" for p in NAMES for bar in ("coverage_90", "sbc", "wis_over_prior")]
+    for p in NAMES:
+        # 400 prior draws per twin: its WIS is the prior box's to within the sample quantiles' noise
+        assert prior["params"][p]["wis_over_prior"] == pytest.approx(1.0, abs=0.05)
+        assert prior["params"][p]["uninformative_share"] == 1.0
+    over = verdict(score(_records("overconfident"), LOWER, UPPER, NAMES))
+    assert {f"{bar} {p}" for bar in ("coverage_90", "sbc") for p in NAMES} <= set(over["failed"])

@@ -5,7 +5,9 @@ whole prior box, generated from the coverage benchmark's JSON (one source for th
     python tools/coverage_table.py benchmarks/results/coverage_well_specified.json [more.json] --readme # rewrite
 
 Each JSON is a ``benchmarks/bench_coverage.py`` output; each of its sets with twins (well-specified,
-misspecified) is one row. The JSONs must share the twin's setting (method, ensemble size, window and the
+misspecified) is one row, with the weighted interval score over the prior's, the ``uninformative`` share
+and the bars of :func:`benchmarks.scores.verdict` it does not meet (a JSON scored before those exist is
+refused: ``bench_coverage.py --rescore`` it). The JSONs must share the twin's setting (method, ensemble size, window and the
 reported posterior's form), so the rows compare like with like. The block sits between
 ``<!-- coverage-table:start -->`` and ``<!-- coverage-table:end -->`` in README.md;
 ``tests/test_docs_tables.py`` checks that it equals what this tool makes from the JSON named in it.
@@ -18,6 +20,10 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # run as a script: the harness's bars are benchmarks.scores
+
+from benchmarks.scores import COVERAGE_90_BAR, SBC_ALPHA, WIS_BAR, verdict  # noqa: E402
+
 START, END = "<!-- coverage-table:start -->", "<!-- coverage-table:end -->"
 NAMES = ("sigma_t", "E_t")
 # what makes two benchmark runs the same experiment: rows of different settings are refused
@@ -54,9 +60,30 @@ def _width(q: dict) -> str:
     return f"{q['width_over_prior_median']:.2f}"
 
 
+def _wis(q: dict) -> str:
+    return f"{q.get('wis_over_prior_counting_failures_as_prior', q['wis_over_prior']):.2f}"
+
+
+def _failed(v: dict) -> str:
+    """The bars a set's reported posterior does not meet, each with its value."""
+    out = []
+    for name in v["failed"]:
+        kind, p = name.split(" ")
+        x = v["bars"][name]["value"]
+        # a bar the table cannot name is a KeyError, never a row that leaves it out
+        out.append({"coverage_90": f"90 % coverage `{p}` {_pct(x)}", "sbc": f"ranks `{p}` p = {x:.3f}",
+                    "wis_over_prior": f"WIS `{p}` {x:.2f}"}[kind])
+    return ", ".join(out) if out else "none"
+
+
 def _row(bench: dict, name: str, source: str) -> str:
     rep, ens = reported(bench, name), bench[name]["summary"]
     p, e = rep["params"], ens["params"]
+    missing = [f"{name}.{x}.{k}" for x in NAMES for k in ("wis_over_prior", "uninformative_share")
+               if k not in p.get(x, {})]
+    if missing:
+        raise ValueError(f"coverage table: {source} has no {missing[0]} (scored before the proper scores): run "
+                         f"`python benchmarks/bench_coverage.py --rescore {source}`")
 
     def both(f, q=p):
         return " / ".join(f(q[x]) for x in NAMES)
@@ -65,7 +92,8 @@ def _row(bench: dict, name: str, source: str) -> str:
     return (f"| {_label(bench, name)} | `{Path(source).name}` | {n} | {both(lambda q: _cov(q['coverage_90']))} "
             f"| {both(lambda q: _cov(q['coverage_50']))} "
             f"| {both(_width)} "
-            f"| {both(lambda q: _pct(q['coverage_90']['fraction']), e)} |")
+            f"| {both(lambda q: _pct(q['coverage_90']['fraction']), e)} "
+            f"| {both(_wis)} | {both(lambda q: _pct(q['uninformative_share']))} | {_failed(verdict(rep))} |")
 
 
 def _setting(bench: dict) -> tuple:
@@ -83,8 +111,9 @@ def table(entries: list) -> str:
             raise ValueError(f"coverage table: {src} differs from {first_src} in {', '.join(diff)}; "
                              "rows must share the twin's setting")
     rows = ["| twins | source | n | reported 90 % interval covers (`sigma_t` / `E_t`) | reported 50 % interval "
-            "covers | 90 % width / prior's | last ensemble's 90 % prediction interval covers |",
-            "|---|---|---|---|---|---|---|"]
+            "covers | 90 % width / prior's | last ensemble's 90 % prediction interval covers | WIS / prior's "
+            "| uninformative | bars not met |",
+            "|---|---|---|---|---|---|---|---|---|---|"]
     for src, bench in entries:
         rows += [_row(bench, name, src) for name in ("well_specified", "misspecified")
                  if (bench.get(name) or {}).get("twins")]
@@ -96,7 +125,12 @@ def table(entries: list) -> str:
     sources = ", ".join(f"`{src}`" for src, _ in entries)
     head = (f"From {sources} ({first['method']}, N = {first['ensemble_size']}, window "
             f"{first['window_s'][0] * 1e6:.0f}-{first['window_s'][1] * 1e6:.0f} us; reported posterior: {posterior}; "
-            "a sampler that failed counts as a miss; brackets: binomial 95 % intervals):")
+            "a sampler that failed counts as a miss; brackets: binomial 95 % intervals; WIS / prior's: the weighted "
+            "interval score of the 50 % and 90 % intervals and the median, its mean over the twins over the prior "
+            "box's on the same truths (1: learned nothing); uninformative: twins whose 90 % interval spans over "
+            "0.8 of the box; the bars: 90 % coverage "
+            f"{100 * COVERAGE_90_BAR[0]:.0f}-{100 * COVERAGE_90_BAR[1]:.0f} %, rank tests p >= {SBC_ALPHA}, "
+            f"WIS / prior's <= {WIS_BAR['sigma_t']} (`sigma_t`) and {WIS_BAR['E_t']} (`E_t`)):")
     return "\n".join([head, "", *rows])
 
 

@@ -1,0 +1,160 @@
+"""Proper scores and the pass/fail bars of the coverage harness (``benchmarks/bench_coverage.py``): bars
+that a method which learns nothing fails.
+
+Coverage and simulation-based-calibration ranks cannot tell the prior from a posterior: the prior box's
+own 5-95 % interval holds truths drawn from the box 90 % of the time and their ranks are uniform. What
+the prior cannot match is sharpness *and* coverage at once, which a proper score measures:
+
+* the weighted interval score (Bracher et al. 2021, *PLoS Comput. Biol.* 17, e1008618) of the 50 % and
+  90 % central intervals and the median, ``WIS = (|y - m| / 2 + sum_k alpha_k / 2 IS_alpha_k) / (K + 1/2)``
+  with ``IS_alpha = (u - l) + 2 / alpha (l - y)_+ + 2 / alpha (y - u)_+`` (an approximation of the CRPS);
+* ``wis_over_prior``: its mean over a set's twins divided by the same score of the box's uniform prior
+  (its 5-95 %, 25-75 % intervals and median) on the same truths. 1: no better than the prior;
+* ``uninformative_share``: the share of twins whose 90 % interval spans more than
+  :data:`calibration.verdict.UNINFORMATIVE_FRACTION` of the box, the product's own ``uninformative``
+  flag.
+
+The twins' records hold the reported intervals' quantiles, not the posterior members or samples, so the
+CRPS of the sample is not computed; a record's median is its ``q50`` where it holds one (the MCMC records
+written since the scores exist) and otherwise the midpoint of its 25-75 % interval.
+
+:func:`verdict` applies the named bars to a set's scored summary: 90 % coverage in 0.85-0.95, the rank
+tests not rejected at 1 %, ``wis_over_prior`` at most :data:`WIS_BAR`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from calibration.verdict import UNINFORMATIVE_FRACTION
+
+#: the central intervals of the score: (alpha, lower quantile key, upper quantile key)
+INTERVALS = ((0.5, "q25", "q75"), (0.1, "q05", "q95"))
+#: the largest ``wis_over_prior`` that passes, per parameter (``sigma_t`` is identified by the disc's
+#: peak, ``E_t`` by its post-peak only)
+WIS_BAR = {"sigma_t": 0.25, "E_t": 0.55}
+COVERAGE_90_BAR = (0.85, 0.95)
+SBC_ALPHA = 0.01
+MEDIAN_FROM_MIDPOINT = "midpoint of the 25-75 % interval (no q50 recorded)"
+
+
+def interval_score(lo, hi, y, alpha: float) -> np.ndarray:
+    """The interval score of the central ``1 - alpha`` interval ``[lo, hi]`` at the truth ``y``: its
+    width plus ``2 / alpha`` times the distance by which the truth falls outside it."""
+    lo, hi, y = (np.asarray(v, float) for v in (lo, hi, y))
+    return (hi - lo) + 2.0 / alpha * (np.maximum(lo - y, 0.0) + np.maximum(y - hi, 0.0))
+
+
+def median_of(row: dict) -> float:
+    """The record's median: ``q50`` where recorded, else the midpoint of its 25-75 % interval."""
+    if row.get("q50") is not None:
+        return float(row["q50"])
+    return 0.5 * (float(row["q25"]) + float(row["q75"]))
+
+
+def weighted_interval_score(row: dict, y: float) -> float:
+    """WIS of one twin's parameter (``row``: its ``q05, q25, q75, q95`` and median) at the truth ``y``."""
+    total = 0.5 * abs(y - median_of(row))
+    for alpha, lo, hi in INTERVALS:
+        total += 0.5 * alpha * float(interval_score(row[lo], row[hi], y, alpha))
+    return total / (len(INTERVALS) + 0.5)
+
+
+def prior_row(lower: float, upper: float) -> dict:
+    """The box's uniform prior as a record's parameter row: its quantiles, mean and median."""
+    w = upper - lower
+    q = {k: lower + f * w for k, f in (("q05", 0.05), ("q25", 0.25), ("q50", 0.5), ("q75", 0.75), ("q95", 0.95))}
+    return {"mean": lower + 0.5 * w, **q, "interval": "the prior box's quantiles"}
+
+
+def proper_scores(rows: list, t: np.ndarray, lower: float, upper: float) -> dict:
+    """A set's proper scores of one parameter: ``rows`` its twins' parameter rows, ``t`` the truths."""
+    w = float(upper - lower)
+    prior = prior_row(lower, upper)
+    wis = np.array([weighted_interval_score(r, y) for r, y in zip(rows, t)])
+    wis_prior = np.array([weighted_interval_score(prior, y) for y in t])
+    width = np.array([(float(r["q95"]) - float(r["q05"])) / w for r in rows])
+    medians = {MEDIAN_FROM_MIDPOINT if r.get("q50") is None else "q50" for r in rows}
+    return {"wis_over_prior": float(wis.mean() / wis_prior.mean()) if len(t) else None,
+            "wis": {"mean_over_box": float(wis.mean() / w) if len(t) else None,
+                    "prior_mean_over_box": float(wis_prior.mean() / w) if len(t) else None,
+                    "twins_worse_than_prior": int(np.sum(wis > wis_prior)),
+                    "median": " and ".join(sorted(medians)),
+                    "reference": "Bracher et al. 2021, 50 % and 90 % central intervals and the median"},
+            "uninformative_share": float(np.mean(width > UNINFORMATIVE_FRACTION)) if len(t) else None}
+
+
+def with_failures_as_prior(res: dict, failed_truths, lower: float, upper: float, n_scored: int) -> float:
+    """``wis_over_prior`` with ``failed_truths`` (twins whose sampler failed: no reported interval)
+    scored as the prior, that is, as having learned nothing."""
+    prior = prior_row(lower, upper)
+    extra = np.array([weighted_interval_score(prior, y) for y in failed_truths])
+    w = float(upper - lower)
+    total = res["wis"]["mean_over_box"] * w * n_scored + extra.sum()
+    prior_total = res["wis"]["prior_mean_over_box"] * w * n_scored + extra.sum()
+    return float(total / prior_total)
+
+
+def prior_records(records: list, lower, upper, names) -> list:
+    """The twins ``records`` with every parameter's reported interval replaced by the prior box's (and
+    its rank by the prior's CDF at the truth): the method that learns nothing, for the same harness."""
+    out = []
+    for r in records:
+        params = {}
+        for j, p in enumerate(names):
+            row = prior_row(float(lower[j]), float(upper[j]))
+            row["sbc_u"] = (float(r["truth"][p]) - float(lower[j])) / (float(upper[j]) - float(lower[j]))
+            params[p] = row
+        out.append({**{k: v for k, v in r.items() if k != "emulator_mcmc"}, "params": params})
+    return out
+
+
+def shrunk_records(records: list, names, factor: float) -> list:
+    """The twins ``records`` with each interval shrunk to ``factor`` of its width around the median (an
+    overconfident method with the same centres)."""
+    out = []
+    for r in records:
+        params = {}
+        for p in names:
+            row = dict(r["params"][p])
+            m = median_of(row)
+            for k in ("q05", "q25", "q75", "q95"):
+                row[k] = m + factor * (float(row[k]) - m)
+            params[p] = row
+        out.append({**r, "params": params})
+    return out
+
+
+def _value(res: dict, p: str, key: str, counting: str):
+    v = res.get(counting, res.get(key)) if counting else res.get(key)
+    if v is None:
+        raise ValueError(f"verdict: the summary of {p} has no {key!r} (a summary scored before the bars "
+                         "existed: run `python benchmarks/bench_coverage.py --rescore FILE` first)")
+    return v
+
+
+def verdict(scored: dict) -> dict:
+    """Named pass/fail bars of one set's scored summary (:func:`benchmarks.bench_coverage.score` or
+    ``score_mcmc``): ``{"bars": {name: {"value", "bar", "met"}}, "met": [...], "failed": [...],
+    "passes"}``. A reported MCMC posterior's failed samplers count as misses of the coverage and as the
+    prior in the score."""
+    params = scored.get("params") or {}
+    unknown = sorted(set(params) - set(WIS_BAR))
+    if not params or unknown:
+        raise ValueError(f"verdict: the summary's parameters {sorted(params)} are not the harness's "
+                         f"{sorted(WIS_BAR)} (no bar for {unknown or 'an empty set'})")
+    bars = {}
+    for p in WIS_BAR:
+        if p not in params:
+            raise ValueError(f"verdict: the summary has no parameter {p!r} (it has {sorted(params)})")
+        res = params[p]
+        cov = _value(res["coverage_90"], p, "fraction", "fraction_counting_failures_as_misses")
+        lo, hi = COVERAGE_90_BAR
+        bars[f"coverage_90 {p}"] = {"value": cov, "bar": f"{lo:.2f}-{hi:.2f}", "met": bool(lo <= cov <= hi)}
+        pmin = min(_value(res["sbc"], p, "chi2_p", ""), _value(res["sbc"], p, "ks_p", ""))
+        bars[f"sbc {p}"] = {"value": pmin, "bar": f"rank tests p >= {SBC_ALPHA}", "met": bool(pmin >= SBC_ALPHA)}
+        ratio = _value(res, p, "wis_over_prior", "wis_over_prior_counting_failures_as_prior")
+        bars[f"wis_over_prior {p}"] = {"value": ratio, "bar": f"<= {WIS_BAR[p]}", "met": bool(ratio <= WIS_BAR[p])}
+    met = [k for k, b in bars.items() if b["met"]]
+    failed = [k for k, b in bars.items() if not b["met"]]
+    return {"bars": bars, "met": met, "failed": failed, "passes": not failed}

@@ -1,0 +1,206 @@
+"""The coverage harness can fail a method that learns nothing (benchmarks/scores.py, benchmarks/bench_coverage.py).
+
+Coverage and rank uniformity are met by the prior box itself on truths drawn from the box; the weighted
+interval score over the prior's is not. These tests score the prior, an overconfident method and the
+shipped reported posterior on the committed twins' truths through the same functions, and check that
+the README says what the verdicts are.
+"""
+
+import copy
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from benchmarks import bench_coverage as bc
+from benchmarks.scores import (WIS_BAR, interval_score, median_of, prior_records, prior_row, shrunk_records,
+                               verdict, weighted_interval_score)
+from calibration.experiment import ExperimentSpec
+from tools import coverage_table
+
+ROOT = Path(__file__).resolve().parents[1]
+SETS = {"coverage_well_specified.json": "well_specified", "coverage_well_specified_repeat.json": "well_specified",
+        "coverage_misspecified.json": "misspecified"}
+NEW_KEYS = ("wis_over_prior", "wis", "uninformative_share")
+
+
+@pytest.fixture(scope="module")
+def spec():
+    return ExperimentSpec.from_config(bc.EXPERIMENT, bc.twin_experiment())
+
+
+@pytest.fixture(scope="module")
+def committed():
+    return {f: json.loads((ROOT / "benchmarks" / "results" / f).read_text()) for f in SETS}
+
+
+def _mcmc_rows(twins):
+    return [{**r, "params": r["emulator_mcmc"]["params"]} for r in twins]
+
+
+def test_the_weighted_interval_score_is_bracher_et_al_s_by_hand():
+    row = {"q05": 1.0, "q25": 2.0, "q50": 3.0, "q75": 4.0, "q95": 5.0}
+    # truth above both intervals: |6-3|/2 + 0.25 (2 + 4 * 2) + 0.05 (4 + 20 * 1), over K + 1/2 = 2.5
+    assert weighted_interval_score(row, 6.0) == pytest.approx((1.5 + 2.5 + 1.2) / 2.5)
+    # inside both: the widths and the distance to the median only
+    assert weighted_interval_score(row, 3.5) == pytest.approx((0.25 + 0.25 * 2 + 0.05 * 4) / 2.5)
+    assert interval_score(1.0, 5.0, 0.0, 0.1) == pytest.approx(4.0 + 20.0)
+    # without q50 the median is the 25-75 % midpoint
+    assert median_of({"q25": 2.0, "q75": 6.0}) == 4.0 and median_of({**row, "q50": None}) == 3.0
+    # the uniform prior's WIS averaged over truths uniform in a box of width 1: (E|y - 1/2| / 2
+    # + 0.25 (0.5 + 4 x 0.0625) + 0.05 (0.9 + 20 x 0.0025)) / 2.5 = 0.36 / 2.5, by quadrature
+    prior = prior_row(0.0, 1.0)
+    assert prior["q50"] == 0.5 and prior["q05"] == pytest.approx(0.05)
+    mean = np.mean([weighted_interval_score(prior, v) for v in np.linspace(0.0, 1.0, 4001)])
+    assert mean == pytest.approx(0.144, abs=1e-4)
+
+
+def test_the_prior_box_through_the_same_harness_covers_and_fails(spec, committed):
+    """The issue's measurement: the box's own intervals on the committed truths cover 88-90 %, rank
+    uniformly and meet the restated bar as often, and fail only the WIS bars (ratio 1 by construction)."""
+    for f, name in SETS.items():
+        twins = committed[f][name]["twins"]
+        s = bc.score(prior_records(twins, spec.lower, spec.upper, spec.names), spec.lower, spec.upper, spec.names)
+        v = verdict(s)
+        assert v["failed"] == ["wis_over_prior sigma_t", "wis_over_prior E_t"] and not v["passes"], (f, v["failed"])
+        for p in spec.names:
+            r = s["params"][p]
+            assert r["wis_over_prior"] == 1.0 and r["uninformative_share"] == 1.0
+            assert 0.88 <= r["coverage_90"]["fraction"] <= 0.90
+            assert 0.48 <= r["coverage_50"]["fraction"] <= 0.60
+            assert r["sbc"]["chi2_p"] > 0.9 and r["bar"]["fraction_met"] == r["coverage_90"]["fraction"]
+            assert r["width_over_prior_median"] == pytest.approx(1.0)
+
+
+def test_an_overconfident_method_fails_the_coverage_bar(spec, committed):
+    """The reported intervals shrunk to 10 % of their width around their median, and point intervals at
+    a value 10 % above the median, on the committed twins: both fail 90 % coverage for each parameter."""
+    twins = _mcmc_rows(committed["coverage_well_specified.json"]["well_specified"]["twins"])
+    shrunk = bc.score(shrunk_records(twins, spec.names, 0.1), spec.lower, spec.upper, spec.names)
+    points = []
+    for r in twins:
+        points.append({**r, "params": {p: {**q, **{k: 1.1 * median_of(q) for k in ("q05", "q25", "q75", "q95")}}
+                                       for p, q in r["params"].items()}})
+    biased = bc.score(points, spec.lower, spec.upper, spec.names)
+    for s, top in ((shrunk, 0.2), (biased, 0.0)):
+        v = verdict(s)
+        for p in spec.names:
+            assert s["params"][p]["coverage_90"]["fraction"] <= top
+            assert f"coverage_90 {p}" in v["failed"]
+    # the shrunk intervals keep their centres: WIS says E_t's is no better than the prior's
+    assert shrunk["params"]["E_t"]["wis_over_prior"] > 1.0
+
+
+def test_the_committed_verdicts_are_the_readme_s(spec, committed):
+    """Each committed set's stored verdict is what its twins give now; the README's table lists exactly
+    the bars not met, and its prose quotes the ranges and claims the verdicts make."""
+    text = (ROOT / "README.md").read_text()
+    flat = " ".join(text.split())
+    assert coverage_table.readme_block_sources(text) == [f"benchmarks/results/{f}" for f in SETS]
+    got = {}
+    for f, name in SETS.items():
+        twins = committed[f][name]["twins"]
+        fresh = verdict(bc.score_mcmc(twins, spec.lower, spec.upper, spec.names))
+        assert committed[f][name]["verdict"] == json.loads(json.dumps(fresh)), f
+        row = next(line for line in text.splitlines() if f"| `{f}` |" in line)
+        cell = row.rstrip(" |").rsplit("|", 1)[1].strip()
+        assert cell == coverage_table._failed(fresh) and cell.count(",") + 1 == len(fresh["failed"]), (f, cell)
+        got[f] = (fresh, bc.score(prior_records(twins, spec.lower, spec.upper, spec.names), spec.lower, spec.upper,
+                                  spec.names))
+    well = [f for f in SETS if SETS[f] == "well_specified"]
+    bars = {f: got[f][0]["bars"] for f in SETS}
+
+    def span(values, fmt):
+        return f"{fmt(min(values))}-{fmt(max(values))}"
+
+    prior_cov = [got[f][1]["params"][p]["coverage_90"]["fraction"] for f in SETS for p in spec.names]
+    assert f"covers {span(prior_cov, lambda x: f'{100 * x:.0f}')} % with uniform ranks" in flat
+    for p in spec.names:
+        ratios = [bars[f][f"wis_over_prior {p}"]["value"] for f in well]
+        assert f"`{p}` {span(ratios, lambda x: f'{x:.2f}')}" in flat and f"against {WIS_BAR[p]}" in flat
+    # sigma_t: met on one set of two; E_t: failed on every set; coverage and ranks met but the one quoted
+    assert sum(bars[f]["wis_over_prior sigma_t"]["met"] for f in well) == 1 and "(met on one set of two)" in flat
+    assert not any(bars[f]["wis_over_prior E_t"]["met"] for f in SETS) and "0.55 on every set" in flat
+    unmet = [(f, b) for f in well for b in bars[f] if not bars[f][b]["met"] and not b.startswith("wis")]
+    assert unmet == [("coverage_well_specified_repeat.json", "coverage_90 sigma_t")]
+    assert bars[unmet[0][0]]["coverage_90 sigma_t"]["value"] == 0.96 and "covering 96 % of the 25 repeat" in flat
+    # "intervals about 0.8 of the prior's width"
+    assert all(0.75 <= committed[f][SETS[f]]["summary_emulator_mcmc"]["params"]["E_t"]["width_over_prior_median"]
+               <= 0.85 for f in SETS) and "intervals about 0.8 of the prior's width" in flat
+    share = [committed[f][SETS[f]]["summary_emulator_mcmc"]["params"]["E_t"]["uninformative_share"] for f in SETS]
+    assert f"{span(share, lambda x: f'{100 * x:.0f}')} % of the twins get the `uninformative` flag" in flat
+
+
+def _strip(obj):
+    """The JSON as it was before the proper scores: their keys and the verdicts removed."""
+    if isinstance(obj, dict):
+        return {k: _strip(v) for k, v in obj.items()
+                if k not in (*NEW_KEYS, "verdict", "wis_over_prior_counting_failures_as_prior")}
+    if isinstance(obj, list):
+        return [_strip(v) for v in obj]
+    return obj
+
+
+def test_rescoring_adds_the_scores_and_changes_no_number(tmp_path, committed):
+    """--rescore of the committed misspecified JSON without its new keys gives the committed file back;
+    a stored number the scoring does not reproduce, a truth outside the box and another benchmark's
+    JSON are refused, naming the file, the key and the value, and nothing is written."""
+    f = "coverage_misspecified.json"
+    old = _strip(committed[f])
+    assert "wis_over_prior" not in json.dumps(old)
+    src = tmp_path / f
+    src.write_text(json.dumps(old, indent=1))
+    verdicts = bc.rescore(src)
+    assert verdicts == {"misspecified": committed[f]["misspecified"]["verdict"]}
+    assert json.loads(src.read_text()) == committed[f]
+    assert src.read_text() == (ROOT / "benchmarks" / "results" / f).read_text()
+
+    bad = copy.deepcopy(old)
+    bad["misspecified"]["summary_emulator_mcmc"]["params"]["E_t"]["coverage_90"]["fraction"] = 0.9
+    (tmp_path / "bad.json").write_text(json.dumps(bad))
+    with pytest.raises(SystemExit, match=r"bad.json: misspecified.summary_emulator_mcmc.params.E_t.coverage_90"
+                                         r".fraction: stored 0.9, rescored 0.8"):
+        bc.rescore(tmp_path / "bad.json", tmp_path / "out.json")
+    assert not (tmp_path / "out.json").exists()
+    outside = copy.deepcopy(old)
+    outside["misspecified"]["twins"][3]["truth"]["E_t"] = 150.0
+    (tmp_path / "outside.json").write_text(json.dumps(outside))
+    with pytest.raises(SystemExit, match=r"misspecified twin 3: truth E_t = 150.0, expected a number in the twin's "
+                                         r"box \[200, 2400\]"):
+        bc.rescore(tmp_path / "outside.json")
+    (tmp_path / "pool.json").write_text(json.dumps({**old, "benchmark": "pool_coverage"}))
+    with pytest.raises(SystemExit, match="benchmark 'pool_coverage'.*expected a bench_coverage JSON"):
+        bc.rescore(tmp_path / "pool.json")
+
+
+def test_a_summary_without_the_scores_is_refused_by_the_verdict_and_the_table(committed):
+    f = "coverage_misspecified.json"
+    old = _strip(committed[f])
+    with pytest.raises(ValueError, match=r"summary of sigma_t has no 'wis_over_prior'.*--rescore FILE"):
+        verdict(old["misspecified"]["summary_emulator_mcmc"])
+    with pytest.raises(ValueError, match=r"b/old.json has no misspecified.sigma_t.wis_over_prior.*--rescore b/old.json"):
+        coverage_table.table([("b/old.json", old)])
+    summ = committed[f]["misspecified"]["summary_emulator_mcmc"]
+    with pytest.raises(ValueError, match=r"\['E_t', 'sigma_t', 'x'\].*no bar for \['x'\]"):
+        verdict({**summ, "params": {**summ["params"], "x": summ["params"]["E_t"]}})
+    with pytest.raises(ValueError, match="no bar for an empty set"):
+        verdict({"params": {}})
+
+
+def test_a_failed_sampler_counts_as_the_prior_in_the_score(spec, committed):
+    """score_mcmc: a twin whose sampler failed has no interval; the verdict's WIS ratio counts it as the
+    prior's (learned nothing), by hand from the scored twins' and the prior's scores."""
+    twins = copy.deepcopy(committed["coverage_well_specified.json"]["well_specified"]["twins"])
+    for r in twins[:5]:
+        r["emulator_mcmc"] = {"error": "RuntimeError: chain shorter than its burn-in"}
+    s = bc.score_mcmc(twins, spec.lower, spec.upper, spec.names)
+    for j, p in enumerate(spec.names):
+        res = s["params"][p]
+        w = spec.upper[j] - spec.lower[j]
+        prior = prior_row(spec.lower[j], spec.upper[j])
+        extra = sum(weighted_interval_score(prior, r["truth"][p]) for r in twins[:5])
+        by_hand = ((res["wis"]["mean_over_box"] * w * 45 + extra) / (res["wis"]["prior_mean_over_box"] * w * 45 + extra))
+        assert res["wis_over_prior_counting_failures_as_prior"] == pytest.approx(by_hand)
+        assert res["wis_over_prior"] < res["wis_over_prior_counting_failures_as_prior"] < 1.0
+        assert verdict(s)["bars"][f"wis_over_prior {p}"]["value"] == res["wis_over_prior_counting_failures_as_prior"]
