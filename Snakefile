@@ -55,7 +55,11 @@ if workflow.is_main_process:
         _paths += list((_exp.get("diagnosis") or {}).get("heldout_records") or [])
         for _path in _paths:
             try:
-                check_record(_path, _exp["observations"]["t_end"] if _exp["kind"] == "measured" else None)
+                # an invalid test (shpb.lab.validity) is refused as a calibration record unless allow_invalid
+                check_record(_path, _exp["observations"]["t_end"] if _exp["kind"] == "measured" else None,
+                             refuse_invalid=_exp["kind"] == "measured"
+                             and _path in (_exp["observations"].get("records") or [])
+                             and not _exp["observations"].get("allow_invalid", False))
             except ObservationFileError as exc:
                 raise WorkflowError(f"experiment {_name!r}: {exc}") from None
     # stale temporaries of killed jobs are removed, member files that no longer match their manifest.json

@@ -133,7 +133,7 @@ def _reduce(args) -> int:
     from .lab.sheet_readers import check_sheet
     try:
         sheet, raw = check_sheet(args.sheet)
-        red = reduce_sheet(sheet, raw)
+        red = reduce_sheet(sheet, raw, check_stated=True)
     except (ValueError, FileNotFoundError) as exc:
         print(f"python -m shpb reduce: error: {exc}", file=sys.stderr)
         return contract.EXIT_BAD_INPUT
