@@ -166,6 +166,9 @@ def test_pooled_sets_count_every_twin_once():
     a, b = _bench(41, "calibrated"), _bench(43, "overconfident")
     out = pool("misspecified", {"a.json": a, "b.json": b})
     assert out["n_twins"] == 20 and out["sources"]["b.json"]["twin_seeds"] == [43000 + i for i in range(10)]
+    # the pooled set's verdict is of its reported posterior (the overconfident half fails the coverage bar)
+    from benchmarks.scores import verdict
+    assert out["verdict"] == verdict(out["summary_emulator_mcmc"]) and not out["verdict"]["passes"]
     for p in NAMES:
         k = [round(score(x["misspecified"]["twins"], LOWER, UPPER, NAMES)["params"][p]["coverage_90"]["fraction"] * 10)
              for x in (a, b)]
@@ -285,7 +288,8 @@ def test_the_verdict_passes_a_sharp_calibrated_posterior_and_fails_the_prior_and
                for p in NAMES)
     prior = score(_records("prior"), LOWER, UPPER, NAMES)
     # its truths in the middle 60 % of the box, it also over-covers and ranks in the middle: every bar fails
-    assert verdict(prior)["failed"] == [f"{bar} {p}" for p in NAMES for bar in ("coverage_90", "sbc", "wis_over_prior")]
+    bars = ("coverage_90", "sbc", "wis_over_prior")
+    assert verdict(prior)["failed"] == [f"{bar} {p}" for p in NAMES for bar in bars]
     for p in NAMES:
         # 400 prior draws per twin: its WIS is the prior box's to within the sample quantiles' noise
         assert prior["params"][p]["wis_over_prior"] == pytest.approx(1.0, abs=0.05)

@@ -179,7 +179,8 @@ def test_a_summary_without_the_scores_is_refused_by_the_verdict_and_the_table(co
     old = _strip(committed[f])
     with pytest.raises(ValueError, match=r"summary of sigma_t has no 'wis_over_prior'.*--rescore FILE"):
         verdict(old["misspecified"]["summary_emulator_mcmc"])
-    with pytest.raises(ValueError, match=r"b/old.json has no misspecified.sigma_t.wis_over_prior.*--rescore b/old.json"):
+    with pytest.raises(ValueError,
+                       match=r"b/old.json has no misspecified.sigma_t.wis_over_prior.*--rescore b/old.json"):
         coverage_table.table([("b/old.json", old)])
     summ = committed[f]["misspecified"]["summary_emulator_mcmc"]
     with pytest.raises(ValueError, match=r"\['E_t', 'sigma_t', 'x'\].*no bar for \['x'\]"):
@@ -200,7 +201,8 @@ def test_a_failed_sampler_counts_as_the_prior_in_the_score(spec, committed):
         w = spec.upper[j] - spec.lower[j]
         prior = prior_row(spec.lower[j], spec.upper[j])
         extra = sum(weighted_interval_score(prior, r["truth"][p]) for r in twins[:5])
-        by_hand = ((res["wis"]["mean_over_box"] * w * 45 + extra) / (res["wis"]["prior_mean_over_box"] * w * 45 + extra))
+        wis = res["wis"]
+        by_hand = (wis["mean_over_box"] * w * 45 + extra) / (wis["prior_mean_over_box"] * w * 45 + extra)
         assert res["wis_over_prior_counting_failures_as_prior"] == pytest.approx(by_hand)
         assert res["wis_over_prior"] < res["wis_over_prior_counting_failures_as_prior"] < 1.0
         assert verdict(s)["bars"][f"wis_over_prior {p}"]["value"] == res["wis_over_prior_counting_failures_as_prior"]

@@ -7,8 +7,8 @@ whole prior box, generated from the coverage benchmark's JSON (one source for th
 Each JSON is a ``benchmarks/bench_coverage.py`` output; each of its sets with twins (well-specified,
 misspecified) is one row, with the weighted interval score over the prior's, the ``uninformative`` share
 and the bars of :func:`benchmarks.scores.verdict` it does not meet (a JSON scored before those exist is
-refused: ``bench_coverage.py --rescore`` it). The JSONs must share the twin's setting (method, ensemble size, window and the
-reported posterior's form), so the rows compare like with like. The block sits between
+refused: ``bench_coverage.py --rescore`` it). The JSONs must share the twin's setting (method, ensemble
+size, window and the reported posterior's form), so the rows compare like with like. The block sits between
 ``<!-- coverage-table:start -->`` and ``<!-- coverage-table:end -->`` in README.md;
 ``tests/test_docs_tables.py`` checks that it equals what this tool makes from the JSON named in it.
 """
