@@ -113,7 +113,8 @@ def _slip(v: float, lo: float, hi: float, unit: str, slips) -> str:
     return ""
 
 
-def _out_of_range(key: str, v: float, lo: float, hi: float, unit: str, what: str, slips, label: str = "") -> str | None:
+def _out_of_range(key: str, v: float, lo: float, hi: float, unit: str, what: str, slips,
+                  label: str = "") -> str | None:
     if lo <= v <= hi:
         return None
     u = f" {unit}" if unit else ""
@@ -130,7 +131,9 @@ def _param_value_error(key: str, name: str, v: float, label: str = "", simulator
         return None
     plo, phi, unit, what, slips = PARAM_RANGES.get(name, (lo, hi, "", "", ()))
     if not ((v >= lo if closed_lo else v > lo) and v < hi):
-        return None if not simulator else (f"{key}: {label}{_num(v)} is outside the simulator's range of {name}: expected "
+        if not simulator:
+            return None
+        return (f"{key}: {label}{_num(v)} is outside the simulator's range of {name}: expected "
                 f"{'>=' if closed_lo else '>'} {_num(lo)} and < {_num(hi)} (shpb.parameters)"
                 f"{_slip(v, max(lo, plo), min(hi, phi), unit, slips)}")
     return _out_of_range(key, v, plo, phi, unit, what, slips, label) if name in PARAM_RANGES else None
