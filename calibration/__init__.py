@@ -10,3 +10,12 @@ validation (:mod:`.config_check`), the member runner (:mod:`.runner`), the ensem
 (:mod:`.ensemble_files`; the three re-exported by :mod:`.workflow_io`) and the plots (:mod:`.plots`). The Snakemake
 rules call these through the adapters in ``scripts/``.
 """
+import sys as _sys
+
+# A Snakemake job script (Snakemake's preamble puts its `snakemake` object in __main__ before the
+# script's imports) dies with the Snakemake process that started it: a SIGKILLed Snakemake then leaves
+# no job running on to write its outputs after the kill (calibration.heal, docs/workflow.md).
+if type(getattr(_sys.modules.get("__main__"), "snakemake", None)).__module__ == "snakemake.script":
+    from .heal import die_with_parent as _die_with_parent
+
+    _die_with_parent()

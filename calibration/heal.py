@@ -2,7 +2,8 @@
 
 * :func:`die_with_parent` / :func:`child_dies_with_parent`: Linux's parent-death signal
   (``prctl(PR_SET_PDEATHSIG, SIGKILL)``), so that a job script dies with the Snakemake process that
-  started it and a simulator with its job script. Without it a SIGKILLed Snakemake left its running
+  started it (``import calibration`` arms it in every Snakemake script job) and a simulator with its
+  job script (:func:`calibration.runner.run_member`). Without it a SIGKILLed Snakemake left its running
   jobs alive, and they moved their outputs into place after the run had died, where the next run took
   them as finished.
 * :func:`write_manifest`: ``manifest.json`` beside a member's files, the sha256 and size of each, written
@@ -61,9 +62,9 @@ def _set_death_signal(sig: int) -> bool:
 def die_with_parent() -> bool:
     """SIGKILL this process when its parent dies (Linux; elsewhere a no-op returning False).
 
-    Called at the top of the job scripts that run simulations: their parent is the Snakemake process
-    (or, on a cluster, the job step's Snakemake), which starts each local job's Python directly. A
-    parent that died before the request cannot signal any more: then this process exits at once."""
+    Called on ``import calibration`` in a Snakemake script job (every ``scripts/*.py``): its parent is
+    the Snakemake process (on a cluster, the job step's Snakemake), which starts each local job's Python
+    directly. A parent that died before the request cannot signal any more: then this exits at once."""
     parent = os.getppid()
     if not _set_death_signal(signal.SIGKILL):
         return False

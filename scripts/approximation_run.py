@@ -1,8 +1,4 @@
 """One run of the approximation error's pairs at its design point and preset (calibration.approximation)."""
-from calibration.heal import die_with_parent
-
-die_with_parent()  # dies with the Snakemake that started it, its simulator with it (calibration.heal)
-
 from calibration.approximation import approximation_run
 from calibration.workflow_io import run_member, simulator_command
 

@@ -1,8 +1,4 @@
 """One real FDEM run of the loop's check (check_runs.json, row `row`; rules/diagnosis.smk)."""
-from calibration.heal import die_with_parent
-
-die_with_parent()  # dies with the Snakemake that started it, its simulator with it (calibration.heal)
-
 from calibration.workflow_io import read_json, run_member, simulator_command
 
 sim, wc = snakemake.params.sim, snakemake.wildcards

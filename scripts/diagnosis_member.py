@@ -1,8 +1,4 @@
 """One FDEM run of the diagnosis design (calibration.workflow_io.run_member with the design point's parameters)."""
-from calibration.heal import die_with_parent
-
-die_with_parent()  # dies with the Snakemake that started it, its simulator with it (calibration.heal)
-
 from calibration.workflow_io import member_params, run_member, simulator_command
 
 sim = snakemake.params.sim

@@ -1,9 +1,5 @@
 """forecast/<record>/: the best-estimate simulation with the posterior-mean parameters, with fracture
 snapshots (a failed run gets a picture saying so instead of the damage maps)."""
-from calibration.heal import die_with_parent
-
-die_with_parent()  # dies with the Snakemake that started it, its simulator with it (calibration.heal)
-
 from pathlib import Path
 
 from calibration.workflow_io import failure_card, read_json, run_member, simulator_command

@@ -1,8 +1,4 @@
 """One ensemble member: `python -m shpb simulate` with the member's parameters (calibration.workflow_io.run_member)."""
-from calibration.heal import die_with_parent
-
-die_with_parent()  # dies with the Snakemake that started it, its simulator with it (calibration.heal)
-
 from calibration.workflow_io import member_params, run_member, simulator_command
 
 sim = snakemake.params.sim

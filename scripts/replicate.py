@@ -1,8 +1,4 @@
 """One replicate run at the iteration's ensemble mean on its own mesh realization (calibration.model_error)."""
-from calibration.heal import die_with_parent
-
-die_with_parent()  # dies with the Snakemake that started it, its simulator with it (calibration.heal)
-
 import pandas as pd
 
 from calibration.experiment import ExperimentSpec

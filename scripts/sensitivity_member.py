@@ -1,9 +1,5 @@
 """One simulation of the sensitivity design: calibration.workflow_io.run_member with the row's parameters, the
 experiment's fixed parameters and its other estimated parameters held at their prior-box centres."""
-from calibration.heal import die_with_parent
-
-die_with_parent()  # dies with the Snakemake that started it, its simulator with it (calibration.heal)
-
 from calibration.workflow_io import member_params, run_member, simulator_command
 
 sim = snakemake.params.sim

@@ -1,8 +1,4 @@
 """Twin experiment: the reference simulation with the truth parameters on its own mesh realization (must succeed)."""
-from calibration.heal import die_with_parent
-
-die_with_parent()  # dies with the Snakemake that started it, its simulator with it (calibration.heal)
-
 from calibration.workflow_io import run_member, simulator_command
 
 sim = snakemake.params.sim

@@ -160,9 +160,9 @@ DUMMY = textwrap.dedent('''
 
 JOB = textwrap.dedent('''
     import sys
-    from calibration.heal import die_with_parent
-    if sys.argv[2] == "1":
-        die_with_parent()
+    if sys.argv[2] == "1":  # what Snakemake's preamble leaves in a script job's __main__
+        snakemake = type("Snakemake", (), {"__module__": "snakemake.script"})()
+    import calibration  # arms the death signal in a Snakemake script job, nowhere else
     from calibration.runner import run_member
     dummy, pidfile, sleep_s, member = sys.argv[3:7]
     run_member(command=[sys.executable, dummy, pidfile, sleep_s], geometry="brazilian_disc", preset="fast",
@@ -191,8 +191,8 @@ def _wait_for(path: Path, timeout: float = 30.0) -> int:
 
 @pytest.mark.parametrize("killed, die_with_parent, sleep_s", [
     ("job", False, 30.0),  # the simulator dies with the job script that started it
-    ("snakemake", True, 30.0),  # the job script dies with its Snakemake, the simulator with it
-    ("snakemake", False, 1.0),  # a job left alive (no death signal) finishes its simulation but moves nothing
+    ("snakemake", True, 30.0),  # a Snakemake script job dies with its Snakemake, the simulator with it
+    ("snakemake", False, 1.0),  # a job left alive (not a script job) finishes its simulation, moves nothing
 ])
 def test_a_killed_job_leaves_no_process_and_writes_nothing_after_the_kill(tmp_path, killed, die_with_parent, sleep_s):
     dummy = tmp_path / "dummy_simulator.py"
