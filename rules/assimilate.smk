@@ -2,12 +2,6 @@
 # members, stop decision, analysis ensemble for k + 1).
 
 
-def member_files(wc, name, folder="members"):
-    ids = member_ids(EXPERIMENTS[wc.exp]["ensemble_size"]) if folder == "members" else replicate_ids(wc.exp)
-    return expand("results/{exp}/iter_{it}/{folder}/{member}/{record}/{name}", exp=wc.exp, it=wc.it,
-                  folder=folder, member=ids, record=list(records(wc.exp)), name=name)
-
-
 rule aggregate:
     input:
         params="results/{exp}/iter_{it}/params.csv",
@@ -20,18 +14,15 @@ rule aggregate:
     output:
         responses="results/{exp}/iter_{it}/responses.csv",
         replicates="results/{exp}/iter_{it}/replicates.csv",
+    log:
+        "results/{exp}/logs/iter_{it}/aggregate.log",
+    conda:
+        CONDA_ENV
     params:
         records=lambda wc: list(records(wc.exp)),
         replicates=lambda wc: replicate_ids(wc.exp),
     script:
         "../scripts/aggregate.py"
-
-
-def earlier_iterations(wc, name):
-    """`name` of iterations 0..it-1: the runs an emulated_esmda analysis builds its emulator on."""
-    if EXPERIMENTS[wc.exp]["method"] != "emulated_esmda":
-        return []
-    return [f"results/{wc.exp}/iter_{k}/{name}" for k in range(int(wc.it))]
 
 
 checkpoint analysis:
@@ -46,6 +37,10 @@ checkpoint analysis:
         history_responses=lambda wc: earlier_iterations(wc, "responses.csv"),
     output:
         analysis="results/{exp}/iter_{it}/analysis.json",
+    log:
+        "results/{exp}/logs/iter_{it}/analysis.log",
+    conda:
+        CONDA_ENV
     params:
         inference=lambda wc: inference_settings(wc.exp),
     script:

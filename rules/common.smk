@@ -2,17 +2,44 @@
 # decision is calibration.experiment.final_iteration, re-taken from the stored analyses with the current
 # stopping rule, so that changing a tolerance never invalidates finished iterations (re-run the final
 # targets with `-R summary forecast_params plots` to apply it).
+import os
+
+# One BLAS/OpenMP/Numba thread per job, overriding the caller's environment: the analyses are small dense
+# solves (tens of members) that more threads do not speed up, the simulations are single-threaded jobs
+# (threads: 1) run side by side, so one thread per job is also the fastest with 2 jobs on 2 cores; and a
+# threaded BLAS sums in an order that depends on its thread count, so a re-run with another
+# OMP_NUM_THREADS would write files that differ in the last digits. Set before any job is spawned: every
+# job process inherits it (a cluster job re-reads this file on its node).
+THREAD_VARIABLES = (
+    "OMP_NUM_THREADS",
+    "OPENBLAS_NUM_THREADS",
+    "MKL_NUM_THREADS",
+    "NUMBA_NUM_THREADS",
+)
+os.environ.update(dict.fromkeys(THREAD_VARIABLES, "1"))
+
 from calibration.experiment import ExperimentSpec
 from calibration.experiment import final_iteration as _final_iteration
 from calibration.experiment import run_mesh_seed
-from calibration.approximation import (approximation_design, approximation_mesh_seed, approximation_run,
-                                       approximation_run_ids, approximation_settings)
+from calibration.approximation import (
+    approximation_design,
+    approximation_mesh_seed,
+    approximation_run,
+    approximation_run_ids,
+    approximation_settings,
+)
 from calibration.model_error import replicate_count
 from calibration.workflow_io import experiment_records, member_ids, read_json
+
+# The software of every job, a path relative to rules/. Deployed only on request
+# (`--software-deployment-method conda`, envs/workflow.yaml says how); by default each job runs in the
+# Python that runs Snakemake.
+CONDA_ENV = "../envs/workflow.yaml"
 
 EXPERIMENTS = config["experiments"]
 RUN = config["run"] or list(EXPERIMENTS)
 PLOTS = ["parameters", "ensemble_curves", "forecast", "misfit", "sensitivity"]
+
 
 wildcard_constraints:
     exp="[A-Za-z][A-Za-z0-9_-]*",
@@ -20,7 +47,24 @@ wildcard_constraints:
     member="[0-9]+",
     record="[A-Za-z0-9][A-Za-z0-9_.-]*",
 
-localrules: lhs, propose, observations, aggregate, analysis, refine_design, refine_aggregate, posterior_sample, forecast_params, plots, summary, diagnosis_design, diagnosis_heldout_observations, diagnosis_select, diagnosis_check, loro
+
+localrules:
+    lhs,
+    propose,
+    observations,
+    aggregate,
+    analysis,
+    refine_design,
+    refine_aggregate,
+    posterior_sample,
+    forecast_params,
+    plots,
+    summary,
+    diagnosis_design,
+    diagnosis_heldout_observations,
+    diagnosis_select,
+    diagnosis_check,
+    loro,
 
 
 def records(exp):
@@ -53,28 +97,56 @@ def iteration_files(exp, name):
 def mesh_seed_of(exp, stage, k=0, index=0, record=None):
     """The mesh realization of one simulation (calibration.experiment.run_mesh_seed; None: unperturbed)."""
     names = list(records(exp))
-    return run_mesh_seed(EXPERIMENTS[exp], stage, int(k), int(index), names.index(record) if record in names else 0)
+    return run_mesh_seed(
+        EXPERIMENTS[exp],
+        stage,
+        int(k),
+        int(index),
+        names.index(record) if record in names else 0,
+    )
 
 
 def replicate_ids(exp):
     """Folder names of the replicate runs per iteration (none when S is not measured)."""
-    return member_ids(replicate_count(EXPERIMENTS[exp])) if replicate_count(EXPERIMENTS[exp]) else []
+    return (
+        member_ids(replicate_count(EXPERIMENTS[exp]))
+        if replicate_count(EXPERIMENTS[exp])
+        else []
+    )
 
 
 def sim_settings(exp, preset=None):
     """What a simulation of this experiment needs besides its parameters (also the params that make
     Snakemake re-run a member when they change)."""
     e = EXPERIMENTS[exp]
-    return {"geometry": e["geometry"], "preset": preset or e["preset"], "fixed": e["fixed"],
-            "t_end": e["simulation"]["t_end"], "sample_dt": e["simulation"]["sample_dt"],
-            "command": config["simulator"]}
+    return {
+        "geometry": e["geometry"],
+        "preset": preset or e["preset"],
+        "fixed": e["fixed"],
+        "t_end": e["simulation"]["t_end"],
+        "sample_dt": e["simulation"]["sample_dt"],
+        "command": config["simulator"],
+    }
 
 
 def inference_settings(exp):
     """Config entries an analysis depends on (a change re-runs the analyses)."""
     e = EXPERIMENTS[exp]
-    keys = ("method", "esmda", "emulated", "max_iterations", "parameters", "transform", "inflation", "truncation",
-            "max_rank", "min_alive_fraction", "localization", "seed", "ensemble_size")
+    keys = (
+        "method",
+        "esmda",
+        "emulated",
+        "max_iterations",
+        "parameters",
+        "transform",
+        "inflation",
+        "truncation",
+        "max_rank",
+        "min_alive_fraction",
+        "localization",
+        "seed",
+        "ensemble_size",
+    )
     return {k: e[k] for k in keys}
 
 
@@ -85,7 +157,8 @@ def time_limit_s(exp, preset=None):
 
 def runtime_min(exp, preset=None):
     """Scheduler wall time [min] of a simulation job: the simulator's own limit plus 5 minutes, so
-    that the member stops itself (and is dropped as failed) before Slurm would kill the job."""
+    that the member stops itself (and is dropped as failed) before Slurm would kill the job.
+    """
     return -(-time_limit_s(exp, preset) // 60) + 5
 
 
@@ -114,3 +187,6 @@ def simulation_group(exp, stage, index, n_index, record, record_names):
     gid = f"sim-{exp}-{stage}-{i * max(1, n // k) // n}"
     workflow.parent_groupids[gid] = SIMULATION_GROUPS
     return gid
+
+
+include: "inputs.smk"

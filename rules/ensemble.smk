@@ -5,12 +5,23 @@
 rule lhs:
     """`parameters: auto`: the sensitivity report decides which parameters the prior spans."""
     input:
-        unpack(lambda wc: {"sensitivity": f"results/{wc.exp}/sensitivity/report.json"}
-               if EXPERIMENTS[wc.exp]["parameters"] == "auto" else {}),
+        unpack(
+            lambda wc: (
+                {"sensitivity": f"results/{wc.exp}/sensitivity/report.json"}
+                if EXPERIMENTS[wc.exp]["parameters"] == "auto"
+                else {}
+            )
+        ),
     output:
         params="results/{exp}/iter_0/params.csv",
+    log:
+        "results/{exp}/logs/lhs.log",
+    conda:
+        CONDA_ENV
     params:
-        prior=lambda wc: {k: EXPERIMENTS[wc.exp][k] for k in ("parameters", "ensemble_size", "seed")},
+        prior=lambda wc: {
+            k: EXPERIMENTS[wc.exp][k] for k in ("parameters", "ensemble_size", "seed")
+        },
     script:
         "../scripts/lhs.py"
 
@@ -20,15 +31,14 @@ rule propose:
         analysis=lambda wc: f"results/{wc.exp}/iter_{int(wc.it) - 1}/analysis.json",
     output:
         params="results/{exp}/iter_{it}/params.csv",
+    log:
+        "results/{exp}/logs/iter_{it}/propose.log",
     wildcard_constraints:
         it="[1-9][0-9]*",
+    conda:
+        CONDA_ENV
     script:
         "../scripts/propose.py"
-
-
-def member_inputs(wc):
-    rec = records(wc.exp)[wc.record]
-    return {"params": f"results/{wc.exp}/iter_{wc.it}/params.csv", "record": [rec] if rec else []}
 
 
 rule member:
@@ -44,18 +54,28 @@ rule member:
         run="results/{exp}/iter_{it}/members/{member}/{record}/run.json",
     log:
         "results/{exp}/iter_{it}/members/{member}/{record}/simulate.log",
+    retries: config["member_retries"]
+    group:
+        lambda wc: simulation_group(
+            wc.exp,
+            f"iter_{wc.it}",
+            wc.member,
+            EXPERIMENTS[wc.exp]["ensemble_size"],
+            wc.record,
+            records(wc.exp),
+        )
+    conda:
+        CONDA_ENV
+    threads: 1
+    resources:
+        attempt=lambda wc, attempt: attempt,
+        time_limit_s=lambda wc: time_limit_s(wc.exp, None),
+        runtime=lambda wc: runtime_min(wc.exp, None),
     params:
         sim=lambda wc: sim_settings(wc.exp),
         record_file=lambda wc: records(wc.exp)[wc.record],
         mesh_seed=lambda wc: mesh_seed_of(wc.exp, "member", wc.it, wc.member, wc.record),
         max_attempts=config["member_retries"] + 1,
-    threads: 1
-    retries: config["member_retries"]
-    group: lambda wc: simulation_group(wc.exp, f"iter_{wc.it}", wc.member, EXPERIMENTS[wc.exp]["ensemble_size"], wc.record, records(wc.exp))
-    resources:
-        attempt=lambda wc, attempt: attempt,
-        time_limit_s=lambda wc: time_limit_s(wc.exp, None),
-        runtime=lambda wc: runtime_min(wc.exp, None),
     script:
         "../scripts/member.py"
 
@@ -71,17 +91,29 @@ rule replicate:
         run="results/{exp}/iter_{it}/replicates/{member}/{record}/run.json",
     log:
         "results/{exp}/iter_{it}/replicates/{member}/{record}/simulate.log",
-    params:
-        sim=lambda wc: sim_settings(wc.exp),
-        record_file=lambda wc: records(wc.exp)[wc.record],
-        mesh_seed=lambda wc: mesh_seed_of(wc.exp, "replicate", wc.it, wc.member, wc.record),
-        max_attempts=config["member_retries"] + 1,
-    threads: 1
     retries: config["member_retries"]
-    group: lambda wc: simulation_group(wc.exp, f"rep_{wc.it}", wc.member, len(replicate_ids(wc.exp)), wc.record, records(wc.exp))
+    group:
+        lambda wc: simulation_group(
+            wc.exp,
+            f"rep_{wc.it}",
+            wc.member,
+            len(replicate_ids(wc.exp)),
+            wc.record,
+            records(wc.exp),
+        )
+    conda:
+        CONDA_ENV
+    threads: 1
     resources:
         attempt=lambda wc, attempt: attempt,
         time_limit_s=lambda wc: time_limit_s(wc.exp, None),
         runtime=lambda wc: runtime_min(wc.exp, None),
+    params:
+        sim=lambda wc: sim_settings(wc.exp),
+        record_file=lambda wc: records(wc.exp)[wc.record],
+        mesh_seed=lambda wc: mesh_seed_of(
+            wc.exp, "replicate", wc.it, wc.member, wc.record
+        ),
+        max_attempts=config["member_retries"] + 1,
     script:
         "../scripts/replicate.py"

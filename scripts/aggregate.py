@@ -1,5 +1,9 @@
 """iter_<k>/responses.csv and replicates.csv: every member's and replicate's curves on the observation grid,
 with its status."""
+from calibration.job_log import log_to
+
+log_to(snakemake.log[0])  # the job's output goes to its log (rules/*.smk)
+
 from pathlib import Path
 
 import pandas as pd

@@ -1,4 +1,8 @@
 """iter_<k>/analysis.json: misfit, failed members, stop decision and the next ensemble (checkpoint)."""
+from calibration.job_log import log_to
+
+_console = log_to(snakemake.log[0])  # the job's output to its log; the analysis line also to the run's stdout
+
 import pandas as pd
 
 from calibration.experiment import ExperimentSpec, analysis_step
@@ -16,4 +20,6 @@ _, replicates = read_responses(snakemake.input.replicates)
 result = analysis_step(spec, int(snakemake.wildcards.it), pd.read_csv(snakemake.input.params), Y, status, obs,
                        pd.read_csv(snakemake.input.prior), history, replicates=replicates)
 atomic_write_json(snakemake.output.analysis, result)
-print(analysis_line(result), flush=True)  # the misfit of this iteration in the run's log
+line = analysis_line(result)
+print(line, flush=True)
+print(line, file=_console, flush=True)  # the misfit of this iteration on the run's output too

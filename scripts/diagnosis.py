@@ -1,5 +1,9 @@
 """diagnosis/selection.pkl + check_runs.json: effects chosen by cross-validation within the calibration
 records on the emulator of the FDEM design (calibration.closing; the held-out records' curves are not read)."""
+from calibration.job_log import log_to
+
+log_to(snakemake.log[0])  # the job's output goes to its log (rules/*.smk)
+
 import pickle
 from pathlib import Path
 

@@ -1,5 +1,9 @@
 """diagnosis/report.json, check.json, check.png: the confirmation walk on the real cross-validation runs,
 then the held-out records' errors before and after (calibration.closing.assemble)."""
+from calibration.job_log import log_to
+
+log_to(snakemake.log[0])  # the job's output goes to its log (rules/*.smk)
+
 import pickle
 
 from calibration.closing import assemble

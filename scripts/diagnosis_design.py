@@ -1,4 +1,8 @@
 """diagnosis/design/params.csv + design.json: the emulator design around the calibrated posterior."""
+from calibration.job_log import log_to
+
+log_to(snakemake.log[0])  # the job's output goes to its log (rules/*.smk)
+
 import numpy as np
 import pandas as pd
 

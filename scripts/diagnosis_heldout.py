@@ -1,4 +1,8 @@
 """diagnosis/heldout/obs.csv + obs.json: the held-out records reduced like the calibration records."""
+from calibration.job_log import log_to
+
+log_to(snakemake.log[0])  # the job's output goes to its log (rules/*.smk)
+
 from calibration.observations import measured_observations
 
 o = snakemake.params.obs

@@ -1,4 +1,8 @@
 """forecast/params.json: the posterior mean the forecast runs at (calibration.posterior.forecast_parameters)."""
+from calibration.job_log import log_to
+
+log_to(snakemake.log[0])  # the job's output goes to its log (rules/*.smk)
+
 import pandas as pd
 
 from calibration.experiment import ExperimentSpec

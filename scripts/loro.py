@@ -1,4 +1,8 @@
 """loro/summary.json + folds.png: leave one record out over a series (calibration.closing.loro_table)."""
+from calibration.job_log import log_to
+
+log_to(snakemake.log[0])  # the job's output goes to its log (rules/*.smk)
+
 from calibration.closing import loro_table
 from calibration.plots import plot_loro
 from calibration.workflow_io import atomic_write_json, read_json

@@ -1,5 +1,9 @@
 """observations/obs.csv + obs.json: twin (truth + noise) or measured records (calibration.observations),
 corrected by the approximation error of the experiment's preset where it is configured (calibration.approximation)."""
+from calibration.job_log import log_to
+
+log_to(snakemake.log[0])  # the job's output goes to its log (rules/*.smk)
+
 from pathlib import Path
 
 import pandas as pd

@@ -1,4 +1,8 @@
 """plots/*.png of a finished experiment (calibration.plots)."""
+from calibration.job_log import log_to
+
+log_to(snakemake.log[0])  # the job's output goes to its log (rules/*.smk)
+
 import numpy as np
 import pandas as pd
 

@@ -1,4 +1,8 @@
 """posterior/samples.csv + sampler.json: the emulator MCMC posterior (calibration.posterior, posterior: emulator_mcmc)."""
+from calibration.job_log import log_to
+
+log_to(snakemake.log[0])  # the job's output goes to its log (rules/*.smk)
+
 import pandas as pd
 
 from calibration.experiment import ExperimentSpec

@@ -1,4 +1,8 @@
 """iter_<k>/params.csv: the analysis ensemble stored by iteration k-1's analysis."""
+from calibration.job_log import log_to
+
+log_to(snakemake.log[0])  # the job's output goes to its log (rules/*.smk)
+
 from calibration.experiment import params_frame
 from calibration.workflow_io import atomic_write_csv, read_json
 

@@ -1,4 +1,8 @@
 """refine/params.csv: the refinement batch of the reported emulator posterior (calibration.posterior.refine_design)."""
+from calibration.job_log import log_to
+
+log_to(snakemake.log[0])  # the job's output goes to its log (rules/*.smk)
+
 import pandas as pd
 
 from calibration.experiment import ExperimentSpec

@@ -1,4 +1,8 @@
 """results/<exp>/summary.html: the summary the HTML report opens on (calibration.report_summary)."""
+from calibration.job_log import log_to
+
+log_to(snakemake.log[0])  # the job's output goes to its log (rules/*.smk)
+
 from calibration.report_summary import summary_html
 from calibration.workflow_io import atomic_write_text, read_json
 

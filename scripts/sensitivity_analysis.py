@@ -1,5 +1,9 @@
 """sensitivity/report.json, indices_time.csv, indices_features.csv, plots/sensitivity_indices.png: the
 design's curves on the experiment's observation grid -> calibration.sensitivity.analyze."""
+from calibration.job_log import log_to
+
+log_to(snakemake.log[0])  # the job's output goes to its log (rules/*.smk)
+
 import numpy as np
 import pandas as pd
 

@@ -1,4 +1,8 @@
 """sensitivity/design.csv: SALib's design (calibration.sensitivity.design), one row per simulation."""
+from calibration.job_log import log_to
+
+log_to(snakemake.log[0])  # the job's output goes to its log (rules/*.smk)
+
 from calibration.sensitivity import SensitivitySpec, design
 from calibration.workflow_io import atomic_write_csv
 

@@ -1,4 +1,8 @@
 """summary.json and posterior.csv of a finished experiment (calibration.experiment.experiment_outcome)."""
+from calibration.job_log import log_to
+
+log_to(snakemake.log[0])  # the job's output goes to its log (rules/*.smk)
+
 import os
 import time
 

@@ -108,8 +108,9 @@ def workflow_rules() -> tuple[dict[str, str], set[str]]:
     rules, local = {}, set()
     for path in [REPO / "Snakefile", *sorted((REPO / "rules").glob("*.smk"))]:
         text = path.read_text()
-        for m in re.finditer(r"^localrules:\s*(.+)$", text, re.M):
-            local |= {n.strip() for n in m.group(1).split(",") if n.strip()}
+        # one line (`localrules: a, b`) or snakefmt's one name per indented line
+        for m in re.finditer(r"^localrules:((?:(?:[ \t]*|\n[ \t]+)\w+[ \t]*,?)+)", text, re.M):
+            local |= {n.strip() for n in m.group(1).replace("\n", ",").split(",") if n.strip()}
         blocks = re.split(r"^(?=(?:rule|checkpoint) \w+:)", text, flags=re.M)
         for b in blocks:
             m = re.match(r"(?:rule|checkpoint) (\w+):", b)

@@ -1,0 +1,105 @@
+"""Results do not depend on the caller's thread settings (rules/common.smk pins one BLAS/OpenMP/Numba
+thread per job): the CI config (.test/config/config.yaml) run twice from one checkout, once with
+OMP_NUM_THREADS=OPENBLAS_NUM_THREADS=2 in the environment and once with 1, and every result file
+compared (tools/compare_runs.py: CSV and JSON as data without wall-time columns and keys, logs apart,
+everything else byte for byte). While each run goes, its job processes are sampled from /proc: the
+thread variables they see and their OS thread count (a BLAS with more than one thread starts its
+worker threads when numpy loads).
+
+    python benchmarks/bench_threads.py [--out benchmarks/results/bench_threads.json]
+
+Two runs of the CI config: about 2 x its time (.ci/run prints it). Not a test: the suite's budget has
+no room for two workflow runs.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+from tools.compare_runs import compare  # noqa: E402
+
+VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
+
+
+def _job_processes(workdir: Path) -> list[dict]:
+    """The Python processes working in `workdir` (jobs and their simulators), each with its thread
+    variables and OS thread count."""
+    seen = []
+    for proc in Path("/proc").iterdir():
+        if not proc.name.isdigit():
+            continue
+        try:
+            if Path(os.readlink(proc / "cwd")) != workdir:
+                continue
+            cmd = (proc / "cmdline").read_bytes().split(b"\0")
+            if b"snakemake" in b" ".join(cmd[:3]) and b"-m" in cmd[:3]:
+                continue  # Snakemake itself, not a job
+            env = dict(kv.split("=", 1) for kv in (proc / "environ").read_bytes().decode(errors="replace").split("\0")
+                       if "=" in kv)
+            threads = int(next(ln.split()[1] for ln in (proc / "status").read_text().splitlines()
+                               if ln.startswith("Threads:")))
+        except (OSError, StopIteration, ValueError):
+            continue  # gone meanwhile
+        seen.append({"cmd": " ".join(c.decode(errors="replace") for c in cmd if c)[:160],
+                     "env": {v: env.get(v) for v in VARIABLES}, "threads": threads})
+    return seen
+
+
+def run(workdir: Path, threads: str) -> dict:
+    env = {**os.environ, "OMP_NUM_THREADS": threads, "OPENBLAS_NUM_THREADS": threads,
+           "PYTHONPATH": str(REPO)}
+    cmd = [sys.executable, "-m", "snakemake", "--snakefile", str(REPO / "Snakefile"), "--directory", str(workdir),
+           "--cores", "2", "--workflow-profile", "none"]
+    samples, stop = [], threading.Event()
+
+    def sample():
+        while not stop.is_set():
+            samples.extend(_job_processes(workdir.resolve()))
+            time.sleep(0.5)
+
+    sampler = threading.Thread(target=sample, daemon=True)
+    t0 = time.time()
+    sampler.start()
+    out = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=3600)
+    stop.set()
+    sampler.join()
+    if out.returncode != 0:
+        raise SystemExit(f"the run with {threads} thread(s) failed:\n{out.stderr[-4000:]}")
+    envs = {json.dumps(s["env"], sort_keys=True) for s in samples}
+    return {"caller_threads": threads, "wall_s": round(time.time() - t0, 1), "job_processes_sampled": len(samples),
+            "max_os_threads_of_a_job": max((s["threads"] for s in samples), default=None),
+            "thread_variables_seen_by_jobs": [json.loads(e) for e in sorted(envs)]}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "bench_threads.json")
+    a = ap.parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        dirs = {}
+        for threads in ("2", "1"):
+            d = Path(tmp) / f"threads_{threads}"
+            shutil.copytree(REPO / ".test" / "config", d / "config")
+            dirs[threads] = (d, run(d, threads))
+        rep = compare(dirs["2"][0] / "results", dirs["1"][0] / "results")
+    result = {"runs": [r for _, r in dirs.values()], "counts": rep["counts"], "differ": rep["differ"],
+              "one_sided_keys": rep["one_sided_keys"], "only_with_2_threads": rep["only_before"],
+              "only_with_1_thread": rep["only_after"], "identical_but_timings": rep["identical_but_timings"]}
+    a.out.parent.mkdir(parents=True, exist_ok=True)
+    a.out.write_text(json.dumps(result, indent=1) + "\n")
+    print(json.dumps({"counts": rep["counts"], "runs": result["runs"]}, indent=1))
+    return 0 if not (rep["differ"] or rep["only_before"] or rep["only_after"]) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

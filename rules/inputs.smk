@@ -1,0 +1,249 @@
+# The input functions (and the names they share) of the rules in rules/*.smk, kept apart from the rules
+# as Snakemake's linter asks: one section per rule file, in the order the Snakefile includes them.
+# Included by rules/common.smk after the names they use.
+from snakemake.exceptions import WorkflowError as _SensitivityWorkflowError
+
+from calibration.closing import candidate_effects
+from calibration.experiment import diagnosis_settings
+from calibration.sensitivity import SensitivitySpec
+from calibration.workflow_io import record_name
+
+
+# rules/observations.smk
+def approximation_files(exp, name):
+    """`name` of every approximation run (none when observations.model_error.approximation_error is off)."""
+    return expand(
+        "results/{exp}/approximation/{run}/{record}/{name}",
+        exp=exp,
+        run=approximation_run_ids(EXPERIMENTS[exp]),
+        record=list(records(exp)),
+        name=name,
+    )
+
+
+def approximation_point(exp, run):
+    """The run's design point {parameter: value} (a param, so that a new box or seed re-runs the pairs)."""
+    names = spec(exp).names
+    return dict(
+        zip(
+            names,
+            map(
+                float,
+                approximation_design(exp, EXPERIMENTS[exp])[approximation_run(run)[1]],
+            ),
+        )
+    )
+
+
+def approximation_preset(exp, run):
+    return (
+        approximation_settings(EXPERIMENTS[exp])["preset"]
+        if run.startswith("fine")
+        else EXPERIMENTS[exp]["preset"]
+    )
+
+
+def observation_inputs(wc):
+    e = EXPERIMENTS[wc.exp]
+    out = {"approximation": approximation_files(wc.exp, "curve.csv")}
+    if e["kind"] == "twin":
+        return {**out, "truth": f"results/{wc.exp}/truth/synthetic/curve.csv"}
+    return {**out, "records": list(records(wc.exp).values())}
+
+
+# rules/ensemble.smk
+def member_inputs(wc):
+    rec = records(wc.exp)[wc.record]
+    return {
+        "params": f"results/{wc.exp}/iter_{wc.it}/params.csv",
+        "record": [rec] if rec else [],
+    }
+
+
+# rules/assimilate.smk
+def member_files(wc, name, folder="members"):
+    ids = (
+        member_ids(EXPERIMENTS[wc.exp]["ensemble_size"])
+        if folder == "members"
+        else replicate_ids(wc.exp)
+    )
+    return expand(
+        "results/{exp}/iter_{it}/{folder}/{member}/{record}/{name}",
+        exp=wc.exp,
+        it=wc.it,
+        folder=folder,
+        member=ids,
+        record=list(records(wc.exp)),
+        name=name,
+    )
+
+
+def earlier_iterations(wc, name):
+    """`name` of iterations 0..it-1: the runs an emulated_esmda analysis builds its emulator on."""
+    if EXPERIMENTS[wc.exp]["method"] != "emulated_esmda":
+        return []
+    return [f"results/{wc.exp}/iter_{k}/{name}" for k in range(int(wc.it))]
+
+
+# rules/forecast.smk
+def posterior_sample_files(exp):
+    """The emulator MCMC posterior's files, for `posterior: emulator_mcmc` (calibration.posterior)."""
+    if EXPERIMENTS[exp].get("posterior", "ensemble") != "emulator_mcmc":
+        return {}
+    return {
+        "samples": f"results/{exp}/posterior/samples.csv",
+        "sampler": f"results/{exp}/posterior/sampler.json",
+    }
+
+
+def refine_runs(exp):
+    """How many refinement runs the reported emulator posterior is measured at (emulated.refine_runs)."""
+    return int((EXPERIMENTS[exp].get("emulated") or {}).get("refine_runs", 0))
+
+
+def refine_files(exp):
+    """The refinement batch's design and curves (calibration.posterior.refine_design), where it has one."""
+    if not posterior_sample_files(exp) or refine_runs(exp) < 1:
+        return {}
+    return {
+        "refine_params": f"results/{exp}/refine/params.csv",
+        "refine_responses": f"results/{exp}/refine/responses.csv",
+    }
+
+
+# rules/report.smk
+def final_inputs(wc):
+    exp = wc.exp
+    recs = list(records(exp))
+    files = {
+        "params": iteration_files(exp, "params.csv"),
+        "responses": iteration_files(exp, "responses.csv"),
+        "analyses": iteration_files(exp, "analysis.json"),
+        "obs": f"results/{exp}/observations/obs.csv",
+        "obs_meta": f"results/{exp}/observations/obs.json",
+        "forecast_curves": expand(
+            "results/{exp}/forecast/{record}/curve.csv", exp=exp, record=recs
+        ),
+        "forecast_runs": expand(
+            "results/{exp}/forecast/{record}/run.json", exp=exp, record=recs
+        ),
+        "forecast_params": f"results/{exp}/forecast/params.json",
+    }
+    files.update(posterior_sample_files(exp))
+    if EXPERIMENTS[exp]["kind"] == "twin":
+        files["truth_run"] = f"results/{exp}/truth/synthetic/run.json"
+    return files
+
+
+def report_summary_inputs(wc):
+    files = {"summary": f"results/{wc.exp}/summary.json"}
+    if diagnosis_cfg(
+        wc.exp
+    ):  # the diagnosis's FDEM check: errors before and after, held-out records too
+        files["check"] = f"results/{wc.exp}/diagnosis/check.json"
+    return files
+
+
+# rules/diagnosis.smk
+def diagnosis_cfg(exp):
+    return diagnosis_settings(EXPERIMENTS[exp])
+
+
+def is_loro(exp):
+    d = diagnosis_cfg(exp)
+    return bool(d) and d.get("validation") == "loro"
+
+
+def loro_experiments():
+    return [e for e in RUN if is_loro(e)]
+
+
+def loro_fold_names(exp):
+    return [f for f, e in EXPERIMENTS.items() if e.get("loro_of") == exp]
+
+
+def calibrated_experiments():
+    """The experiments of the run that calibrate: a leave-one-record-out series runs its folds instead."""
+    return [e for e in RUN if not is_loro(e)] + [
+        f for e in loro_experiments() for f in loro_fold_names(e)
+    ]
+
+
+def diagnosed_experiments():
+    return [e for e in calibrated_experiments() if diagnosis_cfg(e)]
+
+
+def heldout_records(exp):
+    return {record_name(p): str(p) for p in diagnosis_cfg(exp)["heldout_records"]}
+
+
+def design_records(exp):
+    """Every record a design point is simulated for: the calibration records, then the held-out ones."""
+    return {**records(exp), **heldout_records(exp)}
+
+
+def design_files(exp, name):
+    return expand(
+        "results/{exp}/diagnosis/design/{point}/{record}/{name}",
+        exp=exp,
+        point=member_ids(diagnosis_cfg(exp)["design_points"]),
+        record=list(design_records(exp)),
+        name=name,
+    )
+
+
+def reported_analysis(exp):
+    """The analysis.json of the calibration's reported ensemble (its error terms: noise, S, D)."""
+    return iteration_files(exp, "analysis.json")
+
+
+def diagnosis_inputs(wc):
+    files = {
+        "design": f"results/{wc.exp}/diagnosis/design/params.csv",
+        "design_meta": f"results/{wc.exp}/diagnosis/design/design.json",
+        "curves": design_files(wc.exp, "curve.csv"),
+        "obs": f"results/{wc.exp}/observations/obs.csv",
+        "obs_meta": f"results/{wc.exp}/observations/obs.json",
+        "analyses": reported_analysis(wc.exp),
+        "summary": f"results/{wc.exp}/summary.json",
+    }
+    if heldout_records(wc.exp):
+        files["heldout"] = f"results/{wc.exp}/diagnosis/heldout/obs.csv"
+        files["heldout_meta"] = f"results/{wc.exp}/diagnosis/heldout/obs.json"
+    return files
+
+
+def check_rows_of(exp):
+    return read_json(checkpoints.diagnosis_select.get(exp=exp).output.rows)["rows"]
+
+
+def diagnosis_check_inputs(wc):
+    files = {k: v for k, v in diagnosis_inputs(wc).items() if k not in ("summary",)}
+    files["selection"] = f"results/{wc.exp}/diagnosis/selection.pkl"
+    files["rows"] = f"results/{wc.exp}/diagnosis/check_runs.json"
+    files["runs"] = [
+        f"results/{wc.exp}/diagnosis/check/{i}/curve.csv"
+        for i in range(len(check_rows_of(wc.exp)))
+    ]
+    return files
+
+
+# rules/sensitivity.smk
+def sensitivity_spec(exp):
+    if EXPERIMENTS[exp].get("sensitivity") is None:
+        raise _SensitivityWorkflowError(
+            f"experiment {exp!r} has no sensitivity block in the config "
+            f"(experiments.{exp}.sensitivity; see config/schema.yaml)"
+        )
+    return SensitivitySpec.from_config(exp, EXPERIMENTS[exp])
+
+
+def sensitivity_files(exp, name):
+    s = sensitivity_spec(exp)
+    return expand(
+        "results/{exp}/sensitivity/members/{sample}/{record}/{name}",
+        exp=exp,
+        sample=member_ids(s.n_simulations),
+        record=s.record,
+        name=name,
+    )
