@@ -65,11 +65,11 @@ def test_the_lab_checks_of_cama_004_and_a_wrong_gauge_distance(tmp_path):
     # balanced from half the peak to the peak (mean R 0.026), waves aligned within a sample, 0.43 % noise
     assert c["force_balance"]["ok"] and c["force_balance"]["mean_R_half_peak_to_peak"] == pytest.approx(0.026, abs=0.002)
     assert c["pulse_alignment"]["ok"] and abs(c["pulse_alignment"]["best_shift_back_s"]) <= 1.0e-6
-    # 42.25 mm of marble at sqrt(rho/E) = sqrt(2711 / 33.9e9): 11.9 us
-    assert c["pulse_alignment"]["transit_s"] == pytest.approx(0.04225 * math.sqrt(2711.08 / 33.9e9), rel=1e-4)
+    # 42.25 mm of marble at sqrt(rho/E) = sqrt(2711 / 44.8e9) (the rock's modulus, CaMa): 10.4 us
+    assert c["pulse_alignment"]["transit_s"] == pytest.approx(0.04225 * math.sqrt(2711.08 / 44.8e9), rel=1e-4)
     assert c["noise"]["ok"] and c["noise"]["noise_over_peak"] == pytest.approx(0.0043, abs=0.0003)
     # the transmission gauge written 10 cm too far (too near): F2 is read 0.1 m / c0 = 20.1 us too late
-    # (early), and it shows as a shift of F2 by -20.1 us (+20.1 us) beyond the 11.9 us limit
+    # (early), and it shows as a shift of F2 by -20.1 us (+20.1 us) beyond the 10.4 us limit
     c0 = math.sqrt(110e9 / 4430.0)
     for dx in (0.10, -0.10):
         doc = yaml.safe_load((SHEETS / "CaMa_SHPB_004.yaml").read_text())
