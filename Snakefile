@@ -68,6 +68,10 @@ if workflow.is_main_process:
 
     heal_results("results")
 
+from calibration.heal import mark_job_parent
+
+mark_job_parent()  # every Snakemake process reading this (also a cluster job step): its jobs die with it
+
 report: "report/workflow.rst"
 
 

@@ -30,13 +30,15 @@ from pathlib import Path
 
 from shpb.atomic import atomic_write_text
 
-__all__ = ["MANIFEST", "die_with_parent", "child_dies_with_parent", "file_sha256", "write_manifest",
+__all__ = ["MANIFEST", "PARENT_ENV", "mark_job_parent", "die_with_parent", "child_dies_with_parent", "file_sha256", "write_manifest",
            "check_manifest", "is_dry_invocation", "heal_results"]
 
 #: The checksum file of a member folder.
 MANIFEST = "manifest.json"
 #: Siblings removed with a manifest that cannot be read (the files run_member writes).
 MEMBER_FILES = ("curve.csv", "run.json")
+#: The environment variable holding the pid of the Snakemake process that starts this process's jobs.
+PARENT_ENV = "CALIBRATION_SNAKEMAKE_PID"
 _PR_SET_PDEATHSIG = 1
 _TEMP_FILE = re.compile(r"^\..+\.tmp$")
 _TEMP_DIR_PREFIX = ".sim-"
@@ -59,16 +61,33 @@ def _set_death_signal(sig: int) -> bool:
     return bool(prctl) and prctl(_PR_SET_PDEATHSIG, int(sig), 0, 0, 0) == 0
 
 
+def mark_job_parent() -> None:
+    """Tell the jobs this process starts its pid (:data:`PARENT_ENV`): called by every Snakemake process
+    reading the Snakefile (the main one, a cluster job step's), so that a job can tell that its Snakemake
+    died before the job asked to die with it."""
+    os.environ[PARENT_ENV] = str(os.getpid())
+
+
+def _running(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
+    except (OSError, IndexError):
+        return False
+
+
 def die_with_parent() -> bool:
     """SIGKILL this process when its parent dies (Linux; elsewhere a no-op returning False).
 
     Called on ``import calibration`` in a Snakemake script job (every ``scripts/*.py``): its parent is
     the Snakemake process (on a cluster, the job step's Snakemake), which starts each local job's Python
-    directly. A parent that died before the request cannot signal any more: then this exits at once."""
+    directly. A parent that died before the request cannot signal any more (a job still importing when
+    its Snakemake was killed): the process then exits at once, told by :data:`PARENT_ENV`
+    (:func:`mark_job_parent`) or by a parent that changed during the call."""
     parent = os.getppid()
     if not _set_death_signal(signal.SIGKILL):
         return False
-    if parent != 1 and os.getppid() != parent:
+    watched = os.environ.get(PARENT_ENV, "")
+    if (parent != 1 and os.getppid() != parent) or (watched.isdigit() and not _running(int(watched))):
         os._exit(128 + signal.SIGKILL)
     return True
 

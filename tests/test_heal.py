@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from calibration.heal import MANIFEST, check_manifest, heal_results, is_dry_invocation, write_manifest
+from calibration.heal import MANIFEST, PARENT_ENV, check_manifest, heal_results, is_dry_invocation, write_manifest
 from test_workflow import snakemake, twin_config, write_config, write_stand_in
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="prctl is Linux's")
@@ -218,3 +218,18 @@ def test_a_killed_job_leaves_no_process_and_writes_nothing_after_the_kill(tmp_pa
     assert not [p for p in files if p.parent == member]  # no output moved into place
     # a job killed outright leaves its (empty) .sim-* folder for the next run's start to remove
     assert [p.name[:5] for p in member.iterdir()] == ([] if killed == "snakemake" and not die_with_parent else [".sim-"])
+
+
+@pytest.mark.parametrize("script_job, snakemake_alive, returncode", [
+    (True, False, 137),  # its Snakemake died while the job was still starting: it ends at once
+    (True, True, 0), (False, False, 0),  # a live Snakemake; not a Snakemake script job (never armed)
+])
+def test_a_job_whose_snakemake_died_before_it_armed_the_death_signal_exits(script_job, snakemake_alive, returncode):
+    gone = subprocess.Popen(["true"])
+    gone.wait()  # reaped: its pid names no process
+    code = ('snakemake = type("Snakemake", (), {"__module__": "snakemake.script"})()\n' if script_job else "") + \
+        "import calibration\nprint('still here')"
+    env = {**os.environ, PARENT_ENV: str(os.getpid() if snakemake_alive else gone.pid)}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
+    assert out.returncode == returncode, out.stderr[-2000:]
+    assert (out.stdout == "still here\n") == (returncode == 0)
