@@ -12,10 +12,11 @@ rules call these through the adapters in ``scripts/``.
 """
 import sys as _sys
 
-# A Snakemake job script (Snakemake's preamble puts its `snakemake` object in __main__ before the
-# script's imports) dies with the Snakemake process that started it: a SIGKILLed Snakemake then leaves
-# no job running on to write its outputs after the kill (calibration.heal, docs/workflow.md).
-if type(getattr(_sys.modules.get("__main__"), "snakemake", None)).__module__ == "snakemake.script":
+# A Snakemake job script (Snakemake's preamble puts its `snakemake` object, snakemake.script.Snakemake,
+# in __main__ before the script's imports) dies with the Snakemake process that started it: a SIGKILLed
+# Snakemake then leaves no job running on to write its outputs after the kill (calibration.heal).
+_job = type(getattr(_sys.modules.get("__main__"), "snakemake", None))
+if _job.__name__ == "Snakemake" and _job.__module__.startswith("snakemake."):
     from .heal import die_with_parent as _die_with_parent
 
     _die_with_parent()

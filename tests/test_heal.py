@@ -161,7 +161,8 @@ DUMMY = textwrap.dedent('''
 JOB = textwrap.dedent('''
     import sys
     if sys.argv[2] == "1":  # what Snakemake's preamble leaves in a script job's __main__
-        snakemake = type("Snakemake", (), {"__module__": "snakemake.script"})()
+        from snakemake.script import Snakemake
+        snakemake = Snakemake.__new__(Snakemake)
     import calibration  # arms the death signal in a Snakemake script job, nowhere else
     from calibration.runner import run_member
     dummy, pidfile, sleep_s, member = sys.argv[3:7]
@@ -227,7 +228,7 @@ def test_a_killed_job_leaves_no_process_and_writes_nothing_after_the_kill(tmp_pa
 def test_a_job_whose_snakemake_died_before_it_armed_the_death_signal_exits(script_job, snakemake_alive, returncode):
     gone = subprocess.Popen(["true"])
     gone.wait()  # reaped: its pid names no process
-    code = ('snakemake = type("Snakemake", (), {"__module__": "snakemake.script"})()\n' if script_job else "") + \
+    code = ("from snakemake.script import Snakemake\nsnakemake = Snakemake.__new__(Snakemake)\n" if script_job else "") + \
         "import calibration\nprint('still here')"
     env = {**os.environ, PARENT_ENV: str(os.getpid() if snakemake_alive else gone.pid)}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
