@@ -24,8 +24,7 @@ def _psi_branch(u, k, fmax):
 
 
 @njit(cache=True)
-def joint_forces(x, v, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax, broken, f,
-                 newly_broken, newly_damaged, jrate, jdif, slip_p, kappa, zeta_j, energy=True):
+def joint_forces(x, v, joints, state, f, energy=True):
     """Cohesive 4-node joints (Munjiza's combined single and smeared crack, paper Appendix A).
 
     Nodes (a1, a2, b1, b2): a1->a2 is the edge of triangle A in its counter-clockwise order, b1/b2 the
@@ -79,9 +78,17 @@ def joint_forces(x, v, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax
     energy=False skips the stored energy of joints whose damage does not grow (returned as 0); the
     forces and the dissipation are the same.
 
+    x, v: nodal coordinates and velocities; joints: fdem.state.Joints (the law's constants); state:
+    fdem.state.JointState (the history this call updates); f: the force buffer it adds into.
+
     Returns (stored joint energy [J], dissipated energy this call [J], number newly broken,
     number newly damaged).
     """
+    jn, jarea, kn, kt, ft, fs = joints.nodes, joints.area, joints.kn, joints.kt, joints.ft, joints.fs
+    dn, dt_, tanphi, jrate = joints.delta_n, joints.delta_t, joints.tanphi, joints.rate
+    a, b, c = joints.a, joints.b, joints.c
+    Dmax, broken, jdif, slip_p, kappa = state.Dmax, state.broken, state.dif, state.slip_p, state.kappa
+    zeta_j, newly_broken, newly_damaged = state.zeta, state.newly_broken, state.newly_damaged
     Psi = 0.0
     dissipated = 0.0
     nnew = 0
@@ -197,10 +204,8 @@ def joint_forces(x, v, jn, jarea, kn, kt, ft, fs, dn, dt_, tanphi, a, b, c, Dmax
 
 
 @njit(cache=True)
-def contact_forces(x, v, pair_node, pair_edge, n_pairs, node_normal, edges, edge_tri,
-                   edge_joint, broken, Dmax, edge_dlim, edge_thick, node_thick, node_body, node_tri, tri,
-                   node_vertex, body_fracturable, p_c, mu_tab, dt, f, body_force, contact_edge,
-                   contact_d, stick_edge, stick_u):
+def contact_forces(x, v, pair_node, pair_edge, node_normal, nodes, tri, surf, joint_state, dt, f, body_force,
+                   cstate):
     """Node-to-edge penalty contact with optional Coulomb friction.
 
     Edges are oriented counter-clockwise around their triangle, so the outward normal of edge p->q is
@@ -246,9 +251,20 @@ def contact_forces(x, v, pair_node, pair_edge, n_pairs, node_normal, edges, edge
     (measured: a node slipping round a corner onto an edge 50 um deep gave 5 J of energy to a
     fragmenting disc when only the entry was guarded).
 
+    Arguments: the candidate pairs (pair_node, pair_edge) and the surface normals of the last
+    neighbour search; nodes (fdem.state.Nodes: body, vertex, triangle, thickness of each node; x, v
+    are passed on their own), the triangles' nodes tri, surf (fdem.state.Surfaces), joint_state
+    (fdem.state.JointState: which joints are damaged or broken), the time step dt, the force buffer
+    f, and cstate (fdem.state.ContactState: the contact carried from step to step).
     Accumulates per-body contact force into body_force (n_bodies, 2).
     Returns (contact energy [J], friction energy dissipated this call [J], maximum penetration [m]).
     """
+    n_pairs = pair_node.shape[0]
+    node_body, node_vertex, node_tri, node_thick = nodes.body, nodes.vertex, nodes.tri, nodes.thick
+    edges, edge_tri, edge_joint, edge_dlim = surf.edges, surf.tri, surf.joint, surf.dlim
+    edge_thick, body_fracturable, p_c, mu_tab = surf.thick, surf.body_fracturable, surf.penalty, surf.friction
+    broken, Dmax = joint_state.broken, joint_state.Dmax
+    contact_edge, contact_d, stick_edge, stick_u = cstate.edge, cstate.d, cstate.stick_edge, cstate.stick_u
     Uc = 0.0
     P_fric = 0.0
     max_pen = 0.0

@@ -126,7 +126,11 @@ def _pair_table(body_names, default, pairs, what, positive) -> np.ndarray:
 
 @dataclass
 class Model:
-    """Structure-of-arrays state of an assembled FDEM model (SI units)."""
+    """Structure-of-arrays state of an assembled FDEM model (SI units).
+
+    Per joint, delta_n and delta_t are the critical opening and sliding [m] at which a joint has
+    softened completely (paper eqs. A8-A9); the time step is not part of the model
+    (stable_time_step, fdem.solver.run)."""
 
     x0: np.ndarray
     mass: np.ndarray
@@ -151,8 +155,8 @@ class Model:
     kt: np.ndarray
     ft: np.ndarray
     fs: np.ndarray
-    dn: np.ndarray
-    dt: np.ndarray
+    delta_n: np.ndarray
+    delta_t: np.ndarray
     tanphi: np.ndarray
     jedges: np.ndarray
     j_body: np.ndarray
@@ -420,7 +424,7 @@ def build_model(bodies: list[Body], joints: dict[str, JointParams] | None = None
         x0=x0, mass=mass, node_body=node_body, node_vertex=node_vertex, node_tri=node_tri,
         node_thick=node_thick, tri=tri, dminv=np.ascontiguousarray(dminv), area0=area, vol0=vol0,
         lam=lam, mu=mu, eta=eta, tri_body=tri_body, tri_h=tri_h, jn=jn, jarea=jarea, jrate=jrate, jlen0=L0, kn=kn, kt=kt,
-        ft=ft, fs=fs, dn=dn, dt=dtm, tanphi=tanphi, jedges=jedges, j_body=j_body,
+        ft=ft, fs=fs, delta_n=dn, delta_t=dtm, tanphi=tanphi, jedges=jedges, j_body=j_body,
         softening=softening, edges=edges_a, edge_tri=edge_tri_a, edge_dlim=edge_dlim,
         edge_thick=edge_thick, edge_active0=edge_active0, tri_edges=tri_edges, edge_joint=edge_joint, body_names=names,
         body_fracturable=np.array([b.fracturable for b in bodies], np.bool_),

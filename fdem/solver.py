@@ -8,6 +8,8 @@ import numpy as np
 
 from .integrator import ENERGY_NAMES, STATUS_ENERGY, STATUS_NONFINITE, STATUS_OK, STATUS_RUNAWAY, run_loop
 from .model import DEFAULT_SAFETY, Model, stable_time_step
+from .state import (Loads, Outputs, Probes, Settings, joint_state, joints_of, nodes_of, surfaces_of,
+                    triangles_of)
 
 
 @dataclass
@@ -205,8 +207,6 @@ def run(model: Model, t_end: float, *, dt: float | None = None, safety: float = 
     out_nodes = np.zeros((n_samples, max(len(node_sets), 1), 4))
     out_broken = np.zeros(n_samples, np.int64)
     out_pen = np.zeros(n_samples)
-    Dmax = np.zeros((model.n_joints, 2))
-    broken = np.zeros(model.n_joints, np.bool_)
     edge_active = model.edge_active0.copy()
     c = model.contact
     use_contact = c is not None
@@ -214,8 +214,6 @@ def run(model: Model, t_end: float, *, dt: float | None = None, safety: float = 
     if use_contact:
         buffer = c.buffer if c.buffer is not None else 0.3 * float(
             np.min(model.edge_dlim[model.edge_active0]) * 2.0)
-    sa, sb, sc = model.softening
-    inv_mass = 1.0 / model.mass
     snap_t = np.sort(np.asarray(snapshot_times, float).reshape(-1))
     if snap_t.size and not (np.all(np.isfinite(snap_t)) and snap_t[0] >= 0.0):
         raise ValueError(f"snapshot times must be finite and >= 0 s, got {snapshot_times!r}")
@@ -234,24 +232,20 @@ def run(model: Model, t_end: float, *, dt: float | None = None, safety: float = 
     j_onset = -np.ones(model.n_joints)
     j_break = -np.ones(model.n_joints)
 
+    nodes = nodes_of(model, x, v)
+    js = joint_state(model.n_joints)
+    surf = surfaces_of(model, edge_active, c.table(model.body_names) if use_contact else np.zeros((nb, nb)),
+                       c.friction_table(model.body_names) if use_contact else np.zeros((nb, nb)))
+    loads = Loads(cat(vel_nodes, np.int64), cat(vel_dir, np.int64), cat(vel_hist, np.int64),
+                  cat(tr_nodes, np.int64), cat(tr_dir, np.int64), cat(tr_area, float), cat(tr_imp, float),
+                  cat(tr_hist, np.int64), hist_ptr, hist_t, hist_v)
+    out = Outputs(out_t, out_energy, out_bforce, out_stress, out_nodes, out_broken, out_pen, j_onset, j_break,
+                  snap_steps, snap_x, snap_D, track, peak_x, peak_D, peak_info)
+    settings = Settings(float(dt), n_steps, sample_every, float(model.alpha_mass), float(energy_guard),
+                        float(buffer), use_contact, nb)
     t0 = time.perf_counter()
-    status, ns, steps, E, rebuilds = run_loop(
-        x, v, model.mass, inv_mass, model.tri, model.dminv, model.vol0, model.lam, model.mu,
-        model.eta, model.jn, model.jarea, model.kn, model.kt, model.ft, model.fs, model.dn,
-        model.dt, model.tanphi, model.jedges, float(sa), float(sb), float(sc), Dmax, broken, model.jrate,
-        model.edges, model.edge_tri, edge_active, model.edge_dlim, model.edge_thick, model.tri_edges, model.edge_joint,
-        model.node_body, model.node_vertex, model.node_tri, model.node_thick,
-        model.body_fracturable, nb,
-        c.table(model.body_names) if use_contact else np.zeros((nb, nb)),
-        c.friction_table(model.body_names) if use_contact else np.zeros((nb, nb)), float(buffer), use_contact,
-        cat(vel_nodes, np.int64), cat(vel_dir, np.int64), cat(vel_hist, np.int64),
-        cat(tr_nodes, np.int64), cat(tr_dir, np.int64), cat(tr_area, float), cat(tr_imp, float),
-        cat(tr_hist, np.int64), hist_ptr, hist_t, hist_v, float(model.alpha_mass),
-        eg_ptr, eg_el, ng_ptr, ng_nodes, model.x0,
-        float(dt), n_steps, sample_every,
-        out_t, out_energy, out_bforce, out_stress, out_nodes, out_broken, out_pen,
-        float(energy_guard), j_onset, j_break, snap_steps, snap_x, snap_D, track, peak_x, peak_D,
-        peak_info)
+    status, ns, steps, E, rebuilds = run_loop(nodes, triangles_of(model), joints_of(model), js, surf, loads,
+                                              Probes(eg_ptr, eg_el, ng_ptr, ng_nodes), out, settings)
     wall = time.perf_counter() - t0
     msg = {STATUS_OK: "completed",
            STATUS_NONFINITE: f"non-finite state at t = {out_t[max(ns - 1, 0)]:.3e} s (numerical instability)",
@@ -265,7 +259,7 @@ def run(model: Model, t_end: float, *, dt: float | None = None, safety: float = 
         nodes={k: out_nodes[:ns, i] for i, k in enumerate(node_sets)}, broken=out_broken[:ns],
         penetration=out_pen[:ns], status="ok" if status == STATUS_OK else "failed", message=msg,
         dt=float(dt), steps=int(steps), wall_s=wall, updates_per_s=updates / wall if wall > 0 else 0.0,
-        contact_rebuilds=int(rebuilds), x=x, v=v, Dmax=Dmax, joint_broken=broken,
+        contact_rebuilds=int(rebuilds), x=x, v=v, Dmax=js.Dmax, joint_broken=js.broken,
         body_names=list(model.body_names), joint_onset_t=j_onset, joint_break_t=j_break,
         snapshots=[Snapshot(float(min(k, steps) * dt), snap_x[i], snap_D[i])
                    for i, k in enumerate(snap_steps) if k <= steps],

@@ -21,19 +21,17 @@ import numpy as np
 def critical_step(model, iterations: int = 400, tol: float = 1e-6) -> float:
     """2 / sqrt(lambda_max(M^-1 K)) by power iteration, K u from forces at x0 + eps u."""
     from fdem.kernels import joint_forces
+    from fdem.state import joint_state, joints_of
     from fdem.triangles import triangle_forces_scalar
     m = model
     n, nj = m.n_nodes, m.n_joints
-    sa, sb, sc = m.softening
 
     def force(x):
         f = np.zeros((n, 2))
         v = np.zeros((n, 2))
         triangle_forces_scalar(x, v, m.tri, m.dminv, m.vol0, m.lam, m.mu, np.zeros_like(m.eta), f)
         # strengths raised far above any stress: the elastic branch, linear in the gap
-        joint_forces(x, v, m.jn, m.jarea, m.kn, m.kt, m.ft * 1e9, m.fs * 1e9, m.dn, m.dt, m.tanphi, sa, sb, sc,
-                     np.zeros((nj, 2)), np.zeros(nj, np.bool_), f, np.empty(nj, np.int64), np.empty(nj, np.int64),
-                     m.jrate, np.ones((nj, 2)), np.zeros((nj, 2)), np.zeros((nj, 2)), np.ones(nj))
+        joint_forces(x, v, joints_of(m, ft=m.ft * 1e9, fs=m.fs * 1e9), joint_state(nj), f)
         return f
 
     x0 = m.x0.copy()

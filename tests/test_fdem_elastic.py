@@ -5,6 +5,7 @@ import pytest
 from fdem import Body, JointParams, Material, VelocityBC, build_model, run, stable_time_step
 from fdem import meshing
 from fdem.kernels import joint_forces
+from fdem.state import joint_state, joints_of
 from fdem.triangles import triangle_cauchy, triangle_forces
 
 GRANITE = Material(35e9, 0.16, 2550.0)
@@ -25,11 +26,8 @@ def _forces(model, x):
                            model.eta, f)
     Dmax = np.zeros((model.n_joints, 2))
     broken = np.zeros(model.n_joints, np.bool_)
-    Psi, dis, _, _ = joint_forces(x, np.zeros_like(x), model.jn, model.jarea, model.kn, model.kt, model.ft, model.fs,
-                               model.dn, model.dt, model.tanphi, *model.softening, Dmax, broken,
-                               f, np.zeros(model.n_joints, np.int64), np.zeros(model.n_joints, np.int64),
-                                  model.jrate, np.ones((model.n_joints, 2)), np.zeros((model.n_joints, 2)),
-                                  np.zeros((model.n_joints, 2)), np.ones(model.n_joints))
+    Psi, dis, _, _ = joint_forces(x, np.zeros_like(x), joints_of(model),
+                                  joint_state(model.n_joints, Dmax=Dmax, broken=broken), f)
     return f, U, Psi
 
 

@@ -4,6 +4,7 @@ import pytest
 
 from fdem import Body, JointParams, Material, VelocityBC, build_model, run
 from fdem.kernels import joint_forces
+from fdem.state import joint_state, joints_of
 from fdem.softening import A0, z, z_numpy
 
 GRANITE = Material(35e9, 0.16, 2550.0)
@@ -95,10 +96,8 @@ class _Joint:
         n = np.array([t[1], -t[0]])
         x[self.nB] += o * n + s * t
         f = np.zeros_like(x)
-        self.stored, diss, _, _ = joint_forces(x, np.zeros_like(x), self.m.jn, self.m.jarea, self.m.kn, self.m.kt, self.m.ft, self.m.fs,
-                     self.m.dn, self.m.dt, self.m.tanphi, *self.m.softening, self.Dmax,
-                     self.broken, f, np.zeros(1, np.int64), np.zeros(1, np.int64),
-                     self.m.jrate, np.ones((1, 2)), self.slip_p, self.kappa, self.zeta)
+        self.stored, diss, _, _ = joint_forces(x, np.zeros_like(x), joints_of(self.m), joint_state(
+            1, Dmax=self.Dmax, broken=self.broken, slip_p=self.slip_p, kappa=self.kappa, zeta=self.zeta), f)
         self.dissipated += diss
         F = -f[self.nB].sum(axis=0) / self.m.jarea[0]
         return float(F @ n), float(F @ t)
@@ -214,9 +213,8 @@ def test_rate_dependent_strength_raises_the_peak_by_the_DIF_and_keeps_the_fractu
         x[j.nB] += o * n
         f = np.zeros_like(x)
         jdif = j.jdif
-        joint_forces(x, vel, m.jn, m.jarea, m.kn, m.kt, m.ft, m.fs, m.dn, m.dt, m.tanphi,
-                     *m.softening, j.Dmax, j.broken, f, np.zeros(1, np.int64), np.zeros(1, np.int64),
-                     m.jrate, jdif, j.slip_p, j.kappa, j.zeta)
+        joint_forces(x, vel, joints_of(m), joint_state(1, Dmax=j.Dmax, broken=j.broken, dif=jdif,
+                                                       slip_p=j.slip_p, kappa=j.kappa, zeta=j.zeta), f)
         return float((-f[j.nB].sum(axis=0) / m.jarea[0]) @ n)
 
     j.jdif = np.ones((1, 2))

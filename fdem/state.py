@@ -1,0 +1,95 @@
+"""The engine's state and inputs as named structures the compiled step loop takes apart by name.
+
+Named tuples of arrays (and a few scalars) compile in Numba's nopython mode as plain structs, so
+grouping the step loop's arrays costs nothing at run time; a field read in a loop is the array it
+names. The split follows who owns what: constants of the mesh and the laws (Nodes' masses,
+Triangles, Joints, Surfaces, Loads, Probes, Settings) and what the step changes (the positions and
+velocities in Nodes, JointState, ContactState, Outputs). Everything is allocated here, in Python,
+so the compiled loop never decides a shape.
+"""
+from __future__ import annotations
+
+from collections import namedtuple
+
+import numpy as np
+
+# x, v [m, m/s] change every step; the rest is the mesh: mass [kg], reference coordinates x0 [m],
+# each node's body, vertex of the unsplit mesh, triangle (fracturable bodies) and thickness [m].
+Nodes = namedtuple("Nodes", "x v mass inv_mass x0 body vertex tri thick")
+# Constant-strain triangles: node indices, inverse reference edge matrix, volume [m^3], Lame
+# constants [Pa], viscosity [Pa s], and each triangle's three edge indices (-1: none).
+Triangles = namedtuple("Triangles", "tri dminv vol0 lam mu eta edges")
+# Cohesive joints (fdem.kernels.joint_forces): 4 nodes, area [m^2], penalties [Pa/m], strengths
+# [Pa], critical opening and sliding delta_n, delta_t [m] (paper eqs. A8-A9), tan(friction angle),
+# the two edges, rate columns (h, k, rate0), softening shape a, b, c (eq. A3).
+Joints = namedtuple("Joints", "nodes area kn kt ft fs delta_n delta_t tanphi edges rate a b c")
+# History of each joint (two columns: one per Gauss point, both hold the joint's value) and the
+# buffers joint_forces lists newly broken / newly damaged joints in.
+JointState = namedtuple("JointState", "Dmax broken dif slip_p kappa zeta newly_broken newly_damaged")
+# Contact surfaces: edges (node pairs, counter-clockwise), owning triangle, penetration limit [m],
+# thickness [m], joint (-1: body boundary), active flag (changes as joints damage), per-body
+# fracturable flag, per-body-pair penalty [Pa] and Coulomb coefficient.
+Surfaces = namedtuple("Surfaces", "edges tri dlim thick joint active body_fracturable penalty friction")
+# Per node: the edge it pushes on and how deep (-1, 0 when free), its friction spring's edge and
+# (extension [m], stiffness [N/m]).
+ContactState = namedtuple("ContactState", "edge d stick_edge stick_u")
+# Prescribed velocities and tractions: per loaded node its node, direction and history; tractions
+# also area [m^2] and impedance [Pa s/m]; the histories as CSR (hist_ptr) of times and values.
+Loads = namedtuple("Loads", "vel_nodes vel_dir vel_hist tr_nodes tr_dir tr_area tr_imp tr_hist "
+                            "hist_ptr hist_t hist_v")
+# Stress probes (element sets, CSR) and node probes (node sets, CSR).
+Probes = namedtuple("Probes", "eg_ptr eg_el ng_ptr ng_nodes")
+# What the loop records: samples, the fracture record, snapshots and the tracked peak
+# (fdem.integrator.run_loop).
+Outputs = namedtuple("Outputs", "t energy bforce stress nodes broken pen j_onset j_break "
+                                "snap_steps snap_x snap_D track peak_x peak_D peak_info")
+# dt [s] is the time step; buffer [m] the contact search buffer; alpha_mass [1/s] mass damping.
+Settings = namedtuple("Settings", "dt n_steps sample_every alpha_mass energy_guard buffer use_contact "
+                                  "n_bodies")
+
+
+def nodes_of(model, x, v) -> Nodes:
+    return Nodes(x, v, model.mass, 1.0 / model.mass, model.x0, model.node_body, model.node_vertex,
+                 model.node_tri, model.node_thick)
+
+
+def triangles_of(model) -> Triangles:
+    return Triangles(model.tri, model.dminv, model.vol0, model.lam, model.mu, model.eta, model.tri_edges)
+
+
+def joints_of(model, **override) -> Joints:
+    """The model's joints; override replaces fields (e.g. ft=model.ft * 1e9 for the elastic branch)."""
+    a, b, c = model.softening
+    j = Joints(model.jn, model.jarea, model.kn, model.kt, model.ft, model.fs, model.delta_n,
+               model.delta_t, model.tanphi, model.jedges, model.jrate, float(a), float(b), float(c))
+    return j._replace(**override)
+
+
+def joint_state(n_joints: int, **given) -> JointState:
+    """Undamaged history for n_joints joints; given replaces fields with the caller's arrays (kept
+    by reference, so the caller sees what joint_forces writes)."""
+    n = int(n_joints)
+    s = JointState(Dmax=np.zeros((n, 2)), broken=np.zeros(n, np.bool_), dif=np.ones((n, 2)),
+                   slip_p=np.zeros((n, 2)), kappa=np.zeros((n, 2)), zeta=np.ones(n),
+                   newly_broken=np.empty(max(n, 1), np.int64), newly_damaged=np.empty(max(n, 1), np.int64))
+    unknown = set(given) - set(JointState._fields)
+    if unknown:
+        raise KeyError(f"joint_state: unknown fields {sorted(unknown)}; fields are {JointState._fields}")
+    for name, arr in given.items():
+        ref = getattr(s, name)
+        if not (isinstance(arr, np.ndarray) and arr.shape[0] == ref.shape[0] and arr.ndim == ref.ndim
+                and arr.dtype == ref.dtype):
+            raise ValueError(f"joint_state: {name} must be a {ref.dtype} array of shape {ref.shape}, got "
+                             f"{getattr(arr, 'dtype', type(arr).__name__)} {getattr(arr, 'shape', '')}")
+    return s._replace(**given)
+
+
+def surfaces_of(model, edge_active, penalty, friction) -> Surfaces:
+    return Surfaces(model.edges, model.edge_tri, model.edge_dlim, model.edge_thick, model.edge_joint,
+                    edge_active, model.body_fracturable, penalty, friction)
+
+
+def contact_state(n_nodes: int) -> ContactState:
+    """Every node free of contact."""
+    return ContactState(-np.ones(n_nodes, np.int64), np.zeros(n_nodes), -np.ones(n_nodes, np.int64),
+                        np.zeros((n_nodes, 2)))
