@@ -13,8 +13,6 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 __all__ = ["Range", "SHEET_RANGES", "SAMPLING_INTERVAL", "STATED_TOLERANCE", "nonfinite_problems",
            "range_problems", "value_problem", "raw_problems", "stated_problems", "freiburg_problems"]
 
@@ -152,6 +150,8 @@ def range_problems(doc: dict, where: str) -> list[str]:
 def raw_problems(raw, where: str, time_field: str) -> list[str]:
     """A read record's channels are finite on every sample and its sampling interval is plausible.
     ``time_field``: the field that sets the time axis (a csv sheet's ``signals.time.unit``)."""
+    import numpy as np  # here: the sheet checks are imported by every member job, which loads no numpy
+
     out = []
     chans = [("time", "time axis", raw.time[None, :])]
     chans += [(n, "incident bar", raw.incident[k:k + 1]) for k, n in enumerate(raw.incident_channels)]
