@@ -25,7 +25,8 @@ try:
     _config_sources = config_sources(
         (["config/config.yaml"] if Path("config/config.yaml").exists() else [])
         + [str(p) for p in workflow.overwrite_configfiles],
-        overrides=getattr(workflow.config_settings, "config", None))
+        overrides=getattr(workflow.config_settings, "config", None),
+    )
 except ConfigError as exc:
     raise WorkflowError(str(exc)) from None
 
@@ -34,8 +35,12 @@ configfile: "config/config.yaml"
 
 
 try:
-    _validated = validate_config(config, Path(workflow.basedir) / "config" / "schema.yaml", base_dir=".",
-                                 sources=_config_sources)
+    _validated = validate_config(
+        config,
+        Path(workflow.basedir) / "config" / "schema.yaml",
+        base_dir=".",
+        sources=_config_sources,
+    )
 except ConfigError as exc:
     raise WorkflowError(str(exc)) from None
 config.clear()
@@ -44,7 +49,10 @@ config.update(_validated)
 from calibration.closing import loro_folds
 
 for _name, _exp in list(config["experiments"].items()):
-    if _exp.get("kind") == "measured" and (_exp.get("diagnosis") or {}).get("validation") == "loro":
+    if (
+        _exp.get("kind") == "measured"
+        and (_exp.get("diagnosis") or {}).get("validation") == "loro"
+    ):
         config["experiments"].update(loro_folds(_name, _exp))
 
 if workflow.is_main_process:
@@ -56,10 +64,17 @@ if workflow.is_main_process:
         for _path in _paths:
             try:
                 # an invalid test (shpb.lab.validity) is refused as a calibration record unless allow_invalid
-                check_record(_path, _exp["observations"]["t_end"] if _exp["kind"] == "measured" else None,
-                             refuse_invalid=_exp["kind"] == "measured"
-                             and _path in (_exp["observations"].get("records") or [])
-                             and not _exp["observations"].get("allow_invalid", False))
+                check_record(
+                    _path,
+                    (
+                        _exp["observations"]["t_end"]
+                        if _exp["kind"] == "measured"
+                        else None
+                    ),
+                    refuse_invalid=_exp["kind"] == "measured"
+                    and _path in (_exp["observations"].get("records") or [])
+                    and not _exp["observations"].get("allow_invalid", False),
+                )
             except ObservationFileError as exc:
                 raise WorkflowError(f"experiment {_name!r}: {exc}") from None
     # stale temporaries of killed jobs are removed, member files that no longer match their manifest.json
@@ -71,6 +86,7 @@ if workflow.is_main_process:
 from calibration.heal import mark_job_parent
 
 mark_job_parent()  # every Snakemake process reading this (also a cluster job step): its jobs die with it
+
 
 report: "report/workflow.rst"
 
@@ -86,15 +102,17 @@ include: "rules/sensitivity.smk"
 
 
 rule all:
+    default_target: True
     input:
         expand("results/{exp}/summary.json", exp=calibrated_experiments()),
         expand("results/{exp}/summary.html", exp=calibrated_experiments()),
-        expand("results/{exp}/plots/{plot}.png", exp=calibrated_experiments(), plot=PLOTS),
+        expand(
+            "results/{exp}/plots/{plot}.png", exp=calibrated_experiments(), plot=PLOTS
+        ),
         expand("results/{exp}/diagnosis/report.json", exp=diagnosed_experiments()),
         expand("results/{exp}/diagnosis/check.json", exp=diagnosed_experiments()),
         expand("results/{exp}/loro/summary.json", exp=loro_experiments()),
         expand("results/{exp}/sensitivity/report.json", exp=SENSITIVITY_RUN),
-    default_target: True
 
 
 # At the end of a run (not a dry run): each experiment's verdict, stop reason, posterior mean with its
@@ -103,7 +121,17 @@ onsuccess:
     try:
         from calibration.run_summary import experiments_of_run, run_summary
 
-        _targets = getattr(getattr(workflow, "dag_settings", None), "targets", None) or ()
-        print(run_summary(experiments_of_run(_targets, list(EXPERIMENTS), calibrated_experiments()), "results"), flush=True)
+        _targets = (
+            getattr(getattr(workflow, "dag_settings", None), "targets", None) or ()
+        )
+        print(
+            run_summary(
+                experiments_of_run(
+                    _targets, list(EXPERIMENTS), calibrated_experiments()
+                ),
+                "results",
+            ),
+            flush=True,
+        )
     except Exception as exc:  # noqa: BLE001
         print(f"(no run summary: {type(exc).__name__}: {exc})", flush=True)
