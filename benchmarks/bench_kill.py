@@ -15,7 +15,8 @@ group: its jobs must die by themselves) after a random wait, and check
   start has read the Snakefile leaves them to the one after; none may be left after the final run),
 
 then ``snakemake --unlock`` and the next start resumes. A run that finishes before its kill is compared
-with the reference by tools/compare_runs.py (identical but for timings; a manifest may differ in its
+with the reference by tools/compare_runs.py (one that fails by itself, not killed, is resumed and
+counted apart) (identical but for timings; a manifest may differ in its
 ``run.json`` entry, which holds the wall time, never in ``curve.csv``'s), and the folder starts afresh.
 Writes JSON with the cores, the wall times and every kill's record.
 """
@@ -152,14 +153,18 @@ def main(argv=None) -> dict:
         pending = {p for p in pending if p.exists()}
         trial["earlier_temporaries_left"] = len(pending)
         pending |= {work / p for p in trial.get("temporaries_after_kill", [])}
-        if trial["finished_before_kill"]:
+        if trial["finished_before_kill"] and trial["returncode"] != 0:
+            # a run that failed by itself (its log tail is kept): the next start resumes it
+            if sum(t["finished_before_kill"] and t["returncode"] != 0 for t in trials) >= a.kills:
+                raise SystemExit(f"the run keeps failing by itself:\n{trial['log_tail']}")
+        elif trial["finished_before_kill"]:
             trial["vs_reference"] = same_as_reference(ref / "results", work / "results")
             trial["temporaries_left_after_the_run"] = sorted(str(p) for p in pending if p.exists())
             finished.append(trial["vs_reference"]["identical"] and not trial["temporaries_left_after_the_run"])
             shutil.rmtree(work / "results")
             shutil.rmtree(work / ".snakemake", ignore_errors=True)
             pending = set()
-        else:
+        if not trial["finished_before_kill"] or trial["returncode"] != 0:
             subprocess.run(snakemake_argv(work, "--unlock"), capture_output=True, env=env)
         trials.append(trial)
         print(json.dumps({k: v for k, v in trial.items() if k != "vs_reference"})[:300], flush=True)
@@ -178,6 +183,7 @@ def main(argv=None) -> dict:
         "kills_with_temporaries_left": sum(bool(t["temporaries_after_kill"]) for t in killed),
         "temporaries_left_after_a_completed_run": sum(len(t.get("temporaries_left_after_the_run", []))
                                                       for t in trials),
+        "runs_failed_by_themselves": sum(t["finished_before_kill"] and t["returncode"] != 0 for t in trials),
         "completed_runs": len(finished), "completed_runs_identical_to_reference_and_clean": sum(finished),
         "trials": trials,
     }
