@@ -10,12 +10,12 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .contracts import atomic_write_csv
+from .contracts import atomic_write_csv, read_json
 
 if TYPE_CHECKING:  # pragma: no cover
     import numpy as np
 
-__all__ = ["member_ids", "member_params", "combine_member_runs", "write_responses", "read_responses"]
+__all__ = ["member_ids", "member_params", "simulation_params", "combine_member_runs", "write_responses", "read_responses"]
 
 
 def member_ids(n_members: int) -> list[str]:
@@ -34,6 +34,44 @@ def member_params(params_csv: str | Path, member: str | int, fixed: Mapping[str,
         raise KeyError(f"{params_csv}: member {member} not found")
     values = {c: float(v) for c, v in rows[0].items() if c != "member"}
     return {**(fixed or {}), **values}
+
+
+def simulation_params(source: Mapping, fixed: Mapping[str, float], params_file: str | Path | None = None,
+                      experiments: Mapping | None = None) -> dict:
+    """The simulator parameters of one simulation job: the experiment's ``fixed`` parameters overlaid with
+    those ``source`` names (the ``parameters`` param of the simulation rules, rules/simulate.smk):
+
+    - ``{"values": {name: value}}``: given (the truth, a design point of the approximation error, a check run);
+    - ``{"row": member, "held": {name: value}}``: the member's row of the CSV ``params_file``, ``held`` (optional)
+      between the fixed parameters and the row (the sensitivity design's other parameters at their centres);
+    - ``{"key": name}``: the mapping under ``name`` in the JSON ``params_file`` (forecast/params.json);
+    - ``{"ensemble_mean": experiment}``: the mean of the ensemble in ``params_file`` in the unbounded space of
+      the analysis (the replicates), the experiment's config looked up in ``experiments``.
+    """
+    if "values" in source:
+        return {**fixed, **source["values"]}
+    if "row" in source:
+        return member_params(params_file, source["row"], {**fixed, **(source.get("held") or {})})
+    if "key" in source:
+        return {**fixed, **read_json(params_file)[source["key"]]}
+    if "ensemble_mean" in source:
+        return {**fixed, **_ensemble_mean(params_file, source["ensemble_mean"], experiments)}
+    raise ValueError(f"simulation parameters: source {dict(source)!r} has none of the keys values, row, key, "
+                     "ensemble_mean")
+
+
+def _ensemble_mean(params_csv: str | Path, name: str, experiments: Mapping) -> dict:
+    # imported here: numpy and pandas cost every other simulation job 0.1-0.3 s (tests/test_contract.py)
+    import pandas as pd
+
+    from .experiment import ExperimentSpec
+
+    spec = ExperimentSpec.from_config(name, experiments[name])
+    P = pd.read_csv(params_csv)[list(spec.names)].to_numpy(float)
+    # the mean in the unbounded space of the analysis: for a box over orders of magnitude (E_t 100-50,000
+    # J/m^2) the arithmetic mean of a prior Latin hypercube sits far from where the members are
+    mean = spec.transform.to_bounded(spec.transform.to_unbounded(P).mean(axis=0)[None, :])[0]
+    return dict(zip(spec.names, map(float, mean)))
 
 
 def combine_member_runs(runs: Mapping[str, Mapping]) -> dict:

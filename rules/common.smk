@@ -189,4 +189,21 @@ def simulation_group(exp, stage, index, n_index, record, record_names):
     return gid
 
 
+def simulation_preset(rule_name, wc):
+    """The preset of one simulation job: the truth at the observations' preset, the approximation
+    error's runs at theirs (fine_<i> at the finer preset), every other at the experiment's.
+    """
+    if rule_name == "truth":
+        return EXPERIMENTS[wc.exp]["observations"]["preset"]
+    if rule_name == "approximation_run":
+        return approximation_preset(wc.exp, wc.run)
+    return EXPERIMENTS[wc.exp]["preset"]
+
+
+def record_input(exp, record):
+    """The raw record file a simulation reads (none for a twin's synthetic record)."""
+    return [p for p in [records(exp)[record]] if p]
+
+
 include: "inputs.smk"
+include: "simulate.smk"

@@ -45,15 +45,11 @@ rule diagnosis_design:
         "../scripts/diagnosis_design.py"
 
 
-rule diagnosis_member:
-    """One FDEM run of the emulator design (failed runs are left out of the emulator)."""
+# One FDEM run of the emulator design (failed runs are left out of the emulator).
+use rule simulate as diagnosis_member with:
     input:
-        unpack(
-            lambda wc: {
-                "params": f"results/{wc.exp}/diagnosis/design/params.csv",
-                "record": [design_records(wc.exp)[wc.record]],
-            }
-        ),
+        params="results/{exp}/diagnosis/design/params.csv",
+        record=lambda wc: [design_records(wc.exp)[wc.record]],
     output:
         curve="results/{exp}/diagnosis/design/{point}/{record}/curve.csv",
         run="results/{exp}/diagnosis/design/{point}/{record}/run.json",
@@ -61,7 +57,6 @@ rule diagnosis_member:
         "results/{exp}/diagnosis/design/{point}/{record}/simulate.log",
     wildcard_constraints:
         point="[0-9]+",
-    retries: config["member_retries"]
     group:
         lambda wc: simulation_group(
             wc.exp,
@@ -71,15 +66,8 @@ rule diagnosis_member:
             wc.record,
             design_records(wc.exp),
         )
-    conda:
-        CONDA_ENV
-    threads: 1
-    resources:
-        attempt=lambda wc, attempt: attempt,
-        time_limit_s=lambda wc: time_limit_s(wc.exp),
-        runtime=lambda wc: runtime_min(wc.exp),
     params:
-        sim=lambda wc: sim_settings(wc.exp),
+        parameters=lambda wc: {"row": wc.point},
         record_file=lambda wc: design_records(wc.exp)[wc.record],
         mesh_seed=lambda wc: run_mesh_seed(
             EXPERIMENTS[wc.exp],
@@ -88,9 +76,7 @@ rule diagnosis_member:
             int(wc.point),
             list(design_records(wc.exp)).index(wc.record),
         ),
-        max_attempts=config["member_retries"] + 1,
-    script:
-        "../scripts/diagnosis_member.py"
+        run=lambda wc: {"design_point": int(wc.point), "record": wc.record},
 
 
 checkpoint diagnosis_select:
@@ -114,9 +100,9 @@ checkpoint diagnosis_select:
         "../scripts/diagnosis.py"
 
 
-rule diagnosis_check_member:
-    """One real FDEM run of the check: a step's cross-validation point of a calibration record, or its
-    prediction point of a held-out record (check_runs.json, row `row`)."""
+# One real FDEM run of the check: a step's cross-validation point of a calibration record, or its
+# prediction point of a held-out record (check_runs.json, row `row`).
+use rule simulate as diagnosis_check_member with:
     input:
         rows="results/{exp}/diagnosis/check_runs.json",
         record=lambda wc: [
@@ -129,20 +115,14 @@ rule diagnosis_check_member:
         "results/{exp}/diagnosis/check/{row}/simulate.log",
     wildcard_constraints:
         row="[0-9]+",
-    retries: config["member_retries"]
     group:
         lambda wc: simulation_group(
             wc.exp, "check", int(wc.row), len(check_rows_of(wc.exp)), "all", ["all"]
         )
-    conda:
-        CONDA_ENV
-    threads: 1
-    resources:
-        attempt=lambda wc, attempt: attempt,
-        time_limit_s=lambda wc: time_limit_s(wc.exp),
-        runtime=lambda wc: runtime_min(wc.exp),
     params:
-        sim=lambda wc: sim_settings(wc.exp),
+        parameters=lambda wc: {
+            "values": check_rows_of(wc.exp)[int(wc.row)]["simulator"]
+        },
         record_file=lambda wc: design_records(wc.exp)[
             check_rows_of(wc.exp)[int(wc.row)]["record"]
         ],
@@ -157,9 +137,13 @@ rule diagnosis_check_member:
                 check_rows_of(wc.exp)[int(wc.row)]["record"]
             ),
         ),
-        max_attempts=config["member_retries"] + 1,
-    script:
-        "../scripts/diagnosis_check_member.py"
+        run=lambda wc: {
+            "check_row": int(wc.row),
+            **{
+                k: check_rows_of(wc.exp)[int(wc.row)][k]
+                for k in ("step", "role", "record")
+            },
+        },
 
 
 rule diagnosis_check:

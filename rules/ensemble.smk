@@ -41,12 +41,8 @@ rule propose:
         "../scripts/propose.py"
 
 
-rule member:
-    """One FDEM simulation. A numerical failure (exit code 3) or the time limit leave a failed run.json
-    and an empty curve (the analysis drops the member with that reason); rejected arguments or a missing
-    input (exit code 2) fail the job with the simulator's message and leave nothing, so a re-run after
-    the fix simulates the member; a crash is retried (`member_retries`) and recorded as failed on the
-    last attempt."""
+# One ensemble member: its row of the iteration's params.csv.
+use rule simulate as member with:
     input:
         unpack(member_inputs),
     output:
@@ -54,7 +50,6 @@ rule member:
         run="results/{exp}/iter_{it}/members/{member}/{record}/run.json",
     log:
         "results/{exp}/iter_{it}/members/{member}/{record}/simulate.log",
-    retries: config["member_retries"]
     group:
         lambda wc: simulation_group(
             wc.exp,
@@ -64,26 +59,20 @@ rule member:
             wc.record,
             records(wc.exp),
         )
-    conda:
-        CONDA_ENV
-    threads: 1
-    resources:
-        attempt=lambda wc, attempt: attempt,
-        time_limit_s=lambda wc: time_limit_s(wc.exp, None),
-        runtime=lambda wc: runtime_min(wc.exp, None),
     params:
-        sim=lambda wc: sim_settings(wc.exp),
-        record_file=lambda wc: records(wc.exp)[wc.record],
+        parameters=lambda wc: {"row": wc.member},
         mesh_seed=lambda wc: mesh_seed_of(wc.exp, "member", wc.it, wc.member, wc.record),
-        max_attempts=config["member_retries"] + 1,
-    script:
-        "../scripts/member.py"
+        run=lambda wc: {
+            "member": int(wc.member),
+            "iteration": int(wc.it),
+            "record": wc.record,
+        },
 
 
-rule replicate:
-    """One replicate run at the iteration's ensemble mean on its own mesh realization: the replicates of
-    an iteration differ only in the mesh and measure the simulator's own variability S
-    (calibration.model_error; observations.model_error.simulator_replicates)."""
+# One replicate run at the iteration's ensemble mean on its own mesh realization: the replicates of an
+# iteration differ only in the mesh and measure the simulator's own variability S
+# (calibration.model_error; observations.model_error.simulator_replicates).
+use rule simulate as replicate with:
     input:
         unpack(member_inputs),
     output:
@@ -91,7 +80,6 @@ rule replicate:
         run="results/{exp}/iter_{it}/replicates/{member}/{record}/run.json",
     log:
         "results/{exp}/iter_{it}/replicates/{member}/{record}/simulate.log",
-    retries: config["member_retries"]
     group:
         lambda wc: simulation_group(
             wc.exp,
@@ -101,19 +89,13 @@ rule replicate:
             wc.record,
             records(wc.exp),
         )
-    conda:
-        CONDA_ENV
-    threads: 1
-    resources:
-        attempt=lambda wc, attempt: attempt,
-        time_limit_s=lambda wc: time_limit_s(wc.exp, None),
-        runtime=lambda wc: runtime_min(wc.exp, None),
     params:
-        sim=lambda wc: sim_settings(wc.exp),
-        record_file=lambda wc: records(wc.exp)[wc.record],
+        parameters=lambda wc: {"ensemble_mean": wc.exp},
         mesh_seed=lambda wc: mesh_seed_of(
             wc.exp, "replicate", wc.it, wc.member, wc.record
         ),
-        max_attempts=config["member_retries"] + 1,
-    script:
-        "../scripts/replicate.py"
+        run=lambda wc: {
+            "replicate": int(wc.member),
+            "iteration": int(wc.it),
+            "record": wc.record,
+        },

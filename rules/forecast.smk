@@ -23,22 +23,17 @@ rule refine_design:
         "../scripts/refine_design.py"
 
 
-rule refine_member:
-    """One FDEM simulation of the refinement batch, on its own mesh realization; the failure policy of
-    `rule member` (a failed run is left out of the emulator)."""
+# One FDEM simulation of the refinement batch, on its own mesh realization; the failure policy of
+# `rule member` (a failed run is left out of the emulator).
+use rule simulate as refine_member with:
     input:
-        unpack(
-            lambda wc: {
-                "params": f"results/{wc.exp}/refine/params.csv",
-                "record": [p for p in [records(wc.exp)[wc.record]] if p],
-            }
-        ),
+        params="results/{exp}/refine/params.csv",
+        record=lambda wc: record_input(wc.exp, wc.record),
     output:
         curve="results/{exp}/refine/members/{member}/{record}/curve.csv",
         run="results/{exp}/refine/members/{member}/{record}/run.json",
     log:
         "results/{exp}/refine/members/{member}/{record}/simulate.log",
-    retries: config["member_retries"]
     group:
         lambda wc: simulation_group(
             wc.exp,
@@ -48,21 +43,15 @@ rule refine_member:
             wc.record,
             records(wc.exp),
         )
-    conda:
-        CONDA_ENV
-    threads: 1
-    resources:
-        attempt=lambda wc, attempt: attempt,
-        time_limit_s=lambda wc: time_limit_s(wc.exp, None),
-        runtime=lambda wc: runtime_min(wc.exp, None),
     params:
-        sim=lambda wc: sim_settings(wc.exp),
-        record_file=lambda wc: records(wc.exp)[wc.record],
+        parameters=lambda wc: {"row": wc.member},
         mesh_seed=lambda wc: mesh_seed_of(wc.exp, "refine", 0, wc.member, wc.record),
-        max_attempts=config["member_retries"] + 1,
-        iteration="refine",
-    script:
-        "../scripts/member.py"
+        # the refinement batch's runs have no loop iteration
+        run=lambda wc: {
+            "member": int(wc.member),
+            "iteration": "refine",
+            "record": wc.record,
+        },
 
 
 rule refine_aggregate:
@@ -133,14 +122,12 @@ rule forecast_params:
         "../scripts/forecast_params.py"
 
 
-rule forecast:
+# The best-estimate simulation with the posterior-mean parameters, with fracture snapshots (a failed run
+# gets a picture saying so instead of the damage maps).
+use rule simulate as forecast with:
     input:
-        unpack(
-            lambda wc: {
-                "params": f"results/{wc.exp}/forecast/params.json",
-                "record": [p for p in [records(wc.exp)[wc.record]] if p],
-            }
-        ),
+        params="results/{exp}/forecast/params.json",
+        record=lambda wc: record_input(wc.exp, wc.record),
     output:
         curve="results/{exp}/forecast/{record}/curve.csv",
         run="results/{exp}/forecast/{record}/run.json",
@@ -163,18 +150,7 @@ rule forecast:
         ),
     log:
         "results/{exp}/forecast/{record}/simulate.log",
-    retries: config["member_retries"]
-    conda:
-        CONDA_ENV
-    threads: 1
-    resources:
-        attempt=lambda wc, attempt: attempt,
-        time_limit_s=lambda wc: time_limit_s(wc.exp, None),
-        runtime=lambda wc: runtime_min(wc.exp, None),
     params:
+        parameters={"key": "params"},
         snapshots=4,
-        sim=lambda wc: sim_settings(wc.exp),
-        record_file=lambda wc: records(wc.exp)[wc.record],
-        max_attempts=config["member_retries"] + 1,
-    script:
-        "../scripts/forecast.py"
+        run=lambda wc: {"forecast": True, "record": wc.record},

@@ -2,8 +2,8 @@
 # stress on the observation grid (calibration.observations).
 
 
-rule truth:
-    """Twin experiments: the reference simulation (truth parameters, possibly a finer preset)."""
+# Twin experiments: the reference simulation (truth parameters, possibly a finer preset); it must succeed.
+use rule simulate as truth with:
     input:
         lambda wc: [p for p in records(wc.exp).values() if p],
     output:
@@ -11,35 +11,19 @@ rule truth:
         run="results/{exp}/truth/{record}/run.json",
     log:
         "results/{exp}/truth/{record}/simulate.log",
-    retries: config["member_retries"]
-    conda:
-        CONDA_ENV
-    threads: 1
-    resources:
-        attempt=lambda wc, attempt: attempt,
-        time_limit_s=lambda wc: time_limit_s(
-            wc.exp, EXPERIMENTS[wc.exp]["observations"]["preset"]
-        ),
-        runtime=lambda wc: runtime_min(
-            wc.exp, EXPERIMENTS[wc.exp]["observations"]["preset"]
-        ),
     params:
-        sim=lambda wc: sim_settings(
-            wc.exp, EXPERIMENTS[wc.exp]["observations"]["preset"]
-        ),
-        truth=lambda wc: EXPERIMENTS[wc.exp]["observations"]["truth"],
-        record_file=lambda wc: records(wc.exp)[wc.record],
+        sim=lambda wc: sim_settings(wc.exp, simulation_preset("truth", wc)),
+        parameters=lambda wc: {"values": EXPERIMENTS[wc.exp]["observations"]["truth"]},
         mesh_seed=lambda wc: mesh_seed_of(wc.exp, "truth", 0, 0, wc.record),
-    script:
-        "../scripts/truth.py"
+        must_succeed=True,
 
 
-rule approximation_run:
-    """One run of the approximation error's pairs (calibration.approximation): a design point of the
-    prior at the finer preset (fine_<i>) or at the experiment's own (coarse_<i>_<r>), on its own mesh
-    realization. A failed run leaves its pair out."""
+# One run of the approximation error's pairs (calibration.approximation): a design point of the prior at
+# the finer preset (fine_<i>) or at the experiment's own (coarse_<i>_<r>), on its own mesh realization.
+# A failed run leaves its pair out.
+use rule simulate as approximation_run with:
     input:
-        lambda wc: [p for p in [records(wc.exp)[wc.record]] if p],
+        lambda wc: record_input(wc.exp, wc.record),
     output:
         curve="results/{exp}/approximation/{run}/{record}/curve.csv",
         run="results/{exp}/approximation/{run}/{record}/run.json",
@@ -47,7 +31,6 @@ rule approximation_run:
         "results/{exp}/approximation/{run}/{record}/simulate.log",
     wildcard_constraints:
         run="fine_[0-9]+|coarse_[0-9]+_[0-9]+",
-    retries: config["member_retries"]
     group:
         lambda wc: simulation_group(
             wc.exp,
@@ -57,25 +40,19 @@ rule approximation_run:
             wc.record,
             records(wc.exp),
         )
-    conda:
-        CONDA_ENV
-    threads: 1
-    resources:
-        attempt=lambda wc, attempt: attempt,
-        time_limit_s=lambda wc: time_limit_s(
-            wc.exp, approximation_preset(wc.exp, wc.run)
-        ),
-        runtime=lambda wc: runtime_min(wc.exp, approximation_preset(wc.exp, wc.run)),
     params:
-        sim=lambda wc: sim_settings(wc.exp, approximation_preset(wc.exp, wc.run)),
-        point=lambda wc: approximation_point(wc.exp, wc.run),
-        record_file=lambda wc: records(wc.exp)[wc.record],
+        sim=lambda wc: sim_settings(wc.exp, simulation_preset("approximation_run", wc)),
+        parameters=lambda wc: {"values": approximation_point(wc.exp, wc.run)},
         mesh_seed=lambda wc: approximation_mesh_seed(
             EXPERIMENTS[wc.exp], wc.run, list(records(wc.exp)).index(wc.record)
         ),
-        max_attempts=config["member_retries"] + 1,
-    script:
-        "../scripts/approximation_run.py"
+        run=lambda wc: dict(
+            zip(
+                ("approximation", "design_point", "realization"),
+                approximation_run(wc.run),
+            ),
+            record=wc.record,
+        ),
 
 
 rule observations:

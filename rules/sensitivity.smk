@@ -34,17 +34,12 @@ rule sensitivity_design:
         "../scripts/sensitivity_design.py"
 
 
-rule sensitivity_member:
-    """One FDEM simulation of a design row; the failure policy of `rule member` (exit 3 or the time limit:
-    failed run.json and empty curve; exit 2: the job fails with the simulator's message; a crash is
-    retried, then recorded as failed)."""
+# One FDEM simulation of a design row, the experiment's other estimated parameters held at their
+# prior-box centres; the failure policy of `rule member`.
+use rule simulate as sensitivity_member with:
     input:
-        unpack(
-            lambda wc: {
-                "params": f"results/{wc.exp}/sensitivity/design.csv",
-                "record": [p for p in [records(wc.exp)[wc.record]] if p],
-            }
-        ),
+        params="results/{exp}/sensitivity/design.csv",
+        record=lambda wc: record_input(wc.exp, wc.record),
     output:
         curve="results/{exp}/sensitivity/members/{sample}/{record}/curve.csv",
         run="results/{exp}/sensitivity/members/{sample}/{record}/run.json",
@@ -52,7 +47,6 @@ rule sensitivity_member:
         "results/{exp}/sensitivity/members/{sample}/{record}/simulate.log",
     wildcard_constraints:
         sample="[0-9]+",
-    retries: config["member_retries"]
     group:
         lambda wc: simulation_group(
             wc.exp,
@@ -62,20 +56,12 @@ rule sensitivity_member:
             wc.record,
             [wc.record],
         )
-    conda:
-        CONDA_ENV
-    threads: 1
-    resources:
-        attempt=lambda wc, attempt: attempt,
-        time_limit_s=lambda wc: time_limit_s(wc.exp),
-        runtime=lambda wc: runtime_min(wc.exp),
     params:
-        sim=lambda wc: sim_settings(wc.exp),
-        held=lambda wc: dict(sensitivity_spec(wc.exp).held),
-        record_file=lambda wc: records(wc.exp)[wc.record],
-        max_attempts=config["member_retries"] + 1,
-    script:
-        "../scripts/sensitivity_member.py"
+        parameters=lambda wc: {
+            "row": wc.sample,
+            "held": dict(sensitivity_spec(wc.exp).held),
+        },
+        run=lambda wc: {"sensitivity_sample": int(wc.sample), "record": wc.record},
 
 
 rule sensitivity_analysis:

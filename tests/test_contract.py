@@ -71,7 +71,7 @@ def test_a_measured_record_is_read_and_reduced_without_pandas_or_scipy_ndimage()
 
 
 def test_the_member_job_wrapper_imports_no_numpy_and_keeps_run_json_types():
-    """scripts/member.py's imports (calibration.workflow_io) load neither numpy nor pandas, which every one
+    """scripts/simulate.py's imports (calibration.workflow_io) load neither numpy nor pandas, which every one
     of a run's ~270 member jobs would pay for; run.json's numbers still come out as JSON numbers (numpy
     scalars included), booleans as booleans and non-finite values as null."""
     import json
