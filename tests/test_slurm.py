@@ -21,6 +21,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from _rules_text import rule_texts
 
 REPO = Path(__file__).resolve().parents[1]
 CLUSTER = REPO / "tools" / "slurm" / "slurm_local_cluster.sh"
@@ -106,22 +107,7 @@ def test_default_profile_is_for_one_machine():
 # --------------------------------------------------------------------------------------------------
 def workflow_rules() -> tuple[dict[str, str], set[str]]:
     """{rule name: body} and the localrules of Snakefile + rules/*.smk."""
-    rules, local, uses = {}, set(), {}
-    for path in [REPO / "Snakefile", *sorted((REPO / "rules").glob("*.smk"))]:
-        text = path.read_text()
-        # one line (`localrules: a, b`) or snakefmt's one name per indented line
-        for m in re.finditer(r"^localrules:((?:(?:[ \t]*|\n[ \t]+)\w+[ \t]*,?)+)", text, re.M):
-            local |= {n.strip() for n in m.group(1).replace("\n", ",").split(",") if n.strip()}
-        blocks = re.split(r"^(?=(?:rule|checkpoint|use rule \w+ as) \w+)", text, flags=re.M)
-        for b in blocks:
-            m = re.match(r"(?:rule|checkpoint) (\w+):", b)
-            if m:
-                rules[m.group(1)] = b
-            m = re.match(r"use rule (\w+) as (\w+) with:", b)
-            if m:
-                uses[m.group(2)] = (m.group(1), b)
-    # a `use rule <base> as <name> with:` inherits what it does not override: its text, then the base's
-    return rules | {name: b + rules[base] for name, (base, b) in uses.items()}, local
+    return rule_texts([REPO / "Snakefile", *sorted((REPO / "rules").glob("*.smk"))])
 
 
 def has_action(body: str) -> bool:

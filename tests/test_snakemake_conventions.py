@@ -17,6 +17,7 @@ from pathlib import Path
 
 import yaml
 
+from _rules_text import rule_texts
 from tools import config_doc
 
 REPO = Path(__file__).resolve().parents[1]
@@ -24,18 +25,8 @@ THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"
 
 
 def rule_blocks() -> dict[str, str]:
-    """{rule name: its text} of rules/*.smk; a `use rule <base> as <name> with:` is its own text followed by
-    the base's, so that section() finds an overridden section first and an inherited one after it."""
-    blocks, uses = {}, {}
-    for path in sorted((REPO / "rules").glob("*.smk")):
-        for b in re.split(r"^(?=(?:rule|checkpoint|use rule \w+ as) \w+)", path.read_text(), flags=re.M):
-            m = re.match(r"(?:rule|checkpoint) (\w+):", b)
-            if m:
-                blocks[m.group(1)] = b
-            m = re.match(r"use rule (\w+) as (\w+) with:", b)
-            if m:
-                uses[m.group(2)] = (m.group(1), b)
-    return blocks | {name: b + blocks[base] for name, (base, b) in uses.items()}
+    """{rule name: its text} of rules/*.smk (tests/_rules_text.py: a `use rule` inherits its base's text)."""
+    return rule_texts(sorted((REPO / "rules").glob("*.smk")))[0]
 
 
 def section(block: str, name: str) -> str:
