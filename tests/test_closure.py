@@ -22,7 +22,9 @@ from shpb.loading import TrapezoidPulse
 from shpb.simulate import simulate
 
 RECORD = "freiburg-rae-rock-shpb/Rae2021/SHPBdata/CaMa/CaMa_SHPB_004_Ti25_50b_Al12b_0_001.txt"
-MEMBER = {"sigma_t": 34.9e6, "E_t": 27.5e3, "face_gap.gap_m": 150e-6}
+# E: the specimen modulus the model took for this record when the digest below was made (the spreadsheet
+# row's); the record's simulations now take the rock's (44.8 GPa), so it is given here to keep the digest
+MEMBER = {"sigma_t": 34.9e6, "E_t": 27.5e3, "face_gap.gap_m": 150e-6, "E": 33.9e9}
 #: sha256 of the curve array of MEMBER on CaMa_SHPB_004 (fast, 0-200 us, injection 0.3 m, 0.5 us
 #: samples), computed with the sources of c4562fb, the commit before the effect. A deliberate change
 #: of the engine or the mesher changes it: renew it then, from the commit before that change.
