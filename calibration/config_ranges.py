@@ -34,9 +34,9 @@ _UM, _MM = (1e-6, "um"), (1e-3, "mm")
 #: the units a value is likely written in by mistake, tried in order (value x factor inside the range).
 #: The simulator's own bounds (shpb.parameters.bounds) are checked first; these catch unit slips.
 PARAM_RANGES = {
-    # Strengths: rock tensile strengths are 1-30 MPa (Kuru granite 13-17 MPa quasi-static, 25-40 MPa
-    # dynamic, ../shared/notes/reference-values.md; marble 7-10 MPa, shpb.parameters), joint shear
-    # strengths (cohesion) up to about 100 MPa (the marble box's 120 MPa); 0.1 MPa is below any
+    # Strengths: rock tensile strengths are 1-30 MPa (Kuru granite 13-17 MPa quasi-static, Saksala et
+    # al. 2013, Wessling & Kajberg 2022, and 28 MPa dynamic at 400 GPa/s, shpb.parameters; marble
+    # 7-10 MPa), joint shear strengths (cohesion) up to about 100 MPa (the marble box's 120 MPa); 0.1 MPa is below any
     # lithology of shpb/lab/lithologies.csv (the weakest, Savonnieres limestone, has E = 11.5 GPa) and
     # no rock's cohesion or dynamic tensile strength reaches 1 GPa.
     "sigma_n": (1e5, 1e9, "Pa", "a strength", (_MPA, _KPA, _GPA)),
@@ -58,8 +58,8 @@ PARAM_RANGES = {
 
 #: Plausible ranges of the config's other dimensional fields: ``(path under an experiment, lo, hi,
 #: unit, what, slips)``. Windows and steps: SHPB tests last 100-500 us (the disc's window 160 us, the
-#: cylinder's 360 us, docs/workflow.md "Windows"); the records sample at 1.25 MHz (0.8 us,
-#: reference-values.md); 10 ms is beyond any bar's pulse train, 1 ns below any useful grid step.
+#: cylinder's 360 us, docs/workflow.md "Windows"); the Freiburg records sample at 1.25 MHz (0.8 us,
+#: data/freiburg-rae-rock-shpb/PROVENANCE.md); 10 ms is beyond any bar's pulse train, 1 ns below any useful grid step.
 FIELD_RANGES = (
     ("observations.t_start", 0.0, 1e-2, "s", "seconds", (_US, _MS)),
     ("observations.t_end", 1e-6, 1e-2, "s", "seconds", (_US, _MS)),
@@ -68,8 +68,9 @@ FIELD_RANGES = (
     ("simulation.sample_dt", 1e-9, 1e-4, "s", "a time step in seconds", (_US, _NS)),
     # noise: a fraction of the reference's peak stress (0.01 = 1 %); above 50 % the data say nothing
     ("observations.noise.relative_sigma", 1e-6, 0.5, "", "a fraction of the peak stress", ((1e-2, "%"),)),
-    # the records' pre-trigger noise is 0.02-6 MPa on 10-300 MPa peaks (reference-values.md: 4-8 mV
-    # against 0.3-3.4 V); 1 kPa to 100 MPa covers any stress noise a test could have
+    # the records' pre-trigger noise is 0.02-6 MPa on 10-300 MPa peaks (measured on the shipped
+    # Freiburg records: 4-8 mV of pre-trigger noise against 0.3-3.4 V pulses); 1 kPa to 100 MPa
+    # covers any stress noise a test could have
     ("observations.noise.sigma_Pa", 1e3, 1e8, "Pa", "a stress noise level", (_MPA, _KPA)),
     # a correlation time longer than the window (10 ms at most, above) would be one offset
     ("observations.noise.corr_time", 0.0, 1e-2, "s", "seconds", (_US, _MS)),
