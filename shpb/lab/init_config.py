@@ -75,10 +75,8 @@ _CYL_E_T = ("a compression cylinder's post-peak at `fast` needs ~26 kJ/m^2 for t
 #: Rock classes, matched by a word of the lithology's name (shpb/lab/lithologies.csv or the sheet's).
 #: sigma_t is the joint's shear strength (cohesion), E_t the mode II energy (shpb/parameters.py): model
 #: parameters at the `fast` mesh, not handbook values, so the boxes are the ones the shipped
-#: calibrations chose and converged inside, widened where only one rock was tried. Static tensile
-#: strengths for scale (Goodman 1989, Introduction to Rock Mechanics, Table 3.1, recalled): granite
-#: 7-25 MPa, marble 5-12 MPa, sandstone 1-8 MPa, limestone 1.5-6 MPa, quartzite ~11 MPa, gneiss ~7 MPa;
-#: a shear strength is a few times that, and SHPB rates raise it by a factor 1.5-3.
+#: calibrations chose and converged inside, widened where only one rock was tried (no handbook table
+#: is used: a joint's strength at a mesh is not a handbook rock strength).
 ROCK_CLASSES: dict[str, RockClass] = {
     "granite": RockClass((4.0e6, 6.0e7), (200.0, 2400.0), (100.0, 5.0e4), _DISC_BOX,
                          f"no granite cylinder was calibrated; the marble's box: {_CYL_E_T}"),
