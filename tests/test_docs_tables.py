@@ -55,3 +55,18 @@ def test_the_loro_table_is_generated_from_the_committed_loro_summaries():
     sources = loro_table.doc_block_sources(text)
     assert sources and all((ROOT / s).is_file() for s in sources), sources
     assert _block(text, loro_table) == loro_table.block(sources)
+
+
+def test_the_workflow_docs_kill_figures_are_the_committed_benchmarks():
+    kill = json.loads((ROOT / "benchmarks" / "results" / "bench_kill.json").read_text())
+    text = " ".join((ROOT / "docs" / "workflow.md").read_text().split())
+    # the trials whose run was still going when its kill came (the others finished before it)
+    waits = [t["wait_s"] for t in kill["trials"] if not t["finished_before_kill"]]
+    assert kill["cores"] == 2 and len(waits) == kill["kills"]
+    assert (f"{kill['kills']} SIGKILLs of Snakemake alone (not its process group) at random points "
+            f"{min(waits):.1f}-{max(waits):.0f} s into a small twin with the stand-in simulator "
+            f"({kill['members']} members, two analyses)") in text
+    assert kill["analyses"] == 2 and kill["kills_with_live_processes"] == kill["kills_with_files_written_after"] == 0
+    assert kill["temporaries_left_after_a_completed_run"] == 0
+    assert f"each of the {kill['completed_runs']} runs that got to the end identical" in text
+    assert kill["completed_runs_identical_to_reference_and_clean"] == kill["completed_runs"]
