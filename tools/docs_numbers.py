@@ -1,0 +1,128 @@
+"""The result numbers quoted in README.md and docs/*.md that no test ties to a committed JSON.
+
+    python tools/docs_numbers.py            # list them, one per line: file:line  number  context
+
+A *result* is a figure that came out of a run or a benchmark (a coverage, a score, a time, an error, a
+count of runs, a z value). Inputs (config values, box bounds, windows), physical constants, literature
+values with their citation and thresholds stated as settings are not results.
+
+What is looked at: the text outside the generated blocks (``<!-- name:start -->`` ... ``<!-- name:end
+-->``, or ``:begin``), outside code (fenced blocks and `inline code`, which hold commands, config keys
+and their values) and outside link targets, less every quote that ``tests/test_docs_numbers.py``
+checks against its JSON (``QUOTED`` there, passed in as ``checked``).
+
+Which numbers look like results (``RESULT``): a number with a decimal fraction, a percentage, a
+duration (s, min, h), a memory size, a factor (``3.1x``) or a count of successes (``7/9``, ``5 of 5``).
+A bare integer with a physical unit (``45 MPa``, ``160 us``, ``25 members``) is how this project writes
+inputs, so it is not flagged; that is what keeps the pattern from flagging the config. The inputs that
+still have that shape (a safety factor 0.6, a section number 5.2, a version 2.0.1, a penalty 1e-6 of the
+variance) are listed in ``NOT_RESULTS`` as (file, regex on the number with its words around it), each
+with the reason beside it.
+"""
+from __future__ import annotations
+
+import re
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+GENERATED = re.compile(r"<!-- ([\w-]+):(?:start|begin).*?<!-- \1:end -->", re.S)
+FENCE = re.compile(r"^```.*?^```", re.S | re.M)
+# inline code may run over a line break; a blank line ends a paragraph, so it cannot be inside
+CODE = re.compile(r"`(?:[^`\n]|\n(?!\s*\n))*`")
+LINK_TARGET = re.compile(r"\]\([^)\s]*\)")
+IMAGE = re.compile(r"!\[[^\]]*\]\([^)]*\)")
+
+_N = r"\d[\d,]*(?:\.\d+)?(?:e[-+]?\d+)?"
+# a number (or a range a-b of numbers) followed by what makes it look like a result
+RESULT = re.compile(
+    r"(?<![\w.\-/^])(?:[-+])?(?P<num>"
+    r"\d[\d,]*\.\d+(?:e[-+]?\d+)?"                       # a decimal fraction: 0.22, 1.4e-4
+    r"|" + _N + r"(?:\s?-\s?" + _N + r")?\s?(?:%|x\b|s\b|min\b|h\b|MB\b|GB\b|ms\b)"  # 88-90 %, 704 s, 3.1x
+    r"|\d+\s?/\s?\d+(?![\w/^.])"                         # 7/9 (not 1/s, not J/m^2)
+    r"|\d+(?:-\d+)?\sof\s(?:the\s)?\d+"                   # 5 of 5, 28-35 of 40
+    r")")
+
+# (file or "*", regex): numbers that have a result's shape and are not results. The regex is searched in
+# the number's context (80 characters either side) and must cover the number itself.
+NOT_RESULTS: list[tuple[str, str, str]] = [
+    ("*", r"section \d+(?:\.\d+)*", "a section of a paper"),
+    ("*", r">= ?\d+(?:\.\d+)+", "a version"),
+    ("*", r"YAML 1\.1", "a version"),
+    ("*", r"Figs?\. \d+(?:/\d+)?", "a figure of the paper"),
+    ("*", r"(?<![\d.])(?:5|25|50|75|90|95) ?% (?:\w+[ -]){0,3}?(?:intervals?|band|quantiles?|coverage|predictive|"
+          r"prediction|posterior-predictive|credible|central)", "a probability level, a setting"),
+    ("*", r"(?:5|25|50|75|90|95) ?% (?:or|and|/) (?:5|25|50|75|90|95) ?%", "probability levels"),
+    ("*", r"(?:within|more than|at most|at least|above|below|exceeds?|less than|under|over) "
+          r"(?:\d+ ?%(?: ?(?:/|and|or) )?)+(?! of the twins)", "a threshold stated as a setting (whole percents)"),
+    ("*", r"\d+ % / \d+ % bar", "the accuracy bar, a setting"),
+    ("*", r"\d+ ?% (?:\(of the peak\) )?(?:white )?noise", "the twins' noise, an input"),
+    ("*", r"99 ?% of the singular-value sum", "the SVD's truncation, a setting"),
+    ("*", r"defaults? (?:\d+ s[\s,]*)+", "the members' time limits, settings"),
+    ("docs/workflow.md", r"alive 2 s after any kill", "how long the kill benchmark waits before it looks"),
+]
+
+
+def masked(text: str, checked: list[str] = ()) -> str:
+    """``text`` with generated blocks, code, link targets and the ``checked`` quotes blanked out (line
+    breaks kept, so line numbers stay)."""
+    def blank(m):
+        return re.sub(r"[^\n]", " ", m.group(0))
+    text = GENERATED.sub(blank, text)
+    # the quotes first: they may hold code and links of their own
+    for q in checked:
+        pattern = r"\s+".join(re.escape(w) for w in q.split())
+        text = re.sub(pattern, blank, text)
+    for rx in (FENCE, IMAGE, CODE, LINK_TARGET):
+        text = rx.sub(blank, text)
+    return text
+
+
+def _excused(name: str, text: str, start: int, end: int) -> str | None:
+    lo, hi = max(0, start - 80), min(len(text), end + 80)
+    window = text[lo:hi]
+    for doc, rx, why in NOT_RESULTS:
+        if doc not in ("*", name):
+            continue
+        # a space in a pattern is any run of white space (the docs wrap lines anywhere)
+        for m in re.finditer(rx.replace(" ?", r"\s*").replace(" ", r"\s+"), window):
+            if lo + m.start() <= start and lo + m.end() >= end:
+                return why
+    return None
+
+
+def unchecked(name: str, text: str, checked: list[str] = ()) -> list[tuple[int, str, str]]:
+    """``[(line, number, context)]`` of every result-looking number of ``text`` (the file ``name``,
+    relative to the repository) that is neither generated, nor checked, nor a listed non-result."""
+    body = masked(text, checked)
+    out = []
+    for m in RESULT.finditer(body):
+        if _excused(name, body, m.start(), m.end()):
+            continue
+        line = body.count("\n", 0, m.start()) + 1
+        ctx = " ".join(text[max(0, m.start() - 50):m.end() + 30].split())
+        out.append((line, m.group(0).strip(), ctx))
+    return out
+
+
+def docs() -> list[Path]:
+    return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+
+
+def main(argv: list[str]) -> int:
+    sys.path.insert(0, str(ROOT))
+    from tests.test_docs_numbers import quotes_by_file  # the checked table lives with its test
+    checked = quotes_by_file()
+    n = 0
+    for path in docs():
+        name = str(path.relative_to(ROOT))
+        for line, num, ctx in unchecked(name, path.read_text(), checked.get(name, [])):
+            print(f"{name}:{line}\t{num}\t{ctx}")
+            n += 1
+    print(f"{n} unchecked result numbers", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
