@@ -5,7 +5,7 @@ committed run.json's."""
 import json
 from pathlib import Path
 
-from tools import coverage_table, engine_table, loro_table, results_table
+from tools import coverage_table, engine_table, loro_table, results_table, shpb_table
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -70,3 +70,10 @@ def test_the_workflow_docs_kill_figures_are_the_committed_benchmarks():
     assert kill["temporaries_left_after_a_completed_run"] == 0
     assert f"each of the {kill['completed_runs']} runs that got to the end identical" in text
     assert kill["completed_runs_identical_to_reference_and_clean"] == kill["completed_runs"]
+
+
+def test_the_shpb_models_tables_are_generated_from_the_committed_benchmark_json():
+    text = shpb_table.DOC.read_text()
+    for start, end, block in ((shpb_table.PRESET_START, shpb_table.PRESET_END, shpb_table.preset_block()),
+                              (shpb_table.VAR_START, shpb_table.VAR_END, shpb_table.variability_block())):
+        assert text[text.index(start):text.index(end) + len(end)] == block

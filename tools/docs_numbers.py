@@ -83,6 +83,14 @@ NOT_RESULTS: list[tuple[str, str, str]] = [
     ("docs/shpb-models.md", r"2\.9 m/s particle velocity", "the default pulse, an input"),
     ("docs/shpb-models.md", r"radius 0\.25 x|radius 0\.1 R", "the mesh jitter's settings"),
     ("docs/shpb-models.md", r"noise \(1 % of the peak\)", "the twin's noise, an input"),
+    ("*", r"safety factor 0\.6|at 0\.8 fracture runs|than at 0\.6", "the time step's safety factor, a setting"),
+    ("*", r">= \d+ ?%", "a bound"),
+    ("docs/engine.md", r"\(-13% at", "the formula's value at f = 10"),
+    ("docs/cluster.md", r"\d+ x \d+ =\s+\d+ min|plus 5 min", "the time a group asks for, from the settings"),
+    ("docs/cluster.md", r"MinJobAge >= 15 s|default is (?:300|40) s|comes 5 s after|= 40 s|stopped at 40 s",
+     "Slurm's and the plugin's settings"),
+    ("docs/engine.md", r"exceeds 10x the work|at 3x the stable step", "the guard's threshold; an input"),
+    ("docs/engine.md", r"within 0\.5% over 20,500 steps|less than 0\.1% of the element", "the tests' bounds"),
     ("docs/sensitivity.md", r"`a` 0\.3-0\.9, `b` 1\.0-2\.5", "the design's box, an input"),
 ]
 
