@@ -30,9 +30,12 @@ import math
 from collections.abc import Mapping, Sequence
 
 import numpy as np
+import pandas as pd
 
 from enkf.covariance import DenseError, ObservationError
 from enkf.diagnosis import heldout_evaluation, replicate_curve_errors, replicated
+from enkf.diagnosis.band import replicate_variance, run_band
+from enkf.diagnosis.crossval import seed_for
 from shpb import effects as fx
 
 from .diagnose import EmulatedSHPB, emulators_from_design
@@ -41,7 +44,8 @@ from .observations import Observations
 from .protocol import check_runs, confirm, real_curves, select
 
 __all__ = ["FOLD_SEPARATOR", "blind", "candidate_effects", "emulated_model", "protocol_errors", "select_effects",
-           "check_rows", "covariate_table", "assemble", "loro_folds", "loro_table"]
+           "calibration_discrepancy", "check_rows", "covariate_table", "assemble", "predictive_bands", "loro_folds",
+           "loro_table"]
 
 #: Between an experiment's name and a held-out record's in a leave-one-record-out fold's name.
 FOLD_SEPARATOR = "__"
@@ -103,6 +107,14 @@ def protocol_errors(obs: Observations, analysis: Mapping, heldout: Observations 
             if np.any(Sm):
                 sim[h] = _jittered(Sm)
     return noise, sim
+
+
+def calibration_discrepancy(obs: Observations, analysis: Mapping) -> dict[str, np.ndarray]:
+    """Per calibration record, the per-time variance of the model discrepancy ``D`` the workflow's
+    calibration estimated (its reported analysis; zero where it estimated none): the discrepancy term of
+    the check's predictive bands (:func:`predictive_bands`)."""
+    D = stored_error(obs, analysis).D
+    return {r: np.diag(D[obs.record_slice(r), obs.record_slice(r)]).copy() for r in obs.records}
 
 
 def _jittered(S: np.ndarray) -> DenseError:
@@ -167,7 +179,8 @@ def _errors_table(selection, conf: dict, real: Mapping, obs: Observations, held:
         out[r] = {"data": "calibration (cross-validated)",
                   "before": None if before is None else replicate_curve_errors(t, before, y),
                   "after": None if after is None else replicate_curve_errors(t, after, y)}
-    keys = ("rmse", "nrmse", "peak_error", "peak_rel_error", "time_to_peak_error", "replicates", "rmse_per_replicate")
+    keys = ("rmse", "nrmse", "peak_error", "peak_rel_error", "time_to_peak_error", "replicates", "rmse_per_replicate",
+            "predictive_coverage_90")
     for h, ev in held.items():
         out[h] = {"data": "heldout", **{w: {k2: ev[w][k2] for k2 in keys if k2 in ev[w]} for w in ("before", "after")}}
     return out
@@ -194,11 +207,84 @@ def cv_risk(errors: Mapping, shipped_step: int, level: float = 0.90) -> dict:
             "note": "calibration records whose real cross-validated RMSE under the shipped model exceeds the base's"}
 
 
+def _band_of(pred, runs, point_runs, variances: dict, fallback_S, seed, label):
+    """A record's band at one step (:func:`enkf.diagnosis.band.run_band`); None where its runs failed."""
+    if runs is None:
+        return None
+    S, dof = replicate_variance(point_runs)
+    terms = dict(variances)
+    if S is not None:
+        terms["simulator"] = S
+    elif fallback_S is not None:
+        # one run per point: the calibration's measured S (the protocol's term for the record), not the runs'
+        terms["simulator"] = np.diag(fallback_S.dense()).copy()
+    band = run_band(pred.draws, pred.curve, runs, terms, rng=np.random.default_rng(seed_for(seed, "band", *label)),
+                    level=0.90)
+    return band, {"simulator_dof": dof, "simulator_from": "check replicates" if S is not None
+                  else ("calibration's replicates" if fallback_S is not None else "none")}
+
+
+def predictive_bands(selection, real: Mapping, k: int, obs: Observations, heldout: Observations | None,
+                     noise: Mapping, simulator: Mapping, discrepancy: Mapping[str, np.ndarray]):
+    """``({record: {"data", "before", "after"}}, frame)``: each record's 90 % predictive band of its curve
+    under the base model (step 0) and the shipped one (step ``k``), centred on the mean of the real FDEM
+    runs at its prediction point, with :func:`enkf.diagnosis.band.run_band`'s terms:
+
+    (a) the posterior members x population draws through the emulator of the record (its design runs are
+        simulations driven by its incident wave);
+    (b) the simulator's variability, measured on the record's replicated check runs (pooled over the
+        steps' points; with one run per point the protocol's ``simulator`` term);
+    (c) the model discrepancy the calibration estimated on the calibration records (``discrepancy``, their
+        mean; fitted to the base model, so it is cautious for a model that added effects);
+    (d) the instrument noise: the calibration records' pooled level (mean of their noise variances).
+
+    A held-out record's band takes nothing computed from its response: not its curve, nor its own
+    pre-trigger noise (``noise[h]``, which the selection gave it), nor its onset or its modulus. Its
+    band is fixed before its curve is read; the curve only scores it (``frame`` holds the bands, SI).
+    The calibration records' bands (at their cross-validation points, parameters fitted without them)
+    hold their own data in (c) and (d): in-sample."""
+    calib = list(obs.records)
+    variances = {"discrepancy": _mean_block([np.asarray(discrepancy[r], float) for r in calib]),
+                 "noise": _mean_block([np.diag(noise[r].dense()) for r in calib])}
+    seed = int(selection.settings.get("seed", 0))
+    jobs = [(r, "cv", "calibration (in-sample: its own data set the discrepancy and noise terms)", obs)
+            for r in calib]
+    if heldout is not None:
+        jobs += [(h, "heldout", "heldout", heldout) for h in heldout.records]
+    out, frames = {}, []
+    for rec, role, data, src in jobs:
+        pts = [c[rec] for c in real[role].values() if c.get(rec) is not None]
+        entry = {"data": data}
+        # every band is built before the record's curve is read below
+        bands = {}
+        for when, step in (("before", 0), ("after", k)):
+            st = selection.steps[step]
+            pred = st.heldout[rec] if role == "heldout" else st.cv.folds[rec]["prediction"]
+            bands[when] = _band_of(pred, real[role].get(step, {}).get(rec), pts, variances, simulator.get(rec),
+                                   seed, (rec, step))
+        s = src.record_slice(rec)
+        t, y = src.time[s], src.values[s]
+        for when, got in bands.items():
+            if got is None:
+                entry[when] = None
+                continue
+            band, info = got
+            entry[when] = {**band.summary(y), **info}
+            frames.append(pd.DataFrame({"record": rec, "data": role, "model": when, "time_s": t,
+                                        "centre_Pa": band.centre, "lower_Pa": band.lower, "upper_Pa": band.upper}))
+        out[rec] = entry
+    cols = ["record", "data", "model", "time_s", "centre_Pa", "lower_Pa", "upper_Pa"]
+    return out, (pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=cols))
+
+
 def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: EmulatedSHPB, obs: Observations,
-             heldout: Observations | None, noise: Mapping, simulator: Mapping) -> tuple[dict, dict, dict]:
-    """``(report, check, curves)`` of the loop: the confirmation walk on the real cross-validation runs,
-    then (read here for the first time) the held-out records' errors before and after on the real
-    held-out runs. ``runs[i]``: the FDEM curve (DataFrame, or None if it failed) of ``rows[i]``."""
+             heldout: Observations | None, noise: Mapping, simulator: Mapping,
+             discrepancy: Mapping[str, np.ndarray]) -> tuple[dict, dict, dict, pd.DataFrame]:
+    """``(report, check, curves, bands)`` of the loop: the confirmation walk on the real cross-validation
+    runs, then (read here for the first time) the held-out records' errors before and after on the real
+    held-out runs, and every record's predictive band (:func:`predictive_bands`; ``bands`` the csv beside
+    check.json). ``runs[i]``: the FDEM curve (DataFrame, or None if it failed) of ``rows[i]``;
+    ``discrepancy``: :func:`calibration_discrepancy` of the calibration records."""
     real = real_curves(rows, runs, model)
     y = {r: obs.values[obs.record_slice(r)] for r in obs.records}
     # the walk's own rule (enkf.diagnosis.replicated), so the error terms given and the test it picks agree
@@ -224,6 +310,11 @@ def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: Emulated
             raise RuntimeError(f"the held-out FDEM runs of {sorted(set(missing))} failed; no held-out error to report")
         held = heldout_evaluation(selection, hv, ht, final=k,
                                   real={"before": real["heldout"][0], "after": real["heldout"][k]})
+    bands, band_frame = predictive_bands(selection, real, k, obs, heldout if held else None, noise, simulator,
+                                         discrepancy)
+    for h in held:
+        for w in ("before", "after"):
+            held[h][w]["predictive_coverage_90"] = bands[h][w]["predictive_coverage_90"]
     shipped = selection.steps[k]
     if k == 0:
         verdict = "base_kept"
@@ -245,6 +336,13 @@ def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: Emulated
              "fdem_confirmation": {"status": verdict, "text": why, "steps": conf["steps"],
                                    "real_cv_rmse_Pa": conf["real_cv_rmse"]},
              "errors_per_record": errors, "heldout": held, "cv_risk_worse_than_base": risk,
+             "predictive_band": {"level": 0.90, "records": bands, "file": "check_band.csv",
+                                 "terms": "posterior members x population draws on the emulator of the record, "
+                                          "the simulator's variability from the check's replicates, the discrepancy "
+                                          "and the instrument noise pooled over the calibration records; centred "
+                                          "on the mean of the real FDEM runs at the prediction point",
+                                 "note": "held-out records: nothing from their response enters their band; "
+                                         "calibration records: in-sample"},
              "note": "real FDEM runs: calibration records at their cross-validation points (each predicted by a "
                      "calibration without it), held-out records at their prediction points; before = base "
                      "model, after = the confirmed model"}
@@ -257,7 +355,7 @@ def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: Emulated
         s = heldout.record_slice(h)
         curves[h] = {"data": "heldout", "time": heldout.time[s], "obs": heldout.values[s],
                      "before": real["heldout"][0][h], "after": real["heldout"][k][h]}
-    return report, check, curves
+    return report, check, curves, band_frame
 
 
 # --------------------------------------------------------------------------------------------------
@@ -282,8 +380,8 @@ def loro_folds(name: str, exp: Mapping) -> dict[str, dict]:
 
 def loro_table(folds: Mapping[str, Mapping], record_info: Mapping[str, Mapping] | None = None) -> dict:
     """Per fold (``{fold: report.json}``) and in total: the effects kept and their estimates, the held-out
-    record's FDEM errors before and after (RMSE, peak, time to peak), and the mean change with its
-    spread across folds."""
+    record's FDEM errors before and after (RMSE, peak, time to peak) and its 90 % predictive band's coverage
+    (:func:`predictive_bands`), and the mean change with its spread across folds."""
     rows = []
     for fold, rep in folds.items():
         for h, ev in (rep.get("heldout") or {}).items():
@@ -293,7 +391,7 @@ def loro_table(folds: Mapping[str, Mapping], record_info: Mapping[str, Mapping] 
                    "verdict": rep["verdict"], "estimates": shared,
                    "heldout_values": ev["after"].get("point"), "heldout_intervals": ev["after"].get("intervals")}
             for w in ("before", "after"):
-                for key in ("rmse", "peak_error", "peak_rel_error", "time_to_peak_error"):
+                for key in ("rmse", "peak_error", "peak_rel_error", "time_to_peak_error", "predictive_coverage_90"):
                     row[f"{key}_{w}"] = ev[w].get(key)
             row["rmse_change"] = ev["after"]["rmse"] - ev["before"]["rmse"]
             info = (record_info or {}).get(h, {})
@@ -310,6 +408,11 @@ def loro_table(folds: Mapping[str, Mapping], record_info: Mapping[str, Mapping] 
               "folds_worse": int(np.sum(ch > 0)), "folds_better": int(np.sum(ch < 0)),
               "effects_kept": {e: sum(e in r["effects"] for r in rows) for e in sorted({e for r in rows for e in r["effects"]})},
               "cv_risk_worse_than_base": pooled_risk(risks, n)}
+    for w in ("before", "after"):
+        # the held-out records' 90 % band coverage (None for folds run before the check reported it)
+        cov = [r[f"predictive_coverage_90_{w}"] for r in rows if r.get(f"predictive_coverage_90_{w}") is not None]
+        totals[f"mean_predictive_coverage_90_{w}"] = float(np.mean(cov)) if cov else None
+        totals[f"folds_with_predictive_coverage_{w}"] = len(cov)
     return {"rows": rows, "totals": totals}
 
 

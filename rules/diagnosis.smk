@@ -161,6 +161,8 @@ rule diagnosis_check:
             category="{exp}",
             subcategory="diagnosis",
         ),
+        # every record's 90 % predictive band of the check (calibration.closing.predictive_bands)
+        band="results/{exp}/diagnosis/check_band.csv",
         png=report(
             "results/{exp}/diagnosis/check.png",
             category="{exp}",

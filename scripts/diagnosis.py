@@ -9,7 +9,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from calibration.closing import blind, check_rows, covariate_table, emulated_model, protocol_errors, select_effects
+from calibration.closing import (blind, calibration_discrepancy, check_rows, covariate_table, emulated_model,
+                                 protocol_errors, select_effects)
 from calibration.diagnose import model_grid
 from calibration.experiment import diagnosis_settings
 from calibration.model_error import check_replicate_count
@@ -38,7 +39,8 @@ selection = select_effects(model, base_names=meta["base_names"], candidates=snak
                            noise=noise, simulator=simulator, heldout_records=held.records if held is not None else [],
                            settings=d, mesh_mode=e["simulation"].get("mesh_realizations") or "per_run")
 atomic_write_bytes(out.selection, pickle.dumps({"selection": selection, "model": model, "noise": noise,
-                                                "simulator": simulator, "design_failed_runs": n_failed}))
+                                                "simulator": simulator, "design_failed_runs": n_failed,
+                                                "discrepancy": calibration_discrepancy(obs, analysis)}))
 # the calibration records' residual at the base model's calibration against every covariate their sheets
 # give (strain rate, length-to-diameter ratio, gas pressure): what a rate or geometry effect leaves
 table, trends = covariate_table(selection, model, obs)

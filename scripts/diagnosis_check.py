@@ -9,7 +9,7 @@ import pickle
 from calibration.closing import assemble
 from calibration.observations import read_curve, read_observations
 from calibration.plots import plot_diagnosis_check
-from calibration.workflow_io import atomic_write_json, read_json
+from calibration.workflow_io import atomic_write_csv, atomic_write_json, read_json
 
 inp, out = snakemake.input, snakemake.output
 state = pickle.loads(open(inp.selection, "rb").read())
@@ -17,8 +17,9 @@ rows = read_json(inp.rows)["rows"]
 runs = [read_curve(p) for p in inp.runs]
 obs = read_observations(inp.obs, inp.obs_meta)
 held = read_observations(inp.heldout, inp.heldout_meta) if "heldout" in inp.keys() else None
-report, check, curves = assemble(state["selection"], rows, runs, state["model"], obs, held, state["noise"],
-                                 state["simulator"])
+report, check, curves, bands = assemble(state["selection"], rows, runs, state["model"], obs, held, state["noise"],
+                                        state["simulator"], state["discrepancy"])
 atomic_write_json(out.report, report)
 atomic_write_json(out.check, check)
+atomic_write_csv(bands, out.band)
 plot_diagnosis_check(out.png, curves, check["errors_per_record"], check["added"], check["fdem_confirmation"]["text"])

@@ -27,6 +27,29 @@ def _pct(e) -> str:
     return "-" if e is None else f"{100 * e:+.0f} %"
 
 
+def _cov(c) -> str:
+    return "-" if c is None else f"{c:.2f}"
+
+
+def _coverage(r: dict) -> str:
+    """The held-out record's 90 % predictive band coverage before -> after ("-" for a fold run before the
+    check reported it)."""
+    b, a = r.get("predictive_coverage_90_before"), r.get("predictive_coverage_90_after")
+    return "-" if b is None and a is None else f"{_cov(b)} -> {_cov(a)}"
+
+
+def _mean_coverage(series: dict) -> str:
+    vals = {}
+    for w in ("before", "after"):
+        got = [r[f"predictive_coverage_90_{w}"] for r in series["rows"] if r.get(f"predictive_coverage_90_{w}") is not None]
+        vals[w] = (sum(got) / len(got), len(got)) if got else None
+    if vals["before"] is None and vals["after"] is None:
+        return "-"
+    n = max(v[1] for v in vals.values() if v is not None)
+    return (f"**{_cov(vals['before'] and vals['before'][0])} -> {_cov(vals['after'] and vals['after'][0])}**"
+            f" ({n} of {len(series['rows'])} folds)")
+
+
 def rows(series: dict) -> list[str]:
     out = []
     for r in series["rows"]:
@@ -36,14 +59,16 @@ def rows(series: dict) -> list[str]:
             + f" | {', '.join(r['effects']) or 'none (base kept)'} "
             f"| {_mpa(r['rmse_before'])} -> {_mpa(r['rmse_after'])} "
             f"| {_pct(r.get('peak_rel_error_before'))} -> {_pct(r.get('peak_rel_error_after'))} "
-            f"| {r['time_to_peak_error_before'] * 1e6:+.0f} -> {r['time_to_peak_error_after'] * 1e6:+.0f} |")
+            f"| {r['time_to_peak_error_before'] * 1e6:+.0f} -> {r['time_to_peak_error_after'] * 1e6:+.0f} "
+            f"| {_coverage(r)} |")
     t = series["totals"]
     sd = t.get("sd_rmse_change")
     out.append(f"| {series['experiment']} | **mean over {t['folds']} folds** | "
                + ", ".join(f"{e} {n}/{t['folds']}" for e, n in t["effects_kept"].items())
                + f" | **{_mpa(t['mean_rmse_before'])} -> {_mpa(t['mean_rmse_after'])}** (change "
                f"{t['mean_rmse_change'] / 1e6:+.1f}" + (f", sd {sd / 1e6:.1f}" if sd is not None else "")
-               + f"; {t['folds_worse']} fold(s) worse)" + _risk(t.get("cv_risk_worse_than_base")) + " | | |")
+               + f"; {t['folds_worse']} fold(s) worse)" + _risk(t.get("cv_risk_worse_than_base"))
+               + f" | | | {_mean_coverage(series)} |")
     return out
 
 
@@ -76,11 +101,15 @@ def add_risk(summary_path: Path, reports) -> None:
 
 def block(paths) -> str:
     lines = ["| series | held-out record | effects kept | held-out RMSE, real FDEM [MPa] | peak error | "
-             "time-to-peak error [us] |", "|---|---|---|---|---|---|"]
+             "time-to-peak error [us] | held-out 90 % band coverage |", "|---|---|---|---|---|---|---|"]
     for p in paths:
         lines += rows(json.loads((ROOT / p).read_text()))
     head = "From " + ", ".join(f"`{p}`" for p in paths) + " (before: base model; after: the model the fold kept):"
-    return f"{START}\n{head}\n\n" + "\n".join(lines) + f"\n{END}"
+    foot = ("The band coverage is the fraction of the held-out curve inside its 90 % predictive band "
+            "(check.json's `predictive_coverage_90`); \"-\": the fold was run before the check reported it. "
+            "These records are development data: they were read while the method was built, so a coverage "
+            "here is not a test on unseen records.")
+    return f"{START}\n{head}\n\n" + "\n".join(lines) + f"\n\n{foot}\n{END}"
 
 
 DOC = ROOT / "docs" / "closing-the-loop.md"

@@ -1,0 +1,182 @@
+"""The predictive band of a predicted record (enkf.diagnosis.band, calibration.closing.predictive_bands):
+calibrated at its level on curves drawn from its own model, failed by an over-confident band, an
+informativeness check a prior-wide band fails, and a held-out record's band that nothing of its own
+response can move.
+
+The synthetic model: a Gaussian pulse ``a exp(-((t - c) / w)^2)`` with the posterior of ``(a, c)`` a
+normal around (40 MPa, 50 us); the 'real runs' at the prediction point carry an AR(1) mesh departure
+(sd 0.6 MPa on the pulse), each curve a discrepancy (0.8 MPa) and instrument noise (0.3 MPa); the
+'emulator' is the exact pulse plus a 2 MPa bias common to its draws and its point (it cancels)."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from calibration.closing import assemble, check_rows, predictive_bands
+from calibration.observations import OBS_COLUMNS, Observations
+from enkf import AR1Error
+from enkf.diagnosis.band import SCORE_RATIO_BAR, informative, interval_score, replicate_variance, run_band
+from test_protocol_shpb import CALIB, K, MODEL_T, OBS_T, NOISE, curve, data, emulated, run
+
+T = np.arange(0.0, 150e-6, 1.5e-6)
+W = 20e-6
+POST_MEAN, POST_SD = np.array([40e6, 50e-6]), np.array([2e6, 2e-6])
+PRIOR_LO, PRIOR_HI = np.array([20e6, 20e-6]), np.array([60e6, 80e-6])
+BIAS = 2e6 * np.sin(T / 30e-6)
+S_SD, D_SD, R_SD, KREP = 0.6e6, 0.8e6, 0.3e6, 3
+
+
+def pulse(P):
+    P = np.atleast_2d(P)
+    return P[:, :1] * np.exp(-(((T - P[:, 1:2]) / W) ** 2))
+
+
+def s_shape():
+    # the mesh departure grows with the load: small before the pulse, S_SD at its height
+    return S_SD * (0.05 + pulse(POST_MEAN)[0] / POST_MEAN[0])
+
+
+def synthetic(n_curves=200, seed=0):
+    """Per curve: (posterior draws' emulated curves, emulated point, K real runs, two more steps' runs, truth)."""
+    rng = np.random.default_rng(seed)
+    eta = AR1Error(s_shape(), T, 4e-6)
+    delta, noise = AR1Error(D_SD, T, 10e-6), AR1Error(R_SD, T, 3e-6)
+    point = POST_MEAN
+    for _ in range(n_curves):
+        draws = pulse(point + POST_SD * rng.standard_normal((200, 2))) + BIAS
+        runs = pulse(point) + eta.sample(rng, KREP)
+        other = pulse(point + [1e6, 1e-6]) + eta.sample(rng, KREP)  # another step's point, same record
+        truth = point + POST_SD * rng.standard_normal(2)
+        y = pulse(truth)[0] + eta.sample(rng, 1)[0] + delta.sample(rng, 1)[0] + noise.sample(rng, 1)[0]
+        yield draws, pulse(point)[0] + BIAS, runs, other, y
+
+
+def bands(kind, seed=0):
+    out = []
+    rng = np.random.default_rng(99)
+    for draws, em, runs, other, y in synthetic(seed=seed):
+        S, _ = replicate_variance([runs, other])
+        terms = {"simulator": S, "discrepancy": np.full(T.size, D_SD ** 2), "noise": np.full(T.size, R_SD ** 2)}
+        if kind == "noise only":
+            draws, terms = em[None, :], {"noise": terms["noise"]}
+        elif kind == "prior":
+            draws = pulse(PRIOR_LO + (PRIOR_HI - PRIOR_LO) * rng.random((200, 2))) + BIAS
+        out.append((run_band(draws, em, runs, terms, rng=rng), y))
+    return out
+
+
+@pytest.fixture(scope="module")
+def scored():
+    return {k: bands(k) for k in ("posterior", "noise only", "prior")}
+
+
+def test_the_band_covers_curves_of_its_own_model_at_its_level(scored):
+    cov = np.array([b.coverage(y) for b, y in scored["posterior"]])
+    # 200 curves of 100 correlated points: one curve's coverage scatters by about 0.09, the mean of 200 by
+    # 0.007 (measured 0.90; 0.90-0.91 on three other seeds), so the 0.85-0.95 bar is over 5 of its sd wide
+    assert 0.85 <= cov.mean() <= 0.95
+    assert all(set(b.parts) == {"parameters", "simulator", "discrepancy", "noise"} for b, _ in scored["posterior"][:3])
+
+
+def test_an_over_confident_band_fails_the_coverage_check(scored):
+    cov = np.mean([b.coverage(y) for b, y in scored["noise only"]])
+    assert cov < 0.6  # noise alone, 0.3 of about 1.5 MPa of scatter: measured 0.31
+
+
+def test_a_prior_wide_band_covers_but_fails_the_informativeness_check(scored):
+    """Coverage cannot tell a prior-wide band from a calibrated one; the interval score can: the posterior
+    band's mean score is at most SCORE_RATIO_BAR of the prior band's, the prior band's own ratio is 1."""
+    post = np.mean([b.score(y) for b, y in scored["posterior"]])
+    prior = np.mean([b.score(y) for b, y in scored["prior"]])
+    assert np.mean([b.coverage(y) for b, y in scored["prior"]]) > 0.95  # measured 0.96: it would pass coverage
+    assert informative(post, prior) and post / prior < 0.3  # measured 0.25 (7.0 against 28.3 MPa)
+    assert not informative(prior, prior)
+    assert SCORE_RATIO_BAR == 0.55
+
+
+def test_the_interval_score_by_hand():
+    # width 2, one point below by 1, level 0.9 (2 / 0.1 = 20): (2 + 2 + 20) / 2
+    assert interval_score([0.0, 0.0], [2.0, 2.0], [1.0, -1.0], 0.9) == pytest.approx(12.0)
+
+
+def test_the_replicates_give_the_simulator_variability_pooled_over_points():
+    rng = np.random.default_rng(5)
+    eta = AR1Error(1e6, T, 4e-6)
+    pts = [pulse(POST_MEAN) + eta.sample(rng, 3) for _ in range(20)]
+    S, dof = replicate_variance(pts)
+    assert dof == 40 and np.sqrt(np.mean(S)) == pytest.approx(1e6, rel=0.1)
+    assert replicate_variance([pulse(POST_MEAN)]) == (None, 0)  # one run: nothing measured
+
+
+# ---------------------------------------------------------------------------------------------------
+# the workflow's bands on the stand-in of tests/test_protocol_shpb.py, and the held-out record's inputs
+# ---------------------------------------------------------------------------------------------------
+def _obs(values: dict, sigma: float) -> Observations:
+    recs = list(values)
+    frame = pd.DataFrame({"record": np.repeat(recs, OBS_T.size), "time_s": np.tile(OBS_T, len(recs)),
+                          "stress_Pa": np.concatenate([values[r] for r in recs]), "sigma_Pa": sigma})
+    assert list(frame.columns) == list(OBS_COLUMNS)
+    return Observations(frame, "ar1", {r: 3e-6 for r in recs})
+
+
+@pytest.fixture(scope="module")
+def loop():
+    obs = data()
+    sel = run(emulated(), obs)
+    rows = check_rows(sel, 3)
+    departure = AR1Error(1e6, MODEL_T, 10e-6)
+    mesh = {(r, k): departure.sample(np.random.default_rng(100 * ord(r) + k), 1)[0] for r in K for k in range(3)}
+
+    def fdem(row):
+        p = {"face_gap.gap_m": 0.0, **row["simulator"]}
+        y = curve(MODEL_T, p["sigma_p"], p["tau_d"], p["face_gap.gap_m"], K[row["record"]])[0]
+        return pd.DataFrame({"time_s": MODEL_T, "stress_Pa": y + mesh[(row["record"], row["replicate"])]})
+    return obs, sel, rows, [fdem(r) for r in rows]
+
+
+def _assemble(loop, held_values, held_sigma, held_noise):
+    obs, sel, rows, runs = loop
+    cal = _obs({r: obs[r] for r in CALIB}, 0.3e6)
+    held = _obs({"H": held_values}, held_sigma)
+    disc = {r: np.full(OBS_T.size, (0.5e6) ** 2) for r in CALIB}
+    return assemble(sel, rows, runs, emulated(), cal, held, {**NOISE, "H": held_noise}, {}, disc)
+
+
+def test_a_held_out_band_is_the_same_whatever_its_curve_and_its_own_noise(loop):
+    obs = loop[0]
+    report, check, _, frame = _assemble(loop, obs["H"], 0.3e6, NOISE["H"])
+    rng = np.random.default_rng(1)
+    # another test's answer: its curve reversed, tripled and noisy, its pre-trigger noise 30 MPa
+    bad = 3.0 * obs["H"][::-1] + rng.normal(0.0, 5e6, OBS_T.size)
+    report2, check2, _, frame2 = _assemble(loop, bad, 30e6, AR1Error(30e6, OBS_T, 3e-6))
+    h, h2 = frame[frame.record == "H"], frame2[frame2.record == "H"]
+    assert len(h) == 2 * OBS_T.size
+    for col in ("centre_Pa", "lower_Pa", "upper_Pa"):
+        assert np.array_equal(h[col].to_numpy(), h2[col].to_numpy())
+    band, band2 = check["predictive_band"]["records"]["H"], check2["predictive_band"]["records"]["H"]
+    for w in ("before", "after"):
+        assert band[w]["parts_rms_Pa"] == band2[w]["parts_rms_Pa"]
+        # the noise term is the calibration records' pooled 0.3 MPa, not the held-out record's own
+        assert band[w]["parts_rms_Pa"]["noise"] == pytest.approx(0.3e6, rel=1e-9)
+        assert band[w]["simulator_from"] == "check replicates" and band[w]["replicates"] == 3
+    # the curve only scores the band: the clean one lies inside, the corrupted one does not
+    cov = report["heldout"]["H"]["after"]["predictive_coverage_90"]
+    assert cov >= 0.9 and report2["heldout"]["H"]["after"]["predictive_coverage_90"] < 0.5
+    assert check["errors_per_record"]["H"]["after"]["predictive_coverage_90"] == cov
+    assert check["predictive_band"]["records"]["A"]["data"].startswith("calibration (in-sample")
+
+
+def test_the_band_of_a_record_with_one_run_per_point_takes_the_protocol_simulator_term(loop):
+    obs, sel, rows, runs = loop
+    keep = [i for i, r in enumerate(rows) if r["replicate"] == 0]
+    from calibration.protocol import real_curves
+
+    real = real_curves([rows[i] for i in keep], [runs[i] for i in keep], emulated())
+    cal, held = _obs({r: obs[r] for r in CALIB}, 0.3e6), _obs({"H": obs["H"]}, 0.3e6)
+    S = {"H": AR1Error(0.7e6, OBS_T, 5e-6)}
+    out, _ = predictive_bands(sel, real, 1, cal, held, NOISE, S, {r: np.zeros(OBS_T.size) for r in CALIB})
+    after = out["H"]["after"]
+    # one run: its own departure and the data's, 2 S
+    assert after["simulator_from"] == "calibration's replicates" and after["replicates"] == 1
+    assert after["parts_rms_Pa"]["simulator"] == pytest.approx(np.sqrt(2) * 0.7e6, rel=1e-9)
+    assert out["A"]["after"]["simulator_from"] == "none"
