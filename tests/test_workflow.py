@@ -513,38 +513,26 @@ def test_a_malformed_observation_file_fails_before_the_first_simulation(tmp_path
     assert not (tmp_path / "results").exists()
 
 
-def test_a_measured_experiment_runs_from_a_fresh_clone_with_nothing_beside_it(tmp_path):
+def test_every_shipped_config_dry_runs_from_a_fresh_clone_with_nothing_beside_it(tmp_path):
     """A clone of the committed repository in an empty folder (nothing beside it, no FDEM_DATA_DIR), its own
-    code first on the path: a small measured calibration (cylinder, fast, CaMa_005, three members, one
-    analysis) runs to its summary with the data the repository ships. A data file the product needs but
-    did not commit fails here. (Uncommitted changes are not in the clone: commit before relying on it.)"""
+    code first on the path: every shipped config passes its dry run there, and a dry run reads and reduces
+    every record of every experiment the config defines (the Snakefile's check before any job) and
+    resolves every job's input. A data file the product needs but did not commit fails here, before CI's
+    own fresh clone runs the workflow and this suite (.ci/run). (Uncommitted changes are not in the clone:
+    commit before relying on it.)"""
     if not (REPO / ".git").exists():
         pytest.fail(f"{REPO} is not a git checkout: this test clones it to prove a fresh clone runs")
     clone = tmp_path / "empty" / "fdem-enkf-shpb"
     subprocess.run(["git", "clone", "--quiet", str(REPO), str(clone)], check=True, timeout=120)
     assert sorted(p.name for p in clone.parent.iterdir()) == ["fdem-enkf-shpb"]
-    record = "data/freiburg-rae-rock-shpb/Rae2021/SHPBdata/CaMa/CaMa_SHPB_005_Ti25_60b_Al12b_0_001.txt"
-    cfg = {"run": ["marble_fresh"], "experiments": {"marble_fresh": {
-        "kind": "measured", "geometry": "cylinder", "preset": "fast", "seed": 5, "ensemble_size": 3,
-        "method": "esmda", "esmda": {"steps": 1}, "max_rank": 2,
-        "parameters": {"sigma_t": [1.0e7, 1.2e8], "E_t": [100.0, 5000.0]},
-        "simulation": {"t_end": 1.4e-4, "sample_dt": 1.0e-6},
-        "observations": {"t_end": 1.4e-4, "dt": 2.0e-6, "records": [record], "error": {"kind": "ar1"},
-                         "model_error": {"simulator_replicates": 2}}}}}
-    (clone / "fresh.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
     env = {k: v for k, v in os.environ.items() if k != "FDEM_DATA_DIR"}
     env["PYTHONPATH"] = str(clone)
-    out = subprocess.run([sys.executable, "-m", "snakemake", "--cores", "2", "--configfile", "fresh.yaml"],
-                         cwd=clone, capture_output=True, text=True, timeout=600, env=env)
-    assert out.returncode == 0, out.stderr[-4000:]
-    res = clone / "results" / "marble_fresh"
-    summary = json.loads((res / "summary.json").read_text())
-    assert set(summary["posterior"]) == {"sigma_t", "E_t"}
-    assert all(np.isfinite(v["mean"]) for v in summary["posterior"].values())
-    # two analyses' worth of 3 members and 2 replicates at the mean, one forecast
-    assert summary["n_simulations"] == 2 * (3 + 2) + 1 and not summary["failed_members"]
-    run = json.loads((res / "forecast" / "CaMa_SHPB_005" / "run.json").read_text())
-    assert run["status"] == "ok" and run["record"] == "CaMa_SHPB_005"
-    assert (res / "forecast" / "CaMa_SHPB_005" / "snapshots" / "damage_peak.png").is_file()
-    assert not (clone.parent / "shared").exists()
+    configs = sorted(p.name for p in (clone / "config").glob("*.yaml") if p.name != "schema.yaml")
+    assert {"config.yaml", "diagnosis.yaml", "own_data.yaml", "validation.yaml"} <= set(configs)
+    for name in configs:
+        out = subprocess.run([sys.executable, "-m", "snakemake", "-n", "--cores", "2", "--configfile",
+                              f"config/{name}"], cwd=clone, capture_output=True, text=True, timeout=300, env=env)
+        assert out.returncode == 0, (name, (out.stdout + out.stderr)[-3000:])
+        assert "member" in out.stdout, name
+    assert not (clone / "results").exists() and not (clone.parent / "shared").exists()
 
