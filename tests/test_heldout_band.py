@@ -180,3 +180,34 @@ def test_the_band_of_a_record_with_one_run_per_point_takes_the_protocol_simulato
     assert after["simulator_from"] == "calibration's replicates" and after["replicates"] == 1
     assert after["parts_rms_Pa"]["simulator"] == pytest.approx(np.sqrt(2) * 0.7e6, rel=1e-9)
     assert out["A"]["after"]["simulator_from"] == "none"
+
+
+# ---------------------------------------------------------------------------------------------------
+# the leave-one-record-out table
+# ---------------------------------------------------------------------------------------------------
+def _fold(h, cov=None):
+    ev = {"rmse": 5.0e6, "peak_error": 1.0e6, "time_to_peak_error": 1e-6, "point": {}, "intervals": {}}
+    after = dict(ev) if cov is None else {**ev, "predictive_coverage_90": cov[1]}
+    before = dict(ev) if cov is None else {**ev, "predictive_coverage_90": cov[0]}
+    return {"heldout": {h: {"before": before, "after": after}}, "selection": {"steps": [{"posterior": {}}]},
+            "shipped_step": 0, "calib_records": ["x"], "added": [], "verdict": "base_kept", "errors_per_record": {}}
+
+
+def test_the_series_table_carries_each_folds_band_coverage_and_shows_a_dash_where_a_fold_has_none():
+    from calibration.closing import loro_table
+    from tools.loro_table import rows as table_rows
+
+    t = loro_table({"s__A": _fold("A", (0.5, 0.7)), "s__B": _fold("B", (0.9, 1.0)), "s__C": _fold("C")})
+    r = {row["heldout"]: row for row in t["rows"]}
+    assert (r["A"]["predictive_coverage_90_before"], r["A"]["predictive_coverage_90_after"]) == (0.5, 0.7)
+    assert r["C"]["predictive_coverage_90_after"] is None
+    tot = t["totals"]
+    assert tot["mean_predictive_coverage_90_after"] == pytest.approx(0.85)
+    assert tot["folds_with_predictive_coverage_after"] == 2
+    lines = table_rows({"experiment": "s", **t})
+    assert lines[0].endswith("| 0.50 -> 0.70 |") and lines[2].endswith("| - |")
+    assert lines[-1].endswith("| **0.70 -> 0.85** (2 of 3 folds) |")
+    # a series run before the check reported the band: every fold "-", and so is the mean
+    old = loro_table({"s__C": _fold("C")})
+    assert old["totals"]["mean_predictive_coverage_90_after"] is None
+    assert table_rows({"experiment": "s", **old})[-1].endswith("| - |")
