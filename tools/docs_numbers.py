@@ -52,9 +52,9 @@ NOT_RESULTS: list[tuple[str, str, str]] = [
     ("*", r"YAML 1\.1", "a version"),
     ("*", r"Figs?\. \d+(?:/\d+)?", "a figure of the paper"),
     ("*", r"(?<![\d.])(?:5|25|50|75|90|95) ?% (?:\w+[ -]){0,3}?(?:intervals?|band|quantiles?|coverage|predictive|"
-          r"prediction|posterior-predictive|credible|central)", "a probability level, a setting"),
+          r"prediction|posterior-predictive|credible|central|regions?|width|levels?|\()", "a probability level, a setting"),
     ("*", r"(?:5|25|50|75|90|95) ?% (?:or|and|/) (?:5|25|50|75|90|95) ?%", "probability levels"),
-    ("*", r"(?:within|more than|at most|at least|above|below|exceeds?|less than|under|over) "
+    ("*", r"(?:within|more than|at most|at least|above|below|exceeds?|than|under|over|at) "
           r"(?:\d+ ?%(?: ?(?:/|and|or) )?)+(?! of the twins)", "a threshold stated as a setting (whole percents)"),
     ("*", r"\d+ % / \d+ % bar", "the accuracy bar, a setting"),
     ("*", r"\d+ ?% (?:\(of the peak\) )?(?:white )?noise", "the twins' noise, an input"),
@@ -86,6 +86,14 @@ NOT_RESULTS: list[tuple[str, str, str]] = [
     ("*", r"safety factor 0\.6|at 0\.8 fracture runs|than at 0\.6", "the time step's safety factor, a setting"),
     ("*", r">= \d+ ?%", "a bound"),
     ("docs/engine.md", r"\(-13% at", "the formula's value at f = 10"),
+    ("*", r"(?:a|the) 1 % (?:change|scale)", "a perturbation of the input"),
+    ("docs/inference.md", r"approximately 45% of the standard", "the paper's words"),
+    ("docs/inference.md", r"within 0\.1 sd, sd within 7 %, quantiles within 0\.12 sd", "the test's tolerances"),
+    ("docs/inference.md", r"83 % at N = 25, 70 % at N = 8", "the formula's values"),
+    ("docs/inference.md", r"within 2 % \( ?\) / 10 %", "the accuracy bar, a setting"),
+    ("docs/inference.md", r"bars: 90 % coverage 0\.85-0\.95, rank tests not rejected at 1 %, at most 0\.25 \( ?\) and 0\.55",
+     "the harness's bars, settings"),
+    ("docs/inference.md", r"bandwidth \(0\.05 \.\.\. 0\.4", "the bandwidths tried, settings"),
     ("docs/cluster.md", r"\d+ x \d+ =\s+\d+ min|plus 5 min", "the time a group asks for, from the settings"),
     ("docs/cluster.md", r"MinJobAge >= 15 s|default is (?:300|40) s|comes 5 s after|= 40 s|stopped at 40 s",
      "Slurm's and the plugin's settings"),
