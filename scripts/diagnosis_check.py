@@ -13,6 +13,8 @@ from calibration.workflow_io import atomic_write_csv, atomic_write_json, read_js
 
 inp, out = snakemake.input, snakemake.output
 state = pickle.loads(open(inp.selection, "rb").read())
+if "discrepancy" not in state:  # written before the bands needed the calibration's discrepancy
+    raise RuntimeError(f"{inp.selection} holds no discrepancy: re-run rule diagnosis_select for it")
 rows = read_json(inp.rows)["rows"]
 runs = [read_curve(p) for p in inp.runs]
 obs = read_observations(inp.obs, inp.obs_meta)
