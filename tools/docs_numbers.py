@@ -101,7 +101,12 @@ NOT_RESULTS: list[tuple[str, str, str]] = [
      "Slurm's and the plugin's settings"),
     ("docs/engine.md", r"exceeds 10x the work|at 3x the stable step", "the guard's threshold; an input"),
     ("docs/engine.md", r"within 0\.5% over 20,500 steps|less than 0\.1% of the element", "the tests' bounds"),
-    ("docs/sensitivity.md", r"`a` 0\.3-0\.9, `b` 1\.0-2\.5", "the design's box, an input"),
+    ("docs/sensitivity.md", r"shape 0\.3-0\.9, 1\.0-2\.5", "the design's box, an input"),
+    ("docs/architecture.md", r"exit codes 0 / 2 / 3", "exit codes"),
+    ("docs/own-data.md", r"at most 0\.05 valid|above 0\.10 invalid|between 0\.05 and 0\.10|from 10 % of the peak|"
+     r"onset \(5 % of its peak\)|plus 10 %|\(1, 2, 2\.5 or 5 x 10\^k s\)", "the lab checks' limits and the config's rules"),
+    ("docs/own-data.md", r"\(0\.57 c0 for nu = 0\.32\)|for nu = 0\.32", "the Rayleigh speed's ratio, physics"),
+    ("docs/own-data.md", r"short \(0\.15 m, the wave enters 0\.15 m", "the disc's bars, inputs"),
 ]
 
 

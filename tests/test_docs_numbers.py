@@ -1,0 +1,359 @@
+"""Every result number in README.md and docs/*.md is generated (tests/test_docs_tables.py) or quoted here
+with the committed JSON it came from: each quote below is the doc's words with the numbers filled in from
+that JSON, rounded as the doc rounds them, and must stand in the doc as written. tools/docs_numbers.py lists
+the result-looking numbers that are neither; that list must be empty.
+
+A quote's numbers are filled in by ``values(J)``, ``J(path)`` reading a committed JSON; a quote whose numbers
+another test already derives from the JSON names that test in ``by`` and gives the words as they stand."""
+
+from __future__ import annotations
+
+import functools
+import json
+import re
+from statistics import NormalDist
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+from tools import docs_numbers, results_table
+
+ROOT = Path(__file__).resolve().parents[1]
+RUN = "benchmarks/results/default_run"
+SHPB = "benchmarks/results/bench_shpb.json"
+ENGINE = "benchmarks/results/bench_engine.json"
+VAR = "benchmarks/results/bench_sim_variability.json"
+
+
+@functools.lru_cache(maxsize=None)
+def J(path: str):
+    return json.loads((ROOT / path).read_text())
+
+
+@dataclass(frozen=True)
+class Quote:
+    doc: str
+    words: str  # the doc's words, ``{name}`` where ``values`` fills in a number
+    values: Callable | None = None  # J -> {name: formatted number}
+    by: str = ""  # or: the test that derives these numbers from their JSON, "tests/file.py::test_name"
+
+    def text(self) -> str:
+        return self.words.format(**self.values(J)) if self.values else self.words
+
+
+def _span(xs, fmt) -> str:
+    return f"{fmt(min(xs))}-{fmt(max(xs))}"
+
+
+def _mpa(x) -> str:
+    return f"{x / 1e6:.1f}"
+
+
+def _twin():
+    return J(f"{RUN}/twin_ref/summary.json")
+
+
+def _marble():
+    return J(f"{RUN}/marble_loop/summary.json")
+
+
+def _walk_step():
+    return J(f"{RUN}/marble_loop/diagnosis/report.json")["confirmation"]["steps"][0]
+
+
+def _heldout(record="CaMa_SHPB_006"):
+    return J(f"{RUN}/marble_loop/diagnosis/check.json")["heldout"][record]
+
+
+SM = "docs/shpb-models.md"
+
+
+def _shpb(preset, point):
+    return J(SHPB)["presets"][preset][point]
+
+
+def _shpb_runs():
+    return [(p, k, r) for p, pts in J(SHPB)["presets"].items() for k, r in pts.items()]
+
+
+def _onset(sigma_n_mpa, sigma_t_mpa):
+    cases = J(f"studies/results/disc_onset_theory_sigma_n_{sigma_n_mpa}MPa.json")["cases"]
+    return next(c for c in cases if c["sigma_t_Pa"] == sigma_t_mpa * 1e6)
+
+
+def _var(case):
+    return J(VAR)["cases"][case]
+
+
+def _dt_ratios(case):
+    return [r["dt_s"] / _var(case)["unperturbed"]["dt_s"] for r in _var(case)["replicates"]]
+
+
+def _step(preset):
+    return J("studies/results/bench_time_step.json")["presets"][preset]
+
+
+def _error_models(experiment):
+    return next(e for e in J("studies/results/error_models.json")["experiments"] if e["experiment"] == experiment)
+
+
+CL = "docs/closing-the-loop.md"
+REFUTED = "benchmarks/results/loro_seen/refuted_steps.json"
+
+
+def _one(values) -> str:
+    """The one value all of ``values`` share (the doc quotes it once)."""
+    (v,) = set(values)
+    return v
+
+
+def _loro(rock):
+    return J(f"benchmarks/results/loro_unseen_{rock}/{rock}_unseen.json")["totals"]
+
+
+def _fold003():
+    rows = J("benchmarks/results/loro_unseen_sandstone/sandstone_unseen.json")["rows"]
+    return next(r for r in rows if r["heldout"] == "SeeSst_SHPB_003")
+
+
+def _gaps_003():
+    rows = J("benchmarks/results/loro_unseen_sandstone/sandstone_unseen.json")["rows"]
+    return [r["estimates"]["face_gap.gap_m@SeeSst_SHPB_003"]["mean"] for r in rows
+            if "face_gap.gap_m@SeeSst_SHPB_003" in r["estimates"]]
+
+
+def _pop():
+    return J("studies/results/population_average_cv.json")
+
+
+OD = "docs/own-data.md"
+OWN = "benchmarks/results/own_data_run"
+
+
+def _own():
+    return J(f"{OWN}/summary.json")
+
+
+def _off_centre():
+    return [r for r in _var("twin")["replicates"] if not r["checks"]["starts_central"]]
+
+
+HARNESS = "tests/test_harness_informative.py::test_the_committed_verdicts_are_the_readme_s"
+README_RUN = "tests/test_docs_tables.py::test_the_readme_quotes_the_default_runs_time_from_its_run_json"
+KILL = "tests/test_docs_tables.py::test_the_workflow_docs_kill_figures_are_the_committed_benchmarks"
+
+QUOTES: list[Quote] = [
+    # README: the default run and the coverage harness
+    Quote("README.md", "the default run took {run_s} s, {fdem_runs} FDEM runs", lambda J: J(f"{RUN}/run.json"),
+          by=README_RUN),
+    Quote("README.md", "covers 88-90 % with uniform ranks", by=HARNESS),
+    Quote("README.md", "covering 96 % of the 25 repeat twins", by=HARNESS),
+    Quote("README.md", "`sigma_t` 0.22-0.31 of the prior's against 0.25", by=HARNESS),
+    Quote("README.md", "`E_t` 0.67-0.70 against 0.55 on every set", by=HARNESS),
+    Quote("README.md", "26-32 % of the twins get the `uninformative` flag", by=HARNESS),
+    Quote("README.md", "intervals about 0.8 of the prior's width", by=HARNESS),
+    # docs/workflow.md: the default run
+    Quote("docs/workflow.md", "install {install_s} s, run {run_s} s, exit {exit_code}; {fdem_runs} FDEM runs, "
+          "{refine_runs} of them `twin_ref`'s refinement batch", lambda J: J(f"{RUN}/run.json")),
+    Quote("docs/workflow.md", "is {stat} against the statistic's target {target}", lambda J: {
+        "stat": f"{_twin()['verdict']['chi2_per_obs']['reported_against_noise_and_simulator']:.2f}",
+        "target": f"{_twin()['verdict']['chi2_per_obs']['stop_target']:.2f}"}),
+    Quote("docs/workflow.md", "its predictive coverage is {cov}", lambda J: {
+        "cov": f"{_twin()['predictive_coverage_90']['synthetic']:.2f}"}),
+    Quote("docs/workflow.md", "`E_t`'s interval spans {frac} of its box", lambda J: {
+        "frac": f"{_twin()['verdict']['interval_over_box']['E_t']:.2f}"}),
+    Quote("docs/workflow.md", "({pre} MPa before the peak, {post} after", lambda J: {
+        "pre": _span([x for r in _marble()["discrepancy"]["records"].values() for x in r["sigma_phases"][:2]],
+                     lambda x: f"{x / 1e6:.0f}"),
+        "post": _span([r["sigma_phases"][2] for r in _marble()["discrepancy"]["records"].values()],
+                      lambda x: f"{x / 1e6:.0f}")}),
+    Quote("docs/workflow.md", "is {stat} where the stop asks {target}", lambda J: {
+        "stat": f"{_marble()['misfit'][-1]['stop_chi2_per_obs']:.2f}",
+        "target": f"{_marble()['misfit'][-1]['stop_target']:.2f}"}),
+    Quote("docs/workflow.md", "against `R` alone {chi2:.0f}", lambda J: {
+        "chi2": _marble()["verdict"]["chi2_per_obs"]["final"]}),
+    Quote("docs/workflow.md", "predictive coverage ({a}, {b})", lambda J: {
+        "a": f"{_marble()['predictive_coverage_90']['CaMa_SHPB_004']:.2f}",
+        "b": f"{_marble()['predictive_coverage_90']['CaMa_SHPB_014']:.2f}"}),
+    Quote("docs/workflow.md", "at random points 0.5-18 s into a small twin", by=KILL),
+    Quote("docs/workflow.md", "(failure peak {fast}, {standard} and {paper} MPa at `fast`, `standard` and `paper` for the "
+          "reference parameters, at {t_fast}, {t_standard} and {t_paper} us", lambda J: {
+              **{k: _mpa(v["reference"]["peak_stress_Pa"]) for k, v in J(SHPB)["presets"].items()},
+              **{f"t_{k}": f"{v['reference']['peak_t_s'] * 1e6:.0f}" for k, v in J(SHPB)["presets"].items()}}),
+    Quote("docs/workflow.md", "(a `fast` cylinder member about {wall:.0f} s there)", lambda J: {
+        "wall": J(ENGINE)["cases"]["marble_fast"]["new"]["wall_s"]}),
+    Quote("docs/workflow.md", "is predicted with {rmse} MPa RMSE and a peak {peak:.0f} % high", lambda J: {
+        "rmse": _mpa(_heldout()["before"]["rmse"]), "peak": 100 * _heldout()["before"]["peak_rel_error"]}),
+    Quote("docs/workflow.md", "cross-validated RMSE from {before} to {after} MPa, not enough to pass the "
+          "Holm-corrected test (z = {z}, p = {p} against {level})", lambda J: {
+              "before": _mpa(_walk_step()["real_cv_rmse_before"]), "after": _mpa(_walk_step()["real_cv_rmse_after"]),
+              "z": f"{_walk_step()['z']:.2f}", "p": f"{_walk_step()['p']:.3f}", "level": f"{_walk_step()['level']:.4f}"}),
+    # docs/shpb-models.md: bench_shpb.json, the onset theory, bench_sim_variability.json
+    Quote(SM, "(-0.03, +0.03) R, {t:.0f} us after the incident wave's arrival", lambda J: {
+        "t": _shpb("standard", "reference")["first_joint_t_s"] * 1e6}),
+    Quote(SM, "is reached at {onset} MPa of Brazilian stress", lambda J: {"onset": _mpa(_onset(15, 45)["centre_onset_Pa"])}),
+    Quote(SM, "the failure peak ({peak} MPa, {t:.0f} us, the first load maximum) the {n} broken joints all lie within "
+          "0.15 R of the diameter and the two loaded faces carry the same force within {f:.1f} %", lambda J: {
+              "peak": _mpa(_shpb("standard", "reference")["peak_stress_Pa"]),
+              "t": _shpb("standard", "reference")["peak_t_s"] * 1e6, "n": _shpb("standard", "reference")["broken_at_peak"],
+              "f": 100 * abs(_shpb("standard", "reference")["force_ratio_at_peak"] - 1)}),
+    Quote(SM, "Energy balance within {others:.1f} % of the external work in every run but one (`fast`, weak-brittle: "
+          "{wb:.1f} %", lambda J: {
+              "others": 100 * max(r["energy_balance_rel"] for p, k, r in _shpb_runs() if (p, k) != ("fast", "weak_brittle")),
+              "wb": 100 * _shpb("fast", "weak_brittle")["energy_balance_rel"]}),
+    Quote(SM, "deepest contact penetration {span} % of the element size", lambda J: {
+        "span": _span([100 * r["max_contact_penetration_over_h"] for *_, r in _shpb_runs()], lambda x: f"{x:.1f}")}),
+    Quote(SM, "overlap by up to {o:.2f} of an element", lambda J: {
+        "o": max(r["overlap_at_end_over_h"] for *_, r in _shpb_runs())}),
+    Quote(SM, "the failure peak at `standard` is within {s_lo:+.1f} to {s_hi:+.1f} % of `paper` at all three points, "
+          "`fast` within {f_lo:+.1f} to {f_hi:+.1f} %", lambda J: {
+              **{f"{p[0]}_lo": 100 * min(r["peak_rel_diff_to_paper"] for q, _, r in _shpb_runs() if q == p)
+                 for p in ("standard", "fast")},
+              **{f"{p[0]}_hi": 100 * max(r["peak_rel_diff_to_paper"] for q, _, r in _shpb_runs() if q == p)
+                 for p in ("standard", "fast")}}),
+    Quote(SM, "the reference peak at `fast`, {peak} MPa, lies above", lambda J: {
+        "peak": _mpa(_shpb("fast", "reference")["peak_stress_Pa"])}),
+    Quote(SM, "the split at {t:.0f} us ({peak} MPa)", lambda J: {
+        "t": _shpb("paper", "strong_tough")["peak_t_s"] * 1e6, "peak": _mpa(_shpb("paper", "strong_tough")["peak_stress_Pa"])}),
+    Quote(SM, "put the weakest place at {x:.2f} R for joints {a:.0f} degrees off the diameter, in shear, {ref:.1f} % below "
+          "the centre's tensile onset at the reference and {wb:.0f} % at the weak-brittle point", lambda J: {
+              "x": _onset(25, 45)["weakest"]["x_over_R"], "a": _onset(25, 45)["weakest"]["joint_angle_deg"],
+              "ref": 100 * (1 - _onset(25, 45)["weakest_over_centre"]), "wb": 100 * (1 - _onset(25, 30)["weakest_over_centre"])}),
+    Quote(SM, "with onset at {onset} MPa of Brazilian stress", lambda J: {"onset": _mpa(_onset(15, 45)["centre_onset_Pa"])}),
+    Quote(SM, "shorten the stable step to {disc} of the unperturbed mesh's (disc), {cyl} (cylinder)", lambda J: {
+        "disc": _span(_dt_ratios("twin"), lambda x: f"{x:.2f}"), "cyl": _span(_dt_ratios("marble"), lambda x: f"{x:.2f}")}),
+    Quote(SM, "one run at a time, {wall_s:.0f} s;", lambda J: J(VAR)),
+    Quote(SM, "the peak's mesh std ({std:.2f} MPa) is three times the twin's observation noise (1 % of the peak) and equals "
+          "the effect of a {eq:.1f} % change of `sigma_t` (8 runs on the unperturbed mesh with `sigma_t` spread evenly over "
+          "+-1 %: peak std {pstd:.2f} MPa, d peak / d `sigma_t` = {slope:.2f}; up to the peak RMS std {pre:.0f} kPa, after it "
+          "{post:.1f} MPa)", lambda J: {
+              "std": _var("twin")["mesh_variability"]["peak_stress_Pa"]["std"] / 1e6,
+              "eq": 100 * _var("twin")["sigma_t_pm_1pct"]["sigma_t_rel_equivalent_to_mesh_peak_std"],
+              "pstd": _var("twin")["sigma_t_pm_1pct"]["peak_stress_Pa"]["std"] / 1e6,
+              "slope": _var("twin")["sigma_t_pm_1pct"]["dpeak_dsigma_t"],
+              "pre": _var("twin")["sigma_t_pm_1pct"]["std_rms_pre_peak_Pa"] / 1e3,
+              "post": _var("twin")["sigma_t_pm_1pct"]["std_rms_post_peak_Pa"] / 1e6}),
+    Quote(SM, "{n} of the {runs} discs start their first joint just outside the central region (|y| {y} R) and {unb} misses "
+          "the 10 % force balance at the peak", lambda J: {
+              "n": len(_off_centre()), "runs": len(_var("twin")["replicates"]),
+              "y": _span([abs(r["first_joint_xy_over_R"][1]) for r in _off_centre()], lambda x: f"{x:.2f}"),
+              "unb": {1: "one"}.get(sum(not r["checks"]["faces_balanced"] for r in _var("twin")["replicates"]), "?")}),
+    Quote(SM, "moves the disc's peak by {peak} MPa and its post-peak curve by {post} MPa RMS", lambda J: {
+        "peak": _span([abs(d["peak_change_Pa"]) / 1e6 for d in _var("twin")["dt_control"]], lambda x: f"{x:.2f}"),
+        "post": _span([d["rms_diff_post_peak_Pa"] / 1e6 for d in _var("twin")["dt_control"]], lambda x: f"{x:.1f}")}),
+    Quote(SM, "the cylinder's peak moves by {hi:.1f} to {lo:.1f} MPa and its rise by {pre} MPa RMS", lambda J: {
+        "hi": max(d["peak_change_Pa"] for d in _var("marble")["dt_control"]) / 1e6,
+        "lo": min(d["peak_change_Pa"] for d in _var("marble")["dt_control"]) / 1e6,
+        "pre": _span([d["rms_diff_pre_peak_Pa"] / 1e6 for d in _var("marble")["dt_control"]], lambda x: f"{x:.1f}")}),
+    # docs/engine.md: the time step's bounds
+    Quote("docs/engine.md", "gives a critical step {pf:.2f}x (`fast`) and {ps:.2f}x (`standard`) the Gershgorin bound "
+          "without the contact term, and the contact budget (8 k per surface node, 4 k was unstable) takes another "
+          "{cf:.2f}x / {cs:.2f}x", lambda J: {
+              "pf": _step("fast")["power_over_gershgorin_no_contact"], "ps": _step("standard")["power_over_gershgorin_no_contact"],
+              "cf": _step("fast")["contact_budget_factor"], "cs": _step("standard")["contact_budget_factor"]}),
+    # docs/inference.md: the simulator's variability, the error models' comparison
+    Quote("docs/inference.md", "the disc's stress varies with the mesh by {pre:.2f} MPa rms before the peak ({prer:.2f} % of it), "
+          "its peak by {peak:.1f} % (the equivalent of {eq:.1f} % in `sigma_t`), and by {post:.2f} MPa ({postr:.0f} %) after it, "
+          "correlated over {tau:.1f} us; a 1 % change of `sigma_t` on one mesh moves the post-peak by {one:.1f} MPa", lambda J: {
+              "pre": _var("twin")["mesh_variability"]["std_rms_pre_peak_Pa"] / 1e6,
+              "prer": 100 * _var("twin")["mesh_variability"]["std_rms_pre_peak_over_peak"],
+              "peak": 100 * _var("twin")["mesh_variability"]["peak_stress_Pa"]["std"]
+              / _var("twin")["mesh_variability"]["peak_stress_Pa"]["mean"],
+              "eq": 100 * _var("twin")["sigma_t_pm_1pct"]["sigma_t_rel_equivalent_to_mesh_peak_std"],
+              "post": _var("twin")["mesh_variability"]["std_rms_post_peak_Pa"] / 1e6,
+              "postr": 100 * _var("twin")["mesh_variability"]["std_rms_post_peak_over_peak"],
+              "tau": _var("twin")["mesh_variability"]["post_peak_correlation_time_s"] * 1e6,
+              "one": _var("twin")["sigma_t_pm_1pct"]["std_rms_post_peak_Pa"] / 1e6}),
+    Quote("docs/inference.md", "the marble records' 90 % predictive coverage stays about {cov:.2f}", lambda J: {
+        "cov": sum(r["coverage_90_ar1"] for r in _error_models("marble_loop")["records"].values())
+        / len(_error_models("marble_loop")["records"])}),
+    # docs/closing-the-loop.md: the leave-one-record-out series and the population average's study
+    Quote(CL, "(z {z} against {crit})", lambda J: {
+        "z": _span([s["z"] for f in J(REFUTED) for s in f["walk"]], lambda x: f"{x:.2f}"),
+        "crit": _one(f"{NormalDist().inv_cdf(1 - s['level']):.2f}" for f in J(REFUTED) for s in f["walk"])}),
+    Quote(CL, "(SeeSst_SHPB_003: its own gap about {own:.2f} mm against the population's {pop:.2f} mm, held-out RMSE "
+          "{before} -> {after} MPa", lambda J: {
+              "own": 1e3 * sum(_gaps_003()) / len(_gaps_003()),
+              "pop": 1e3 * _fold003()["heldout_values"]["face_gap.gap_m@SeeSst_SHPB_003"],
+              "before": _mpa(_fold003()["rmse_before"]), "after": _mpa(_fold003()["rmse_after"])}),
+    Quote(CL, "Measured: {sw} of {sr} (sandstone), {mw} of {mr} (marble); the held-out folds then gave {sf} of {sn} and "
+          "{mf} of {mn} worse", lambda J: {
+              "sw": _loro("sandstone")["cv_risk_worse_than_base"]["worse"],
+              "sr": _loro("sandstone")["cv_risk_worse_than_base"]["records"],
+              "mw": _loro("marble")["cv_risk_worse_than_base"]["worse"],
+              "mr": _loro("marble")["cv_risk_worse_than_base"]["records"],
+              "sf": _loro("sandstone")["folds_worse"], "sn": _loro("sandstone")["folds"],
+              "mf": _loro("marble")["folds_worse"], "mn": _loro("marble")["folds"]}),
+    Quote(CL, "lowered the emulated cross-validated RMSE by {rel:.0f} % on the earlier series' calibration records "
+          "(`studies/population_average_cv.py`, `studies/results/population_average_cv.json`: {point:.2f} -> {avg:.2f} MPa, "
+          "se {se:.2f}, better in {better} of {n}, worse than the base in {worse} of {n} either way)", lambda J: {
+              "rel": 100 * (1 - _pop()["mean_rmse_Pa"]["average"] / _pop()["mean_rmse_Pa"]["point"]),
+              "point": _pop()["mean_rmse_Pa"]["point"] / 1e6, "avg": _pop()["mean_rmse_Pa"]["average"] / 1e6,
+              "se": _pop()["average_minus_point_Pa"]["se"] / 1e6, "better": _pop()["average_minus_point_Pa"]["average_better"],
+              "n": _pop()["predictions"],
+              "worse": _one(str(_pop()["worse_than_base"][k]) for k in ("point", "average"))}),
+    # docs/own-data.md: the example's run, and the dispersion correction's figures the suite asserts
+    Quote(OD, "2 cores, {m} min {s} s, {fdem_runs} FDEM runs): sigma_t {st} MPa [{st5}, {st95}], E_t {et:.0f} J/m^2 "
+          "[{et5:.0f}, {et95:.0f}] (90 % intervals)", lambda J: {
+              "m": J(f"{OWN}/run.json")["run_s"] // 60, "s": J(f"{OWN}/run.json")["run_s"] % 60,
+              "fdem_runs": J(f"{OWN}/run.json")["fdem_runs"],
+              "st": _mpa(_own()["posterior"]["sigma_t"]["mean"]), "st5": _mpa(_own()["posterior"]["sigma_t"]["q05"]),
+              "st95": _mpa(_own()["posterior"]["sigma_t"]["q95"]), "et": _own()["posterior"]["E_t"]["mean"],
+              "et5": _own()["posterior"]["E_t"]["q05"], "et95": _own()["posterior"]["E_t"]["q95"]}),
+    Quote(OD, "the observations inside the 90 % predictive band {cov:.2f}; verdict `{verdict}`", lambda J: {
+        "cov": _own()["predictive_coverage_90"]["granite_disc"], "verdict": _own()["verdict"]["verdict"]}),
+    Quote(OD, "misfit per observation {stat:.3f} against its target {target:.3f}", lambda J: {
+        "stat": _own()["misfit"][-1]["stop_chi2_per_obs"], "target": _own()["misfit"][-1]["stop_target"]}),
+    Quote(OD, "peaks at 173.5 MPa instead of 172.2 MPa, its mean force balance goes from 0.026 to 0.020",
+          by="tests/test_dispersion.py::test_a_sheet_turns_the_correction_on"),
+    Quote(OD, "within 0.0061 of c0", by="tests/test_dispersion.py::test_the_solver_reproduces_the_freiburg_table"),
+    Quote(OD, "changes by 42 % of its amplitude over 1.25 m",
+          by="tests/test_dispersion.py::test_a_dispersed_pulse_is_corrected_back"),
+]
+
+
+def quotes_by_file() -> dict:
+    """``{doc: [quote as it stands in the doc]}``, with the tables the tools generate outside markers."""
+    out: dict = {}
+    for q in QUOTES:
+        out.setdefault(q.doc, []).append(q.text())
+    folder = ROOT / RUN
+    out.setdefault("docs/workflow.md", []).extend([
+        results_table.table(folder, ["twin_ref", "marble_loop"]),
+        results_table.diagnosis_table(folder, "marble_loop")])
+    return out
+
+
+def _flat(path: str) -> str:
+    return " ".join((ROOT / path).read_text().split())
+
+
+def test_every_quote_stands_in_its_doc_with_its_json_numbers():
+    missing = [(q.doc, q.text()) for q in QUOTES if " ".join(q.text().split()) not in _flat(q.doc)]
+    assert not missing, missing
+
+
+def test_a_quote_checked_elsewhere_names_a_test_that_exists():
+    for q in QUOTES:
+        if q.by:
+            path, name = q.by.split("::")
+            assert re.search(rf"^def {name}\(", (ROOT / path).read_text(), re.M), q.by
+
+
+def test_no_result_number_in_the_docs_is_unchecked():
+    checked = quotes_by_file()
+    found = []
+    for path in docs_numbers.docs():
+        name = str(path.relative_to(ROOT))
+        found += [(name, *u) for u in docs_numbers.unchecked(name, path.read_text(), checked.get(name, []))]
+    assert not found, "\n".join(f"{n}:{line} {num!r} in '{ctx}'" for n, line, num, ctx in found)
+
+
+def test_the_inventory_flags_a_new_result_and_not_an_input():
+    text = "The run took 731 s and covered 87 % of the twins (z = 2.71), with 25 members over 0-160 us."
+    flagged = [num for _, num, _ in docs_numbers.unchecked("docs/x.md", text)]
+    assert flagged == ["731 s", "87 %", "2.71"]
+    # the same words inside a generated block, inline code or a checked quote are not flagged
+    assert not docs_numbers.unchecked("docs/x.md", f"<!-- t:start -->\n{text}\n<!-- t:end -->")
+    assert not docs_numbers.unchecked("docs/x.md", f"`{text}`")
+    assert not docs_numbers.unchecked("docs/x.md", text, ["took 731 s and covered 87 %", "(z = 2.71)"])
