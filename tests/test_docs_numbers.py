@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from tools import docs_numbers, results_table
+from tools import docs_numbers
 
 ROOT = Path(__file__).resolve().parents[1]
 RUN = "benchmarks/results/default_run"
@@ -313,14 +313,10 @@ QUOTES: list[Quote] = [
 
 
 def quotes_by_file() -> dict:
-    """``{doc: [quote as it stands in the doc]}``, with the tables the tools generate outside markers."""
+    """``{doc: [quote as it stands in the doc]}``."""
     out: dict = {}
     for q in QUOTES:
         out.setdefault(q.doc, []).append(q.text())
-    folder = ROOT / RUN
-    out.setdefault("docs/workflow.md", []).extend([
-        results_table.table(folder, ["twin_ref", "marble_loop"]),
-        results_table.diagnosis_table(folder, "marble_loop")])
     return out
 
 

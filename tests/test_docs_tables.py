@@ -37,7 +37,9 @@ def test_the_readme_quotes_the_default_runs_time_from_its_run_json():
 
 
 def test_the_workflow_docs_default_run_tables_are_the_tools_output():
-    text = (ROOT / "docs" / "workflow.md").read_text()
+    text = results_table.WORKFLOW_DOC.read_text()
+    start, end = text.index(results_table.WORKFLOW_START), text.index(results_table.WORKFLOW_END)
+    assert text[start:end + len(results_table.WORKFLOW_END)] == results_table.workflow_block()
     folder = ROOT / "benchmarks" / "results" / "default_run"
     assert results_table.table(folder, ["twin_ref", "marble_loop"]) in text
     assert results_table.diagnosis_table(folder, "marble_loop") in text

@@ -1,6 +1,7 @@
 """The result numbers quoted in README.md and docs/*.md that no test ties to a committed JSON.
 
-    python tools/docs_numbers.py            # list them, one per line: file:line  number  context
+    python tools/docs_numbers.py    # list them (file:line, number, context) and the checked quotes whose
+                                    # JSON changed, with the words the doc must now say; exit 1 if any
 
 A *result* is a figure that came out of a run or a benchmark (a coverage, a score, a time, an error, a
 count of runs, a z value). Inputs (config values, box bounds, windows), physical constants, literature
@@ -158,16 +159,23 @@ def docs() -> list[Path]:
 
 def main(argv: list[str]) -> int:
     sys.path.insert(0, str(ROOT))
-    from tests.test_docs_numbers import quotes_by_file  # the checked table lives with its test
-    checked = quotes_by_file()
+    from tests.test_docs_numbers import QUOTES  # the checked table lives with its test
+    checked: dict = {}
     n = 0
+    for q in QUOTES:
+        text = q.text()
+        checked.setdefault(q.doc, []).append(text)
+        # a quote whose JSON changed (a new default run): the words the doc must now say
+        if " ".join(text.split()) not in " ".join((ROOT / q.doc).read_text().split()):
+            print(f"{q.doc}\tstale quote, now: {text}")
+            n += 1
     for path in docs():
         name = str(path.relative_to(ROOT))
         for line, num, ctx in unchecked(name, path.read_text(), checked.get(name, [])):
             print(f"{name}:{line}\t{num}\t{ctx}")
             n += 1
-    print(f"{n} unchecked result numbers", file=sys.stderr)
-    return 0
+    print(f"{n} stale quotes and unchecked result numbers", file=sys.stderr)
+    return 1 if n else 0
 
 
 if __name__ == "__main__":

@@ -3,10 +3,13 @@
     python tools/results_table.py results twin_ref marble_loop          # the full table
     python tools/results_table.py --readme benchmarks/results/default_run/twin_ref/summary.json \
         benchmarks/results/default_run/marble_loop/summary.json           # rewrite README's block
+    python tools/results_table.py --workflow-docs                        # rewrite docs/workflow.md's block
 
 The README's block (between ``<!-- results-table:start -->`` and ``<!-- results-table:end -->``) is the
 short form for a user: verdict, stop, posterior and predictive check per experiment, and the closing
 of the loop where the experiment has one; ``tests/test_docs_tables.py`` checks it against the JSON it names.
+docs/workflow.md's block (``<!-- default-run-table:start -->`` ... ``:end -->``) is the full table of the
+committed default run with the loop's check, made from ``benchmarks/results/default_run``.
 
 Per experiment: the verdict and its flags, how the loop stopped, the posterior mean with its 90 %
 interval per parameter (and the truth for twins), the estimated discrepancy per record (its RMS size
@@ -120,6 +123,25 @@ def readme_block_sources(text: str) -> list:
     return [part for part in head.split("`")[1::2] if part.endswith(".json")]
 
 
+WORKFLOW_DOC = ROOT / "docs" / "workflow.md"
+WORKFLOW_START, WORKFLOW_END = "<!-- default-run-table:start -->", "<!-- default-run-table:end -->"
+DEFAULT_RUN = ("benchmarks/results/default_run", ("twin_ref", "marble_loop"))
+
+
+def workflow_block(folder: str = DEFAULT_RUN[0], names=DEFAULT_RUN[1]) -> str:
+    """docs/workflow.md's block: the full table of the committed default run and the loop's check."""
+    parts = [table(ROOT / folder, names)]
+    parts += [diagnosis_table(ROOT / folder, n) for n in names
+              if (ROOT / folder / n / "diagnosis" / "check.json").is_file()]
+    return "\n".join([WORKFLOW_START, "\n\n".join(parts), WORKFLOW_END])
+
+
+def _write_workflow_docs() -> None:
+    text = WORKFLOW_DOC.read_text()
+    a, b = text.index(WORKFLOW_START), text.index(WORKFLOW_END) + len(WORKFLOW_END)
+    WORKFLOW_DOC.write_text(text[:a] + workflow_block() + text[b:])
+
+
 def _write_readme(paths) -> None:
     readme = ROOT / "README.md"
     text = readme.read_text()
@@ -130,6 +152,9 @@ def _write_readme(paths) -> None:
 if __name__ == "__main__":
     if sys.argv[1] == "--readme":
         _write_readme(sys.argv[2:])
+        sys.exit(0)
+    if sys.argv[1] == "--workflow-docs":
+        _write_workflow_docs()
         sys.exit(0)
     folder, names = Path(sys.argv[1]), sys.argv[2:]
     print(table(folder, names))
