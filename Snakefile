@@ -3,15 +3,18 @@
 # with the posterior mean -> plots, tables, summary.json. See README.md, "Running the workflow".
 #
 # The config is validated (config/schema.yaml + calibration.workflow_io.validate_config) and the measured
-# observation files are read and reduced before any job runs; a bad key, value or file stops here with
-# a message naming it.
+# observation files are checked before any job runs; a bad key, value or file stops here with a message
+# naming it. A record is reduced for that check once per content (calibration.record_check keeps the
+# verdict's summary under .snakemake/fdem-records/), and once more by its observations job, which stores
+# the reduction that every simulation of it reads.
 from pathlib import Path
 
 from snakemake.exceptions import WorkflowError
 from snakemake.utils import min_version
 
 from calibration.config_files import config_sources
-from calibration.observations import ObservationFileError, check_record
+from calibration.observations import ObservationFileError, cached_check_record
+from calibration.record_check import code_digest
 from calibration.workflow_io import ConfigError, validate_config
 
 min_version("9.0")
@@ -46,16 +49,17 @@ except ConfigError as exc:
 config.clear()
 config.update(_validated)
 # `diagnosis: {validation: loro}`: one fold experiment per record, that record held out (calibration.closing)
-from calibration.closing import loro_folds
-
 for _name, _exp in list(config["experiments"].items()):
     if (
         _exp.get("kind") == "measured"
         and (_exp.get("diagnosis") or {}).get("validation") == "loro"
     ):
+        from calibration.closing import loro_folds
+
         config["experiments"].update(loro_folds(_name, _exp))
 
 if workflow.is_main_process:
+    _code = code_digest()
     for _name, _exp in config["experiments"].items():
         _paths = list(_exp["observations"].get("records") or [])
         if _exp["observations"].get("incident_record"):
@@ -64,7 +68,7 @@ if workflow.is_main_process:
         for _path in _paths:
             try:
                 # an invalid test (shpb.lab.validity) is refused as a calibration record unless allow_invalid
-                check_record(
+                cached_check_record(
                     _path,
                     (
                         _exp["observations"]["t_end"]
@@ -74,6 +78,7 @@ if workflow.is_main_process:
                     refuse_invalid=_exp["kind"] == "measured"
                     and _path in (_exp["observations"].get("records") or [])
                     and not _exp["observations"].get("allow_invalid", False),
+                    code=_code,
                 )
             except ObservationFileError as exc:
                 raise WorkflowError(f"experiment {_name!r}: {exc}") from None

@@ -32,25 +32,28 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
 
-from enkf import estimate_noise, observation_error
-from enkf.covariance import AR1Error, DenseError, ObservationError
+from .record_check import CACHE_DIR, ObservationFileError, cached_summary, check_summary
+
+if TYPE_CHECKING:  # pragma: no cover
+    from enkf.covariance import ObservationError
+
+# enkf (and SciPy under it) is imported where an error model or a noise estimate is made: the Snakefile
+# imports this module at parse time (every command, `-n` too), where neither is needed.
 
 __all__ = [
     "OBS_COLUMNS", "ObservationFileError", "Observations", "observation_grid", "curve_on_grid", "read_curve",
     "twin_observations", "reduce_measured_record", "measured_observations", "check_record",
     "read_observations", "response_matrix", "with_approximation_error", "record_validity",
+    "record_check_summary", "cached_check_record", "write_reduced_record", "stored_observations",
 ]
 
 #: Columns of ``obs.csv`` (SI units).
 OBS_COLUMNS = ("record", "time_s", "stress_Pa", "sigma_Pa")
-
-
-class ObservationFileError(ValueError):
-    """An observation source or file is malformed; the message names the file and the problem."""
 
 
 # --------------------------------------------------------------------------------------------------
@@ -162,6 +165,9 @@ class Observations:
 
         enkf's AR(1) model takes one correlation time; with several records the mean of theirs is used.
         """
+        from enkf import observation_error
+        from enkf.covariance import DenseError
+
         tau = float(np.mean([self.corr_time.get(r, 0.0) for r in self.records])) if self.corr_time else 0.0
         kind = self.error_kind if (self.error_kind != "ar1" or tau > 0) else "diagonal"
         R = observation_error(kind, self.sigma, times=self.time, corr_time=tau, groups=self.groups)
@@ -225,6 +231,8 @@ def read_observations(csv_path: str | Path, json_path: str | Path) -> Observatio
         if sd.size != obs.m:
             raise ObservationFileError(f"observation metadata {json_path}: approximation_error.sd_Pa has {sd.size} "
                                        f"values for {obs.m} observations")
+        from enkf.covariance import AR1Error
+
         obs.added_cov = AR1Error(sd, obs.time, float(approx["corr_time_s"]), groups=obs.groups).dense()
     return obs
 
@@ -259,6 +267,8 @@ def twin_observations(truth_curve: pd.DataFrame, grid: np.ndarray, *, rng: np.ra
     reference on the grid. ``corr_time > 0`` draws AR(1)-correlated noise (and declares it), else white.
     The draw is ``L e``, ``e ~ N(0, I)`` from ``rng`` (one call, so a seed fixes it).
     """
+    from enkf import observation_error
+
     truth = curve_on_grid(truth_curve["time_s"], truth_curve["stress_Pa"], grid)
     if not np.all(np.isfinite(truth)):
         raise ValueError(f"the reference simulation covers {truth_curve['time_s'].min():.3g}-"
@@ -284,12 +294,14 @@ def twin_observations(truth_curve: pd.DataFrame, grid: np.ndarray, *, rng: np.ra
 @dataclass(frozen=True)
 class _Measured:
     """A measured record read, checked and reduced once: the reduction, the sheet's or spreadsheet's
-    metadata, the noise estimate of the stress and the lab checks with the validity class."""
+    metadata, the noise estimate of the stress, the lab checks with the validity class and what a
+    simulation of the record needs besides its wave (:func:`shpb.lab.reduced_store.simulation_inputs`)."""
 
     red: object
     meta: dict
     noise: object
     checks: dict
+    sim: dict
 
 
 def _stat_key(path: Path) -> tuple:
@@ -310,14 +322,16 @@ def _record_key(path: Path) -> tuple:
 
 
 def _measured(path: Path) -> _Measured:
-    """The record's :class:`_Measured`, cached per (file, mtime, size): the Snakefile checks every record at
-    parse time, and a job reads it again (docs/workflow.md)."""
+    """The record's :class:`_Measured`, cached per (file, mtime, size) within a process (tests and tools
+    ask for one record several times; the workflow reduces each record once, in its observations stage)."""
     return _measured_cached(_record_key(path), str(path))
 
 
 @lru_cache(maxsize=64)
 def _measured_cached(key: tuple, path_str: str) -> _Measured:
+    from enkf import estimate_noise
     from shpb.lab.lab_reduce import lab_checks
+    from shpb.lab.reduced_store import pretrigger_stress, simulation_inputs
     from shpb.lab.sheet import is_sheet
 
     path = Path(path_str)
@@ -328,19 +342,13 @@ def _measured_cached(key: tuple, path_str: str) -> _Measured:
         sheet, raw = check_sheet(path)
         red = reduce_sheet(sheet, raw, check_stated=True)
         spec, transit = dict(sheet.metadata), transit_time(sheet)
+        sim = simulation_inputs(path, sheet=sheet)
+        thickness = float(sheet.specimen["thickness"]) if sheet.geometry == "brazilian_disc" else None
     else:
         raw, spec, red, transit = _freiburg_record(path)
-    bar = red.bar
-    k_pa = bar.E * bar.area / (math.pi * red.specimen_diameter ** 2 / 4.0)
-    if is_sheet(path) and sheet.geometry == "brazilian_disc":  # stress 2F/(pi D t), not F/(pi D^2/4)
-        k_pa *= red.specimen_diameter / (2.0 * float(sheet.specimen["thickness"]))
-    used = [raw.transmitted_channels.index(c) for c in red.channels_used["transmitted"]]
-    spv = 1.0 if raw.unit == "strain" else bar.strain_per_volt_transmitted
-    tra = bar.compression_sign * spv * raw.transmitted[used].mean(axis=0)
-    i_a = int(np.searchsorted(raw.time, red.arrival_time_gauge))
-    i_pre = i_a - max(1, int(round(10.0e-6 / raw.dt)))
-    noise = estimate_noise(k_pa * tra[:i_pre], raw.dt, model="ar1")
-    return _Measured(red, spec, noise, lab_checks(red, transit))
+        sim, thickness = simulation_inputs(path, spec=spec), None
+    noise = estimate_noise(pretrigger_stress(raw, red, thickness), raw.dt, model="ar1")
+    return _Measured(red, spec, noise, lab_checks(red, transit), sim)
 
 
 def _freiburg_record(path: Path):
@@ -370,9 +378,9 @@ def reduce_measured_record(path: str | Path):
     peak stress and strain rate against the reduction).
 
     Returns ``(ReducedRecord, metadata, NoiseEstimate of the stress)``; metadata is the spreadsheet
-    row, or the sheet's ``metadata`` block. The noise estimate is taken from the pre-trigger part of
-    the averaged transmitted-bar signal (the one the specimen stress is made of), converted to Pa with
-    the reduction's own strain-to-stress factor. Cached per (file, mtime, size): treat the result as read-only.
+    row, or the sheet's ``metadata`` block. The noise estimate is taken from the pre-trigger stress of
+    the averaged transmitted-bar signal (:func:`shpb.lab.reduced_store.pretrigger_stress`). Cached per
+    (file, mtime, size): treat the result as read-only.
     """
     m = _measured(Path(path))
     return m.red, m.meta, m.noise
@@ -383,29 +391,92 @@ def record_validity(path: str | Path) -> dict:
     return _measured(Path(path)).checks["validity"]
 
 
+def _read(path: Path) -> _Measured:
+    try:
+        return _measured(path)
+    except (OSError, ValueError, KeyError) as exc:
+        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)  # KeyError's str() quotes it
+        raise ObservationFileError(f"observation file {path}: {msg}") from exc
+
+
+def record_check_summary(path: str | Path) -> dict:
+    """What :func:`check_record` decides on (JSON-ready, the parse-time cache's entry,
+    :mod:`calibration.record_check`): the reduced record's ``end_time_s``, whether its specimen stress is
+    all finite, its ``validity`` class and reasons. :class:`ObservationFileError` names the file and the
+    problem when it cannot be read, checked or reduced."""
+    red = _read(Path(path)).red
+    v = _measured(Path(path)).checks["validity"]
+    return {"end_time_s": float(red.time[-1]), "stress_finite": bool(np.all(np.isfinite(red.stress))),
+            "validity": {"class": str(v["class"]), "reasons": [str(r) for r in v["reasons"]]}}
+
+
 def check_record(path: str | Path, t_end: float | None = None, *, refuse_invalid: bool = False) -> None:
     """Read, check and reduce a measured record; :class:`ObservationFileError` names the file and the
     problem (unreadable or malformed file, non-finite samples, implausible or contradictory values, no
     spreadsheet row, no pulse, window shorter than ``t_end``). ``refuse_invalid``: a test of validity class
     ``invalid`` is refused too (a calibration record, unless the experiment sets
     ``observations.allow_invalid: true``)."""
+    check_summary(path, record_check_summary(path), t_end, refuse_invalid=refuse_invalid)
+
+
+def cached_check_record(path: str | Path, t_end: float | None = None, *, refuse_invalid: bool = False,
+                        cache_dir: str | Path = CACHE_DIR, code: bytes | None = None) -> dict:
+    """:func:`check_record` on the record's summary kept in ``cache_dir`` under the SHA-256 of what its
+    reduction reads (:mod:`calibration.record_check`; the Snakefile's check before any job): the record is
+    reduced only when that content has no valid entry. Returns the summary."""
+    summary = cached_summary(path, code, cache_dir, record_check_summary)
+    check_summary(path, summary, t_end, refuse_invalid=refuse_invalid)
+    return summary
+
+
+def _record_entry(path: Path) -> dict:
+    """One record's part of the observations, JSON-ready: its reduced record's scalars, noise, checks and
+    test covariates (``record.json``'s ``observation``, :func:`write_reduced_record`)."""
+    m = _read(path)
+    red, spec, noise = m.red, m.meta, m.noise
+    v = m.checks["validity"]
+    return {"noise_std_Pa": red.noise_std_Pa["stress"], "noise_estimate": noise.to_dict(),
+            "peak_stress_Pa": red.peak_stress, "peak_time_s": red.peak_time,
+            "strain_rate_at_peak_per_s": red.strain_rate_at_peak,
+            "force_balance_at_peak": red.force_balance_at_peak, "notes": list(red.notes),
+            "validity": v["class"], "validity_reasons": list(v["reasons"]),
+            "specimen_length_m": red.specimen_length, "specimen_diameter_m": red.specimen_diameter,
+            "spreadsheet_strength_Pa": _float_or_none(spec.get("reference_stress_Pa")),
+            # the incident bar face's travel before the specimen carries 2 % of its peak: the
+            # record's own measure of the face gap (prior centre of its face_gap.gap_m)
+            "closure_before_load_m": _closure_or_none(red),
+            # test covariates for the residual's trends across records (calibration.covariates)
+            **_test_covariates(red, spec),
+            "corr_time_s": noise.corr_time, "dt_s": red.dt, "check": record_check_summary(path)}
+
+
+def write_reduced_record(path: str | Path, folder: str | Path) -> Path:
+    """Reduce a measured record once and store it (``folder``: ``results/<exp>/observations/<record>/``,
+    :mod:`shpb.lab.reduced_store`): its incident wave and set-up for the simulations, its reduced curves,
+    noise and checks for :func:`stored_observations`. Returns the ``record.json`` written."""
+    from shpb.lab.reduced_store import write_reduced
+
     path = Path(path)
-    try:
-        m = _measured(path)
-    except (OSError, ValueError, KeyError) as exc:
-        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)  # KeyError's str() quotes it
-        raise ObservationFileError(f"observation file {path}: {msg}") from exc
-    red = m.red
-    if not np.all(np.isfinite(red.stress)):
-        raise ObservationFileError(f"observation file {path}: the reduced specimen stress has non-finite values")
-    if t_end is not None and red.time[-1] < t_end - 1e-12:
-        raise ObservationFileError(f"observation file {path}: the reduced record ends at {red.time[-1]:.4g} s, "
-                                   f"before the observation window's end {t_end:.4g} s")
-    validity = m.checks["validity"]
-    if refuse_invalid and validity["class"] == "invalid":
-        raise ObservationFileError(f"observation file {path}: the test is invalid as a calibration record ("
-                                   + "; ".join(validity["reasons"]) + "): expected a valid or questionable test; "
-                                   "set the experiment's observations.allow_invalid: true to use it anyway")
+    entry = _record_entry(path)
+    m = _measured(path)
+    return write_reduced(folder, m.red, source=path, simulation=m.sim, observation=entry)
+
+
+def _assemble(parts, *, t_start, t_end, dt, error_kind, sigma_scale) -> Observations:
+    """Observations from ``(name, source, time, stress, entry)`` per record (entry: :func:`_record_entry`)."""
+    frames, corr, info = [], {}, {}
+    for name, source, time, stress, e in parts:
+        check_summary(source, e["check"], t_end)
+        grid = observation_grid(t_start, t_end, dt if dt is not None else e["dt_s"])
+        values = curve_on_grid(time, stress, grid)
+        sigma = sigma_scale * e["noise_std_Pa"]
+        frames.append(pd.DataFrame({"record": name, "time_s": grid, "stress_Pa": values,
+                                    "sigma_Pa": np.full(grid.size, sigma)}))
+        corr[name] = e["corr_time_s"]
+        info[name] = {"source": str(source), "sigma_Pa": sigma,
+                      **{k: v for k, v in e.items() if k not in ("corr_time_s", "dt_s", "check")}}
+    return Observations(pd.concat(frames, ignore_index=True), error_kind, corr,
+                        {"source": "measured", "sigma_scale": sigma_scale, "record_info": info})
 
 
 def measured_observations(records: Mapping[str, str | Path], *, t_start: float, t_end: float, dt: float | None,
@@ -415,33 +486,30 @@ def measured_observations(records: Mapping[str, str | Path], *, t_start: float, 
     The grid of each record is ``t_start..t_end`` with step ``dt`` (default: the record's sample
     interval). Returns the observations and ``{name: ReducedRecord}`` (for plots and the summary).
     """
-    frames, corr, info, reduced = [], {}, {}, {}
+    parts, reduced = [], {}
     for name, path in records.items():
-        check_record(path, t_end)
-        red, spec, noise = reduce_measured_record(path)
-        grid = observation_grid(t_start, t_end, dt if dt is not None else red.dt)
-        values = curve_on_grid(red.time, red.stress, grid)
-        sigma = sigma_scale * red.noise_std_Pa["stress"]
-        frames.append(pd.DataFrame({"record": name, "time_s": grid, "stress_Pa": values,
-                                    "sigma_Pa": np.full(grid.size, sigma)}))
-        corr[name] = noise.corr_time
+        e = _record_entry(Path(path))
+        red = _measured(Path(path)).red
+        parts.append((name, path, red.time, red.stress, e))
         reduced[name] = red
-        info[name] = {"source": str(path), "sigma_Pa": sigma, "noise_std_Pa": red.noise_std_Pa["stress"],
-                      "noise_estimate": noise.to_dict(), "peak_stress_Pa": red.peak_stress,
-                      "peak_time_s": red.peak_time, "strain_rate_at_peak_per_s": red.strain_rate_at_peak,
-                      "force_balance_at_peak": red.force_balance_at_peak, "notes": list(red.notes),
-                      "validity": record_validity(path)["class"],
-                      "validity_reasons": list(record_validity(path)["reasons"]),
-                      "specimen_length_m": red.specimen_length, "specimen_diameter_m": red.specimen_diameter,
-                      "spreadsheet_strength_Pa": _float_or_none(spec.get("reference_stress_Pa")),
-                      # the incident bar face's travel before the specimen carries 2 % of its peak: the
-                      # record's own measure of the face gap (prior centre of its face_gap.gap_m)
-                      "closure_before_load_m": _closure_or_none(red),
-                      # test covariates for the residual's trends across records (calibration.covariates)
-                      **_test_covariates(red, spec)}
-    obs = Observations(pd.concat(frames, ignore_index=True), error_kind, corr,
-                       {"source": "measured", "sigma_scale": sigma_scale, "record_info": info})
+    obs = _assemble(parts, t_start=t_start, t_end=t_end, dt=dt, error_kind=error_kind, sigma_scale=sigma_scale)
     return obs, reduced
+
+
+def stored_observations(folders: Mapping[str, str | Path], *, t_start: float, t_end: float, dt: float | None,
+                        error_kind: str = "ar1", sigma_scale: float = 1.0) -> Observations:
+    """:func:`measured_observations` from the records stored by :func:`write_reduced_record`
+    (``{name: folder}``), read and not reduced again: the same observations, number for number."""
+    from shpb.lab.reduced_store import read_curves, read_reduced
+
+    parts = []
+    for name, folder in folders.items():
+        try:
+            doc, curves = read_reduced(folder), read_curves(folder)
+        except ValueError as exc:
+            raise ObservationFileError(str(exc)) from None
+        parts.append((name, doc["source"], curves["time_s"], curves["stress_Pa"], doc["observation"]))
+    return _assemble(parts, t_start=t_start, t_end=t_end, dt=dt, error_kind=error_kind, sigma_scale=sigma_scale)
 
 
 # --------------------------------------------------------------------------------------------------

@@ -51,6 +51,7 @@ wildcard_constraints:
 localrules:
     lhs,
     propose,
+    reduced_record,
     observations,
     aggregate,
     analysis,
@@ -200,9 +201,18 @@ def simulation_preset(rule_name, wc):
     return EXPERIMENTS[wc.exp]["preset"]
 
 
+def stored_record(exp, record):
+    """The record.json of the reduced record a simulation of `record` reads (rule reduced_record in
+    rules/observations.smk); None for a twin's synthetic record."""
+    if record in records(exp) and not records(exp)[record]:
+        return None
+    return f"results/{exp}/observations/{record}/record.json"
+
+
 def record_input(exp, record):
-    """The raw record file a simulation reads (none for a twin's synthetic record)."""
-    return [p for p in [records(exp)[record]] if p]
+    """The reduced record a simulation reads, its record.json and incident wave (none for a twin)."""
+    p = stored_record(exp, record)
+    return [p, p[: -len("record.json")] + "incident.csv"] if p else []
 
 
 include: "inputs.smk"

@@ -48,15 +48,20 @@ def observation_inputs(wc):
     out = {"approximation": approximation_files(wc.exp, "curve.csv")}
     if e["kind"] == "twin":
         return {**out, "truth": f"results/{wc.exp}/truth/synthetic/curve.csv"}
-    return {**out, "records": list(records(wc.exp).values())}
+    return {**out, "records": [stored_record(wc.exp, r) for r in records(wc.exp)]}
+
+
+def raw_record(exp, record):
+    """The raw file (Freiburg record or test sheet) of a calibration or held-out record."""
+    held = heldout_records(exp) if diagnosis_cfg(exp) else {}
+    return {**records(exp), **held}[record]
 
 
 # rules/ensemble.smk
 def member_inputs(wc):
-    rec = records(wc.exp)[wc.record]
     return {
         "params": f"results/{wc.exp}/iter_{wc.it}/params.csv",
-        "record": [rec] if rec else [],
+        "record": record_input(wc.exp, wc.record),
     }
 
 
@@ -178,8 +183,9 @@ def heldout_records(exp):
 
 
 def design_records(exp):
-    """Every record a design point is simulated for: the calibration records, then the held-out ones."""
-    return {**records(exp), **heldout_records(exp)}
+    """Every record a design point is simulated for, the calibration records then the held-out ones:
+    {name: its reduced record's record.json} (rule reduced_record)."""
+    return {r: stored_record(exp, r) for r in {**records(exp), **heldout_records(exp)}}
 
 
 def design_files(exp, name):

@@ -1,5 +1,5 @@
-# Observations: a twin's reference simulation plus noise, or measured records reduced to the specimen
-# stress on the observation grid (calibration.observations).
+# Observations: a twin's reference simulation plus noise, or measured records reduced once (rule
+# reduced_record) to the specimen stress on the observation grid (calibration.observations).
 
 
 # Twin experiments: the reference simulation (truth parameters, possibly a finer preset); it must succeed.
@@ -55,6 +55,24 @@ use rule simulate as approximation_run with:
         ),
 
 
+rule reduced_record:
+    """A measured record (calibration or held-out) reduced once: its incident wave, set-up, reduced curves,
+    noise and checks (calibration.observations.write_reduced_record, shpb.lab.reduced_store); every
+    simulation of the record and the observations read these files, not the raw one."""
+    input:
+        lambda wc: raw_record(wc.exp, wc.record),
+    output:
+        record="results/{exp}/observations/{record}/record.json",
+        incident="results/{exp}/observations/{record}/incident.csv",
+        curves="results/{exp}/observations/{record}/curves.csv",
+    log:
+        "results/{exp}/logs/reduced_record_{record}.log",
+    conda:
+        CONDA_ENV
+    script:
+        "../scripts/reduced_record.py"
+
+
 rule observations:
     input:
         unpack(observation_inputs),
@@ -70,7 +88,7 @@ rule observations:
             k: EXPERIMENTS[wc.exp][k]
             for k in ("kind", "seed", "preset", "observations")
         },
-        records=lambda wc: records(wc.exp),
+        records=lambda wc: {r: stored_record(wc.exp, r) for r in records(wc.exp)},
         approximation_runs=lambda wc: approximation_run_ids(EXPERIMENTS[wc.exp]),
     script:
         "../scripts/observations.py"

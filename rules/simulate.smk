@@ -13,7 +13,7 @@ rule simulate:
     attempt.
 
     params: `parameters` where the parameters come from (calibration.ensemble_files.simulation_params),
-    `record_file` the record (None: the twin's synthetic one), `mesh_seed` the mesh realization (None:
+    `record_file` the reduced record's record.json (rule reduced_record; None: the twin's synthetic one), `mesh_seed` the mesh realization (None:
     the unperturbed mesh), `snapshots` a count of fracture snapshots, `run` the entries added to
     run.json, `must_succeed` a failed run fails the job."""
     output:
@@ -36,7 +36,7 @@ rule simulate:
     params:
         sim=lambda wc: sim_settings(wc.exp),
         parameters={"values": {}},
-        record_file=lambda wc: records(wc.exp)[wc.record],
+        record_file=lambda wc: stored_record(wc.exp, wc.record),
         mesh_seed=None,
         snapshots=None,
         run={},

@@ -1,4 +1,4 @@
-"""observations/obs.csv + obs.json: twin (truth + noise) or measured records (calibration.observations),
+"""observations/obs.csv + obs.json: twin (truth + noise) or the stored reduced records (calibration.observations),
 corrected by the approximation error of the experiment's preset where it is configured (calibration.approximation)."""
 from calibration.job_log import log_to
 
@@ -10,7 +10,7 @@ import pandas as pd
 
 from calibration.approximation import apply_approximation_error
 from calibration.experiment import rng_for
-from calibration.observations import measured_observations, observation_grid, read_curve, twin_observations
+from calibration.observations import observation_grid, read_curve, stored_observations, twin_observations
 
 e = snakemake.params.exp
 o = e["observations"]
@@ -20,8 +20,9 @@ if e["kind"] == "twin":
                             relative_sigma=o["noise"]["relative_sigma"], sigma_Pa=o["noise"]["sigma_Pa"],
                             corr_time=o["noise"]["corr_time"], meta={"truth": o["truth"]})
 else:
-    obs, _ = measured_observations(snakemake.params.records, t_start=o["t_start"], t_end=o["t_end"], dt=o["dt"],
-                                   error_kind=o["error"]["kind"], sigma_scale=o["error"]["sigma_scale"])
+    # each record as rule reduced_record stored it (read, not reduced again)
+    obs = stored_observations(snakemake.params.records, t_start=o["t_start"], t_end=o["t_end"], dt=o["dt"],
+                              error_kind=o["error"]["kind"], sigma_scale=o["error"]["sigma_scale"])
 runs = list(snakemake.params.approximation_runs)
 if runs:
     root = Path(snakemake.output.csv).parents[1] / "approximation"

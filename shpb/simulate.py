@@ -80,37 +80,44 @@ def write_outputs(out_dir, columns: dict, run_info: dict) -> None:
 
 
 def _measured_incident(record):
-    """Reduce a measured record: a test sheet (``.yaml``: its bars, specimen and rock, shpb.lab.sheet)
-    or a Freiburg raw file (the Freiburg bars, its spreadsheet row and lithology). Returns a dict:
-    ``reduced``, ``length``, ``diameter`` [m], ``rock`` (E, nu, rho) and ``bars`` (None for the
-    Freiburg layout, whose bars are the geometry's defaults; else the sheet's material, diameter and
-    gauge distances), ``geometry`` (the specimen's)."""
+    """A measured record's wave and set-up: a reduced record stored by the workflow's observations stage
+    (its folder or ``record.json``, :mod:`shpb.lab.reduced_store`: read, not reduced again), a test sheet
+    (``.yaml``: its bars, specimen and rock, shpb.lab.sheet) or a Freiburg raw file (the Freiburg bars,
+    its spreadsheet row and lithology), the last two reduced here. Returns a dict: ``reduced`` (what
+    gives ``incident_wave_at_gauge()``), ``length``, ``diameter`` [m], ``rock`` (E, nu, rho) and ``bars``
+    (None for the Freiburg layout, whose bars are the geometry's defaults; else the sheet's material,
+    diameter and gauge distances), ``geometry`` (the specimen's), ``specimen``, ``source`` (the raw file)."""
+    from .lab.reduced_store import is_reduced, read_reduced, simulation_inputs
+
     path = Path(record)
-    if not path.is_file():
-        raise FileNotFoundError(f"measured record {path} not found")
-    from .lab.sheet import is_sheet
-    if is_sheet(path):
-        from .lab.lab_reduce import reduce_sheet
-        from .lab.sheet_readers import check_sheet
-        sheet, raw = check_sheet(path)
-        b = sheet.bar
-        bars = {"material": Material(b.E, sheet.bar_nu, b.rho), "diameter_m": b.diameter,
-                "gauge_distance_m": (b.gauge_distance_incident, b.gauge_distance_transmitted),
-                "label": sheet.bar_material}
-        return {"reduced": reduce_sheet(sheet, raw), "length": sheet.specimen_length, "diameter": sheet.specimen_diameter,
-                "rock": dict(sheet.rock), "bars": bars, "geometry": sheet.geometry, "specimen": dict(sheet.specimen)}
-    from .lab.records import freiburg_specimen, read_freiburg_raw, rock_properties
-    from .lab.reduction import reduce_record
-    raw = read_freiburg_raw(path)
-    spec = freiburg_specimen(path)
-    L, D = float(spec["length_m"]), float(spec["diameter_m"])
-    red = reduce_record(raw, specimen_length_m=L, specimen_diameter_m=D)
-    # The specimen's elastic constants are the rock's (the lithology's mean), never the test row's E: the
-    # source lab took that E from the slope of this test's own stress-strain curve, so it is the record's
-    # response, and a held-out record's prediction may not use it (docs/closing-the-loop.md).
-    rock = rock_properties(str(spec.get("lithology", path.parent.name)))
-    return {"reduced": red, "length": L, "diameter": D, "rock": rock, "bars": None, "geometry": "cylinder",
-            "specimen": {"geometry": "cylinder", "length": L, "diameter": D}}
+    if is_reduced(path):
+        stored = read_reduced(path)
+        sim, red, source = stored["simulation"], stored["incident"], stored["source"]
+    else:
+        if not path.is_file():
+            raise FileNotFoundError(f"measured record {path} not found")
+        from .lab.sheet import is_sheet
+        if is_sheet(path):
+            from .lab.lab_reduce import reduce_sheet
+            from .lab.sheet_readers import check_sheet
+            sheet, raw = check_sheet(path)
+            red, sim = reduce_sheet(sheet, raw), simulation_inputs(path, sheet=sheet)
+        else:
+            from .lab.records import freiburg_specimen, read_freiburg_raw
+            from .lab.reduction import reduce_record
+            raw = read_freiburg_raw(path)
+            spec = freiburg_specimen(path)
+            red = reduce_record(raw, specimen_length_m=float(spec["length_m"]),
+                                specimen_diameter_m=float(spec["diameter_m"]))
+            sim = simulation_inputs(path, spec=spec)
+        source = str(path)
+    bars = sim["bars"]
+    if bars is not None:
+        mat = bars["material"]
+        bars = {**bars, "material": Material(mat["E"], mat["nu"], mat["rho"]),
+                "gauge_distance_m": tuple(bars["gauge_distance_m"])}
+    return {"reduced": red, "length": sim["length"], "diameter": sim["diameter"], "rock": sim["rock"],
+            "bars": bars, "geometry": sim["geometry"], "specimen": sim["specimen"], "source": source}
 
 
 def _measured_disc(record):
@@ -259,7 +266,14 @@ def build(geometry: str, preset: str, params: dict | None = None, record=None,
     probes = [f"{g.incident_bar}.gauge", f"{g.transmission_bar}.gauge", f"{g.specimen}.centre"]
     return {"model": model, "traction_bcs": bcs, "stress_probes": probes, "geometry": g,
             "params": p, "arrival_s": float(arrival), "window_s": float(window),
-            "measured": measured, "record": None if record is None else str(record)}
+            "measured": measured, "record": None if record is None else _record_source(record)}
+
+
+def _record_source(record) -> str:
+    """The raw record a simulation stands for (run.json's ``record``), also when it reads the stored one."""
+    from .lab.reduced_store import is_reduced, read_reduced
+
+    return str(read_reduced(record)["source"]) if is_reduced(record) else str(record)
 
 
 def snapshot_times(snapshots, window_s: float) -> list[float]:
