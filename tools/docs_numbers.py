@@ -10,15 +10,17 @@ values with their citation and thresholds stated as settings are not results.
 What is looked at: the text outside the generated blocks (``<!-- name:start -->`` ... ``<!-- name:end
 -->``, or ``:begin``), outside code (fenced blocks and `inline code`, which hold commands, config keys
 and their values) and outside link targets, less every quote that ``tests/test_docs_numbers.py``
-checks against its JSON (``QUOTED`` there, passed in as ``checked``).
+checks against its JSON (``QUOTES`` there, passed in as ``checked``).
 
 Which numbers look like results (``RESULT``): a number with a decimal fraction, a percentage, a
 duration (s, min, h), a memory size, a factor (``3.1x``) or a count of successes (``7/9``, ``5 of 5``).
 A bare integer with a physical unit (``45 MPa``, ``160 us``, ``25 members``) is how this project writes
 inputs, so it is not flagged; that is what keeps the pattern from flagging the config. The inputs that
-still have that shape (a safety factor 0.6, a section number 5.2, a version 2.0.1, a penalty 1e-6 of the
-variance) are listed in ``NOT_RESULTS`` as (file, regex on the number with its words around it), each
-with the reason beside it.
+still have that shape (a safety factor 0.6, a section number 5.2, a version 2.0.1, an interval level
+90 %, a threshold "at most 10 %", a literature value) are listed in ``NOT_RESULTS`` as (file, regex on
+the number with its words around it, reason); a space in a regex matches any white space. The cost of
+that choice: an integer result with a unit (``285 FDEM runs``) is not flagged; the quotes check such
+numbers where they are results all the same.
 """
 from __future__ import annotations
 
