@@ -25,16 +25,16 @@ ensemble of the last analysis, which is the one the stop decision was taken on.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
 
-from enkf import (BoxTransform, DenseError, EnsembleFailure, StopCriteria, check_stop, emulated_esmda_update, enkf_update,
-                  esmda_alphas, esmda_update, jsonable, latin_hypercube, localization_mask, mean_misfit, misfit_table,
-                  posterior_dict, prediction_interval_dict)
+from enkf import (AnalysisSettings, BoxTransform, CalibrationProcess, DenseError, EmulatedSettings, FailurePolicy,
+                  SeededSteps, StepSchedule, StopCriteria, StopPolicy, esmda_alphas, jsonable, latin_hypercube, localization_mask,
+                  mean_misfit, misfit_table, posterior_dict, prediction_interval_dict)
+from enkf.process import all_runs as _all_runs, capped_truncation  # noqa: F401 (capped_truncation: re-exported)
 from enkf.ces import interval_summary
 
 from .model_error import (MESH_PURPOSE, MESH_STAGES, analysis_error, discrepancy_kind, mesh_mode,  # noqa: F401
@@ -42,10 +42,12 @@ from .model_error import (MESH_PURPOSE, MESH_STAGES, analysis_error, discrepancy
                           run_mesh_seed)
 from .identifiability import linear_sensitivity
 from .observations import Observations
+from .process import WorkflowLikelihood, step_schedule, stop_misfit
 from .sensitivity import AUTO, selected_parameters
 from .verdict import calibration_verdict, member_chi2, reported_iteration
 
-__all__ = ["PURPOSES", "MESH_STAGES", "rng_for", "mesh_seed", "run_mesh_seed", "ExperimentSpec", "initial_ensemble", "analysis_step", "decide", "capped_truncation",
+__all__ = ["PURPOSES", "MESH_STAGES", "rng_for", "mesh_seed", "run_mesh_seed", "ExperimentSpec", "initial_ensemble",
+           "build_process", "analysis_step", "decide", "capped_truncation",
            "all_runs", "diagnosis_settings", "final_iteration", "final_verdict", "reported_ensemble", "linear_sensitivity", "record_misfits", "summary"]
 
 #: Independent random streams of an experiment (the ``spawn_key`` of :func:`rng_for`).
@@ -74,20 +76,21 @@ class ExperimentSpec:
     max_iterations: int = 3
     transform_kind: str = "logit"
     criteria: StopCriteria = field(default_factory=StopCriteria)
-    inflation: object = "default"
-    truncation: float | None = None
-    max_rank: int | None = None
-    min_alive_fraction: float = 0.5
+    inflation: object = AnalysisSettings.inflation
+    truncation: float | None = AnalysisSettings.truncation
+    max_rank: int | None = AnalysisSettings.max_rank
+    min_alive_fraction: float = FailurePolicy.min_alive_fraction
     unrelated: Mapping[str, Sequence[Sequence[float]]] = field(default_factory=dict)
     truth: Mapping[str, float] | None = None
-    inner_members: int = 400
-    inner_steps: int = 8
-    temper_base: float = 4.0
+    # the process' defaults (enkf.process), stated there once
+    inner_members: int = EmulatedSettings.inner_members
+    inner_steps: int = EmulatedSettings.inner_steps
+    temper_base: float = StepSchedule.temper_base
     posterior: str = "ensemble"
     discrepancy: str = "none"
     mesh_mode: str = "per_run"
     replicates: int = 0
-    smoothing: object = "loo"
+    smoothing: object = EmulatedSettings.smoothing
     self_calibrate: bool = False
     emulator_error: str = "ar1"
     refine_runs: int = 0
@@ -112,7 +115,7 @@ class ExperimentSpec:
         emulated = exp.get("emulated") or {}
         stop = exp.get("stopping", {})
         criteria = StopCriteria(chi2_target=stop.get("chi2_target"), nrmse_tol=stop.get("nrmse_tol"),
-                                collapse_fraction=float(stop.get("collapse_fraction", 1e-3)), max_iterations=max_it)
+                                collapse_fraction=float(stop.get("collapse_fraction", StopCriteria.collapse_fraction)), max_iterations=max_it)
         truth = exp.get("observations", {}).get("truth")
         return cls(name=name, names=names, lower=np.array([params[p][0] for p in names], float),
                    upper=np.array([params[p][1] for p in names], float), ensemble_size=int(exp["ensemble_size"]),
@@ -120,7 +123,7 @@ class ExperimentSpec:
                    transform_kind=exp.get("transform", "logit"), criteria=criteria,
                    inflation=None if exp.get("inflation") == "none" else exp.get("inflation", "default"), truncation=exp.get("truncation"),
                    max_rank=exp.get("max_rank"),
-                   min_alive_fraction=float(exp.get("min_alive_fraction", 0.5)),
+                   min_alive_fraction=float(exp.get("min_alive_fraction", cls.min_alive_fraction)),
                    unrelated=dict(exp.get("localization") or {}),
                    truth=None if truth is None else {p: float(truth[p]) for p in truth},
                    inner_members=int(emulated.get("inner_members", cls.inner_members)),
@@ -163,33 +166,39 @@ def params_frame(P: np.ndarray, names: Sequence[str]) -> pd.DataFrame:
     return df
 
 
-def _spread(spec: ExperimentSpec, P: np.ndarray, alive: np.ndarray) -> np.ndarray | None:
-    if alive.sum() < 2:
-        return None
-    return spec.transform.to_unbounded(P[alive]).std(axis=0, ddof=1)
-
-
 def decide(spec: ExperimentSpec, k: int, misfit: Mapping, n_obs: int, spread, prior_spread) -> dict:
-    """The stop decision after ``k`` analyses (:func:`enkf.check_stop` with the experiment's rule).
-
-    ES-MDA: the convergence tests are taken only once its ``alpha`` schedule is complete (its posterior
-    is defined only there) and the schedule is the iteration budget. Emulated ES-MDA: likewise once its
-    tempering is done (every iteration if ``temper_base`` is 1). EnKF: every iteration.
-    """
-    if spec.method == "esmda":
-        allow = k >= len(spec.alphas)
-    elif spec.method == "emulated_esmda":
-        allow = k >= spec.max_iterations or spec.temper_base == 1.0
-    else:
-        allow = True
-    d = check_stop(k, chi2_per_obs=_nan(misfit.get("chi2_per_obs")), nrmse=_nan(misfit.get("nrmse")),
-                   n_obs=n_obs, spread=spread, prior_spread=prior_spread, criteria=spec.criteria,
-                   allow_convergence=allow, model_target=misfit.get("target")).to_dict()
-    return d
+    """The stop decision after ``k`` analyses: the process' stop policy with the experiment's rule
+    (:class:`enkf.StopPolicy`; the convergence tests where the method's posterior is defined,
+    :meth:`enkf.StepSchedule.converges_at`)."""
+    return StopPolicy(spec.criteria).decide(step_schedule(spec), k, misfit, n_obs, spread, prior_spread).to_dict()
 
 
-def _nan(v) -> float:
-    return math.nan if v is None else float(v)
+def build_process(spec: ExperimentSpec, obs: Observations, params: pd.DataFrame | None = None, *,
+                  prior_params: pd.DataFrame | None = None, iteration: int = 0,
+                  history: Sequence[tuple[pd.DataFrame, np.ndarray]] = ()) -> CalibrationProcess:
+    """The experiment's calibration process at analysis ``iteration``, rebuilt from its iteration files:
+    ``params`` (``iter_<k>/params.csv``; default the prior ensemble, :func:`initial_ensemble`),
+    ``prior_params`` (``iter_0/params.csv``, the reference spread of the collapse guard and inflation;
+    default ``params``) and ``history``, the ``(params, responses)`` of iterations ``0 .. k-1`` (the
+    emulated ES-MDA's emulator is built on every run so far). Each analysis ``k`` draws from its own
+    stream, ``rng_for(seed, "analysis", k)``."""
+    names = list(spec.names)
+    params = initial_ensemble(spec) if params is None else params
+    prior = params if prior_params is None else prior_params
+    if spec.method == "emulated_esmda" and len(history) != iteration:
+        raise ValueError(f"{spec.name}, iteration {iteration}: emulated_esmda needs the runs of iterations "
+                         f"0..{iteration - 1}, got {len(history)} of them")
+    runs = [(hp[names].to_numpy(float), np.asarray(hy, float)) for hp, hy in history] \
+        if spec.method == "emulated_esmda" else []
+    return CalibrationProcess(
+        params[names].to_numpy(float), obs.values, WorkflowLikelihood(spec, obs),
+        rng=SeededSteps(spec.seed, PURPOSES["analysis"]), schedule=step_schedule(spec), stop=StopPolicy(spec.criteria),
+        failure=FailurePolicy(spec.min_alive_fraction),
+        analysis=AnalysisSettings(spec.inflation, spec.truncation, spec.max_rank, spec.localization(obs)),
+        emulated=EmulatedSettings(spec.inner_members, spec.inner_steps, spec.smoothing, obs.time,
+                                  obs.frame["record"].to_numpy(str)),
+        transform=spec.transform, names=names, iteration=iteration, runs=runs,
+        prior_spread=spec.transform.to_unbounded(prior[names].to_numpy(float)).std(axis=0, ddof=1), label=spec.name)
 
 
 def analysis_step(spec: ExperimentSpec, k: int, params: pd.DataFrame, responses: np.ndarray,
@@ -215,156 +224,60 @@ def analysis_step(spec: ExperimentSpec, k: int, params: pd.DataFrame, responses:
         If fewer than ``min_alive_fraction`` of the members survived (the message lists why they failed).
     """
     names = list(spec.names)
-    P = params[names].to_numpy(float)
     Y = np.asarray(responses, float)
-    N = P.shape[0]
+    N = len(params)
     if Y.shape != (N, obs.m):
         raise ValueError(f"responses have shape {Y.shape}, expected ({N}, {obs.m})")
-    status_ok = member_status["status"].to_numpy(str) == "ok"
-    alive = status_ok & np.all(np.isfinite(Y), axis=1)
-    failed = []
-    for i in np.flatnonzero(~alive):
-        row = member_status.iloc[i]
-        reason = str(row.get("reason") or "")
-        if status_ok[i]:
-            reason = "simulated curve does not cover the observation grid (NaN on the grid)"
-        failed.append({"member": int(row["member"]), "reason": reason})
-
-    err = obs.error_model()
-    d = obs.values
-    transform = spec.transform
-    prior_spread = transform.to_unbounded(prior_params[names].to_numpy(float)).std(axis=0, ddof=1)
-    needed = max(2, math.ceil(spec.min_alive_fraction * N - 1e-12))
-    if alive.sum() < needed:
-        lines = "\n".join(f"  member {f['member']}: {f['reason']}" for f in failed)
-        raise EnsembleFailure(f"{spec.name}, iteration {k}: only {int(alive.sum())} of {N} members succeeded "
-                              f"(need {needed}, min_alive_fraction={spec.min_alive_fraction}). Failures:\n{lines}")
-
-    # The likelihood's terms: R, the simulator's variability S measured by this iteration's replicates,
-    # and the model discrepancy D estimated on these members over R + 2S.
-    terms, model_error = analysis_error(spec.discrepancy, obs, Y, alive, replicates=replicates, mode=spec.mesh_mode,
-                                        measured=spec.truth is None)
-    misfit_out = misfit_block(Y, obs, err, terms, alive)
-    spread = _spread(spec, P, alive)
+    process = build_process(spec, obs, params, prior_params=prior_params, iteration=k, history=history)
+    step = process.tell(Y, ok=member_status["status"].to_numpy(str) == "ok",
+                        reasons={i: member_status.iloc[i].get("reason") for i in range(N)},
+                        member_ids=member_status["member"].to_numpy(int), replicates=replicates)
+    err, d, alive, res = obs.error_model(), obs.values, step.alive, step.result
+    misfit_out = step.misfit
     members = misfit_table(Y, d, err, alive).rename(columns={"rmse": "rmse_Pa"})
     members["member"] = params["member"].to_numpy(int)
-
-    update = None
-    next_params = None
-    alpha = None
-    if spec.method == "esmda" and k < len(spec.alphas):
-        alpha = spec.alphas[k]
-    elif spec.method == "enkf":
-        alpha = 1.0
+    update = None if res is None else res.to_dict()
     if spec.method == "emulated_esmda":
-        res = _emulated_analysis(spec, k, P, Y, alive, obs, history, terms.emulated(),
-                                 loo_scale=terms.likelihood().std)
-        update = res.to_dict()
-        next_params = res.params.tolist()
         if res.error is not None:
-            # A diagnostic, not the stop test (see _misfit_for_decide): the fit measured against R plus
-            # the emulator's leave-one-out error, which holds the simulator's ruggedness once the design
-            # is dense where the posterior is.
-            C = DenseError(terms.emulated().dense() + res.error.dense(), _symmetric=True)
+            # A diagnostic, not the stop test (calibration.process.stop_misfit): the fit measured against R
+            # plus the emulator's leave-one-out error, which holds the simulator's ruggedness once the
+            # design is dense where the posterior is.
+            C = DenseError(step.terms.emulated().dense() + res.error.dense(), _symmetric=True)
             misfit_out["chi2_per_obs_model_error"] = mean_misfit(Y, d, C, alive)["chi2_per_obs"]
-    elif alpha is not None:
-        base = spec.truncation if spec.truncation is not None else (0.99 if spec.method == "esmda" else 1.0)
-        total = terms.assimilation(alpha)
-        truncation = capped_truncation(Y, alive, total, base, spec.max_rank)
-        common = dict(rng=rng_for(spec.seed, "analysis", k), transform=transform,
-                      localization=spec.localization(obs), prior_std=prior_spread, alive=alive,
-                      min_alive_fraction=spec.min_alive_fraction, names=names)
-        if spec.method == "esmda":
-            infl = None if spec.inflation == "default" else spec.inflation
-            res = esmda_update(P, Y, d, total, alpha=alpha, inflation=infl, truncation=truncation, **common)
-        else:
-            infl = "paper" if spec.inflation == "default" else spec.inflation
-            res = enkf_update(P, Y, d, total, inflation=infl, truncation=truncation, **common)
-        update = res.to_dict()
+    elif update is not None:
         update.pop("misfit_members", None)  # the same numbers are in "members" below
         update["max_rank"] = spec.max_rank
-        next_params = res.params.tolist()
-
-    decision = decide(spec, k, _misfit_for_decide(misfit_out), obs.m, spread, prior_spread)
+    spread = step.spread
     return jsonable({
         "experiment": spec.name,
         "iteration": k,
         "method": spec.method,
-        "alpha_next": alpha,
+        "alpha_next": step.alpha,
         "n_members": N,
         "n_alive": int(alive.sum()),
         "alive": alive.tolist(),
-        "failed_members": failed,
+        "failed_members": step.failed,
         "n_obs": obs.m,
         "obs_error": err.describe(),
-        "model_error": model_error,
+        "model_error": step.terms.model_error,
         "misfit": misfit_out,
         "misfit_per_record": record_misfits(Y, obs, alive),
         "members": members.to_dict(orient="records"),
-        "posterior": posterior_dict(P, names, alive),
+        "posterior": posterior_dict(step.params, names, alive),
         "spread_unbounded": None if spread is None else dict(zip(names, spread.tolist())),
-        "prior_spread_unbounded": dict(zip(names, prior_spread.tolist())),
-        "decision": decision,
+        "prior_spread_unbounded": dict(zip(names, process.prior_spread.tolist())),
+        "decision": step.decision.to_dict(),
         "stop_criteria": spec.criteria.to_dict(),
         "update": update,
-        "next_params": None if next_params is None else {"names": names, "values": next_params},
+        "next_params": None if step.next_params is None else {"names": names, "values": step.next_params.tolist()},
     })
 
 
-def _emulated_analysis(spec: ExperimentSpec, k: int, P: np.ndarray, Y: np.ndarray, alive: np.ndarray,
-                       obs: Observations, history: Sequence[tuple[pd.DataFrame, np.ndarray]], error, loo_scale=None):
-    """:func:`enkf.emulated_esmda_update` on every successful run of iterations ``0..k``."""
-    if len(history) != k:
-        raise ValueError(f"{spec.name}, iteration {k}: emulated_esmda needs the runs of iterations 0..{k - 1}, "
-                         f"got {len(history)} of them")
-    names = list(spec.names)
-    X, Ys, latest = all_runs(spec, [hp for hp, _ in history] + [pd.DataFrame(P, columns=names)],
-                             [hy for _, hy in history] + [Y], alive)
-    return emulated_esmda_update(X, Ys, latest, obs.values, error,
-                                 lower=spec.lower, upper=spec.upper, n_members=spec.ensemble_size,
-                                 rng=rng_for(spec.seed, "analysis", k), times=obs.time,
-                                 groups=obs.frame["record"].to_numpy(str), inner_members=spec.inner_members,
-                                 inner_steps=spec.inner_steps,
-                                 temper=spec.temper_base ** max(0, spec.max_iterations - 1 - k),
-                                 smoothing=spec.smoothing, loo_scale=loo_scale,
-                                 transform_kind=spec.transform_kind, names=names)
-
-
 def all_runs(spec: ExperimentSpec, params: Sequence[pd.DataFrame], responses: Sequence[np.ndarray], last_alive):
-    """Every successful run of iterations ``0..K``: ``(X (k, n), Y (k, m), latest (k,) bool)``, where a run
-    counts if its curve is finite on the grid (and, in iteration ``K``, its member is alive)."""
+    """Every successful run of iterations ``0..K``: ``(X (k, n), Y (k, m), latest (k,) bool)``
+    (:func:`enkf.process.all_runs` on the experiment's parameter columns)."""
     names = list(spec.names)
-    runs = [(p[names].to_numpy(float), np.asarray(y, float)) for p, y in zip(params, responses)]
-    ok = [np.all(np.isfinite(y), axis=1) for _, y in runs]
-    ok[-1] = ok[-1] & np.asarray(last_alive, bool)
-    X = np.vstack([p[o] for (p, _), o in zip(runs, ok)])
-    Y = np.vstack([y[o] for (_, y), o in zip(runs, ok)])
-    latest = np.concatenate([np.full(int(o.sum()), i == len(runs) - 1) for i, o in enumerate(ok)])
-    return X, Y, latest
-
-
-def capped_truncation(Y: np.ndarray, alive: np.ndarray, err, base: float, max_rank: int | None) -> float:
-    """The ``truncation`` argument of :func:`enkf.esmda_update` / :func:`enkf.enkf_update` that keeps at
-    most ``max_rank`` singular values of the whitened response anomalies (and never more than ``base``).
-
-    Same anomalies as the analysis: ``S = L^{-1} (Y_alive - mean)^T / sqrt(N_alive - 1)``; the
-    returned fraction sits just below the cumulative singular-value fraction of the ``max_rank``-th
-    value, so :func:`enkf.truncation_rank` keeps exactly ``min(rank(base), max_rank)`` values.
-    """
-    if max_rank is None:
-        return base
-    Ya = np.asarray(Y, float)[np.asarray(alive, bool)]
-    if Ya.shape[0] < 2:
-        return base
-    S = err.whiten((Ya - Ya.mean(axis=0)).T) / math.sqrt(Ya.shape[0] - 1)
-    s = np.linalg.svd(S, compute_uv=False)
-    if s.size == 0 or s[0] <= 0:
-        return base
-    frac = np.cumsum(s) / np.sum(s)
-    r = min(int(max_rank), int(np.count_nonzero(s > s[0] * 1e-12)))
-    if r >= s.size or frac[r - 1] >= base:
-        return base
-    return float(frac[r - 1]) - 1e-12
+    return _all_runs([p[names].to_numpy(float) for p in params], responses, last_alive)
 
 
 def record_misfits(Y: np.ndarray, obs: Observations, alive=None) -> dict:
@@ -388,23 +301,13 @@ def final_iteration(spec: ExperimentSpec, analyses: Sequence[Mapping]) -> tuple[
         spread = a.get("spread_unbounded")
         spread = None if spread is None else np.array([spread[p] for p in spec.names])
         prior = np.array([a["prior_spread_unbounded"][p] for p in spec.names])
-        d = decide(spec, k, _misfit_for_decide(a["misfit"]), int(a["n_obs"]), spread, prior)
+        d = decide(spec, k, stop_misfit(a["misfit"]), int(a["n_obs"]), spread, prior)
         if d["stop"]:
             return k, d
         if a.get("next_params") is None:
             return k, {**d, "stop": True, "reason": "no_update",
                        "message": "the stored analysis has no update to continue from; re-run the analysis"}
     return len(analyses), None
-
-
-def _misfit_for_decide(m: Mapping) -> dict:
-    # The median member against the full error model (R + 2S + D), standardised, with its target: the members
-    # must fit, not their mean (a blurred mean of step-like members can fit where none does). Also for
-    # emulated_esmda: its chi2_per_obs_model_error (+ the emulator's leave-one-out error) is recorded but
-    # not a stop test, because on a sparse design that error is interpolation error and the test cannot
-    # fail (docs/inference.md). Files written before the members were scored carry only the mean's.
-    chi2 = m.get("stop_chi2_per_obs", m.get("chi2_per_obs"))
-    return {"rmse": m.get("rmse_Pa"), "nrmse": m.get("nrmse"), "chi2_per_obs": chi2, "target": m.get("stop_target")}
 
 
 def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], decision: Mapping,

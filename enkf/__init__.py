@@ -10,8 +10,11 @@ Sees parameter matrices ``(N, n)`` and response matrices ``(N, m)``, one row per
 * :mod:`enkf.inflation`   parameter inflation (eq. 5): multiplicative and the paper's spread floor.
 * :mod:`enkf.stopping`    discrepancy principle, tolerance, collapse guard, iteration budget.
 * :mod:`enkf.diagnostics` misfits and spreads as numbers, dicts and DataFrames.
-* :mod:`enkf.loop`        a reference iterate-until-stop driver for in-process forward models.
-* :mod:`enkf.emulated`    emulator-assisted ES-MDA: each analysis an ES-MDA on an emulator of all runs so far.
+* :mod:`enkf.process`     the calibration process, ask and tell: EnKF, ES-MDA and emulated ES-MDA behind one
+  interface, its stop, failure and step-schedule policies, its state saved and loaded.
+* :mod:`enkf.loop`        the process' in-process driver for forward models run in one program.
+* :mod:`enkf.emulated`    emulator-assisted ES-MDA: each analysis an ES-MDA on an emulator of all runs so far
+  (a step of the process: :mod:`enkf.emulated_step`).
 
 Reference: Godinez & Rougier (2021), Appl. Sci. 11, 2898, section 4.
 """
@@ -53,3 +56,12 @@ __all__ += [
 from .emulated import EmulatedAnalysis, emulated_esmda_update, emulator_error_model
 
 __all__ += ["EmulatedAnalysis", "emulated_esmda_update", "emulator_error_model"]
+
+# The calibration process (issue 54): one object the workflow, the benchmarks and the tests drive. Importing
+# emulated_step registers the emulated ES-MDA's analysis with it.
+from . import emulated_step  # noqa: E402,F401
+from .process import (AnalysisSettings, CalibrationProcess, EmulatedSettings, FailurePolicy, FixedError,  # noqa: E402
+                      SeededSteps, StepSchedule, StopPolicy)
+
+__all__ += ["AnalysisSettings", "CalibrationProcess", "EmulatedSettings", "FailurePolicy", "FixedError",
+            "SeededSteps", "StepSchedule", "StopPolicy"]

@@ -1,14 +1,15 @@
-"""A reference driver for the iterate-until-stop cycle (paper, section 4: initialization, simulation,
-assimilation, cycle), for callers that can run the whole ensemble in-process (tests, twin experiments).
+"""The in-process driver of the calibration process (paper, section 4: initialization, simulation,
+assimilation, cycle), for callers that can run the whole ensemble in one program (tests, twin
+experiments, the emulated ES-MDA's inner loop, the cross-validation's fits).
 
-The Snakemake workflow runs the same cycle one step per checkpoint with :func:`enkf_update` /
-:func:`esmda_update`, :func:`check_stop` and the diagnostics; this function is that cycle in a loop:
+It is the loop a caller of :class:`enkf.process.CalibrationProcess` writes, with a fixed observation error
+(:class:`enkf.process.FixedError`) and no update after the stop (a generator shared with the caller is
+left where the last analysis left it); the Snakemake workflow drives the same process one ``tell`` per
+analysis job:
 
-    k = 0; p = p_0
-    loop: y = forward(p)                      # one simulation per member, NaN rows = failed members
-          decision = check_stop(k, misfit of the median member, spread(p))
-          if decision.stop: break
-          p = analysis(p, y, alpha_k); k += 1
+    process = CalibrationProcess(p_0, obs, FixedError(R), ...)
+    while not process.done:
+        process.tell(forward(process.ask()))  # NaN rows = failed members
 
 ``method="enkf"``: the paper's EnKF repeated (``alpha = 1`` each time, inflation ``"paper"`` by
 default), stopped by the criteria. ``method="esmda"``: the schedule ``alphas`` (default
@@ -19,16 +20,16 @@ are only taken at its end, the collapse guard at every step.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 
 from ._rng import RngLike, as_generator
-from .analysis import enkf_update, esmda_alphas, esmda_update
 from .covariance import ObservationError
-from .diagnostics import default_names, jsonable, mean_misfit, member_misfit, posterior_dict
-from .stopping import StopCriteria, StopDecision, check_stop
+from .diagnostics import jsonable, posterior_dict
+from .process import AnalysisSettings, CalibrationProcess, FailurePolicy, FixedError, StepSchedule, StopPolicy
+from .stopping import StopCriteria, StopDecision
 from .transforms import BoxTransform, IdentityTransform
 
 
@@ -82,54 +83,19 @@ def assimilate(forward: Callable[[np.ndarray], np.ndarray], params0, obs, obs_er
     params0 : (N, n) initial ensemble (e.g. :func:`latin_hypercube`).
     method : ``"esmda"`` (default) or ``"enkf"`` (the paper's iteration).
     alphas : ES-MDA schedule (default ``esmda_alphas(3)``), ignored for ``"enkf"``.
-    inflation : ``"default"`` = ``"paper"`` for EnKF and none for ES-MDA; else as in :func:`enkf_update`.
-    truncation : SVD truncation; default 1.0 for EnKF (exact eq. 4), 0.99 for ES-MDA.
+    inflation, truncation : as :class:`enkf.process.AnalysisSettings` (the method's defaults).
     Other arguments as :func:`enkf_update` and :func:`check_stop`.
     """
     if method not in ("esmda", "enkf"):
         raise ValueError("method must be 'esmda' or 'enkf'")
-    rng = as_generator(rng)
-    transform = IdentityTransform() if transform is None else transform
-    criteria = criteria or StopCriteria()
-    P = np.array(params0, dtype=float, ndmin=2)
-    names = default_names(P.shape[1], names)
-    d = np.asarray(obs, dtype=float)
-    if method == "esmda":
-        schedule = esmda_alphas(3) if alphas is None else np.asarray(alphas, dtype=float)
-        criteria = replace(criteria, max_iterations=int(schedule.size))
-        infl = None if inflation == "default" else inflation
-        trunc = 0.99 if truncation is None else truncation
-    else:
-        schedule = None
-        infl = "paper" if inflation == "default" else inflation
-        trunc = 1.0 if truncation is None else truncation
-    prior_spread = transform.to_unbounded(P).std(axis=0, ddof=1)
-
-    history: list[dict] = []
-    n_sim = 0
-    k = 0
+    process = CalibrationProcess(
+        params0, obs, FixedError(obs_error), rng=as_generator(rng),
+        schedule=StepSchedule(method, () if alphas is None else tuple(alphas)),
+        stop=StopPolicy(criteria or StopCriteria()), failure=FailurePolicy(min_alive_fraction),
+        analysis=AnalysisSettings(inflation=inflation, truncation=truncation, localization=localization),
+        transform=transform, names=names, update_on_stop=False)
     while True:
-        Y = np.array(forward(P), dtype=float, ndmin=2)
-        n_sim += P.shape[0]
-        alive = np.all(np.isfinite(Y), axis=1)
-        misfit = mean_misfit(Y, d, obs_error, alive)
-        members = member_misfit(Y, d, obs_error, alive)
-        spread = transform.to_unbounded(P[alive]).std(axis=0, ddof=1) if alive.sum() > 1 else None
-        # the members must fit, not their (possibly blurred) mean
-        decision = check_stop(k, chi2_per_obs=members["median_chi2_per_obs"], nrmse=members["median_nrmse"], n_obs=d.size,
-                              spread=spread, prior_spread=prior_spread, criteria=criteria,
-                              allow_convergence=(method == "enkf" or k == criteria.max_iterations))
-        history.append(jsonable({"iteration": k, "n_alive": int(alive.sum()), "misfit_mean": misfit, "misfit_members": members,
-                                 "posterior": posterior_dict(P, names, alive), "decision": decision.to_dict()}))
-        if decision.stop:
-            return AssimilationResult(P, Y, alive, history, decision, n_sim, names, prior_spread)
-        common = dict(rng=rng, transform=transform, localization=localization, inflation=infl,
-                      prior_std=prior_spread, alive=alive, min_alive_fraction=min_alive_fraction,
-                      truncation=trunc, names=names)
-        if method == "esmda":
-            result = esmda_update(P, Y, d, obs_error, alpha=float(schedule[k]), **common)
-        else:
-            result = enkf_update(P, Y, d, obs_error, **common)
-        history[-1]["analysis"] = result.to_dict()
-        P = result.params
-        k += 1
+        step = process.tell(np.array(forward(process.ask()), dtype=float, ndmin=2))
+        if process.done:
+            return AssimilationResult(step.params, step.responses, step.alive, process.history, process.decision,
+                                      process.n_simulations, process.names, process.prior_spread)
