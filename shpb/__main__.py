@@ -99,6 +99,8 @@ def main(argv=None) -> int:
     ic.add_argument("--diagnosis", action="store_true",
                     help="close the loop: hold one record out (the last by test order) and predict it at the end")
     ic.add_argument("--heldout", metavar="NAME", help="with --diagnosis: the sheet (file stem) to hold out")
+    ic.add_argument("--allow-invalid", action="store_true",
+                    help="calibrate on records graded invalid by the lab checks (observations.allow_invalid)")
     args = ap.parse_args(argv)
     if args.command == "init-config":
         return _init_config(args)
@@ -144,7 +146,11 @@ def _reduce(args) -> int:
     word = {True: "ok", False: "CHECK"}
     print(f"{sheet.name}: peak {red.peak_stress / 1e6:.1f} MPa at {red.peak_time * 1e6:.1f} us -> {out}\n"
           f"  force balance: mean R {fb['mean_R_half_peak_to_peak']:.3f} from half peak to peak "
-          f"(limit {fb['limit']}) {word[fb['ok']]}\n"
+          f"(limit {fb['limit']}) {word[fb['ok']]}"
+          + ("" if fb["ok"] or sheet.reduction.get("dispersion_correction", False) else
+             " (the specimen out of equilibrium, a bar's constants off, or the bars' dispersion: try "
+             "reduction: {dispersion_correction: true} in the sheet, docs/own-data.md)")
+          + "\n"
           f"  pulse alignment: best shift of F2 {al['best_shift_back_s'] * 1e6:+.2f} us "
           f"(limit +-{al['limit_s'] * 1e6:.2f} us) {word[al['ok']]}\n"
           f"  noise: {nz['noise_over_peak']:.2%} of the peak (limit {nz['limit']:.0%}) {word[nz['ok']]}\n"
@@ -176,7 +182,8 @@ def _init_config(args) -> int:
     from .atomic import atomic_write_text
     from .lab.init_config import InitConfigError, init_config
     try:
-        text, doc = init_config(args.sheets, name=args.name, diagnosis=args.diagnosis, heldout=args.heldout)
+        text, doc = init_config(args.sheets, name=args.name, diagnosis=args.diagnosis, heldout=args.heldout,
+                                allow_invalid=args.allow_invalid)
     except (ValueError, FileNotFoundError, InitConfigError) as exc:
         print(f"python -m shpb init-config: error: {exc}", file=sys.stderr)
         return contract.EXIT_BAD_INPUT

@@ -207,3 +207,38 @@ def test_an_unknown_heldout_name_is_refused(written):
         init_config(sheets, diagnosis=True, heldout="CaMa_SHPB_4")
     text, doc = init_config(sheets, diagnosis=True)     # default: the last by test order
     assert [Path(p).stem for p in _exp(doc)["diagnosis"]["heldout_records"]] == ["CaMa_SHPB_014"]
+
+
+def test_a_heldout_records_response_never_sets_the_window():
+    # the held-out record falls last; the window is the calibration records' (their latest fall 250 us)
+    a, b, held = _triangle(200, 250, 600, "a"), _triangle(150, 240, 600, "b"), _triangle(400, 500, 600, "h")
+    window, why = choose_window([a, b, held], heldout="h")
+    assert window == pytest.approx(choose_window([a, b])[0]) and window < 400e-6
+    assert "h, held out, is not read" in why
+    # its reduced length (its bars, not its response) still caps the window
+    short = _triangle(150, 240, 200, "h")
+    assert choose_window([a, b, short], heldout="h")[0] <= 200e-6 + 1e-12
+
+
+def test_invalid_calibration_records_are_refused_unless_allowed(tmp_path):
+    """Savonnieres limestone SaLi_SHPB_004 and _007 grade invalid (force balance mean R 0.105 and 0.145 > 0.10):
+    init-config says so instead of writing a config the dry run refuses; --allow-invalid writes it with
+    observations.allow_invalid and names them; an invalid held-out record is not refused."""
+    sali = REPO / "data/freiburg-rae-rock-shpb/Rae2021/SHPBdata/SaLi"
+    sheets = []
+    for raw in ("SaLi_SHPB_004_Ti25_25b_Al16b_0_001.txt", "SaLi_SHPB_007_Ti25_35b_Al16b_0_001.txt",
+                "SaLi_SHPB_009_Ti25_45b_Al12b_0_001.txt"):
+        sheets.append(tmp_path / f"{raw[:13]}.yaml")
+        write_sheet(freiburg_sheet(sali / raw, tmp_path), sheets[-1])
+    with pytest.raises(InitConfigError, match=r"invalid as calibration records.*SaLi_SHPB_004.*force_balance invalid"):
+        init_config(sheets)
+    text, doc = init_config(sheets, allow_invalid=True)
+    exp = _exp(doc)
+    assert exp["observations"]["allow_invalid"] is True
+    (why,) = [ln for ln in text.splitlines() if "graded invalid" in ln]
+    assert "SaLi_SHPB_004, SaLi_SHPB_007 graded invalid" in why and "SaLi_SHPB_009" not in why
+    assert "SaLi_SHPB_009: " in text and ", questionable" in text and ", invalid" in text
+    # held out, the invalid records are not refused: only calibration records are gated
+    with pytest.raises(InitConfigError, match=r"SaLi_SHPB_007") as refused:
+        init_config(sheets, diagnosis=True, heldout="SaLi_SHPB_004")
+    assert "SaLi_SHPB_004.yaml" not in str(refused.value)

@@ -21,12 +21,12 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
-from .lab_reduce import reduce_sheet
+from .lab_reduce import lab_checks, reduce_sheet, transit_time
 from .sheet_readers import check_sheet
 
 __all__ = ["RockClass", "ROCK_CLASSES", "WIDE_DEFAULT", "RecordTimes", "record_times", "choose_window",
@@ -105,6 +105,8 @@ class RecordTimes:
     peak_stress: float
     fall: float | None
     end: float
+    validity: str = "valid"
+    reasons: tuple[str, ...] = ()
 
 
 def record_times(name: str, path: Path, time: np.ndarray, stress: np.ndarray) -> RecordTimes:
@@ -118,14 +120,19 @@ def record_times(name: str, path: Path, time: np.ndarray, stress: np.ndarray) ->
     return RecordTimes(name, path, onset, float(time[i]), peak, fall, float(time[-1]))
 
 
-def choose_window(times: list[RecordTimes]) -> tuple[float, str]:
-    """``(t_end, reason)``: from 0 to the latest fall plus the margin, rounded up, and no later than the
-    shortest reduced record (the workflow refuses a window a record does not cover)."""
+def choose_window(times: list[RecordTimes], heldout: str | None = None) -> tuple[float, str]:
+    """``(t_end, reason)``: from 0 to the latest fall of the calibration records plus the margin, rounded
+    up, and no later than the shortest reduced record, held-out one included (the workflow refuses a window
+    a record does not cover). A held-out record's response (its peak, its fall) never sets the window:
+    what it is predicted on is chosen from the calibration records alone; its reduced length comes from
+    its bars (2 x_I / c0), not from its response."""
+    every = times
+    times = [t for t in every if t.name != heldout]
     falls = [t.fall if t.fall is not None else t.end for t in times]
     latest = max(range(len(times)), key=lambda k: falls[k])
     t_fall = falls[latest]
     want = math.ceil((t_fall + max(MARGIN_FRACTION * t_fall, MIN_MARGIN_S)) / ROUND_S - 1e-9) * ROUND_S
-    shortest = min(times, key=lambda t: t.end)
+    shortest = min(every, key=lambda t: t.end)
     cap = math.floor(shortest.end / ROUND_S + 1e-9) * ROUND_S
     if cap < max(t.peak for t in times):
         raise InitConfigError(f"{shortest.path}: the reduced record ends at {shortest.end * 1e6:.0f} us, before "
@@ -133,7 +140,8 @@ def choose_window(times: list[RecordTimes]) -> tuple[float, str]:
     unseen = [t.name for t in times if t.fall is None]
     why = (f"0 to the latest fall ({times[latest].name}: down to {FALL_FRACTION:.0%} of its peak at "
            f"{t_fall * 1e6:.0f} us) + {MARGIN_FRACTION:.0%} (at least {MIN_MARGIN_S * 1e6:.0f} us), rounded up to "
-           f"{ROUND_S * 1e6:.0f} us; holds every record's onset, peak and fall")
+           f"{ROUND_S * 1e6:.0f} us; holds every calibration record's onset, peak and fall"
+           + (f" ({heldout}, held out, is not read)" if heldout else ""))
     if unseen:
         why += f"; {unseen} do not fall that far before their reduced window ends"
     if want > cap:
@@ -184,7 +192,9 @@ def read_sheets(paths: list[str | Path]) -> tuple[list, list[RecordTimes]]:
     for p in paths:
         sheet, raw = check_sheet(p)
         red = reduce_sheet(sheet, raw)
-        loaded.append((sheet, record_times(Path(p).stem, Path(p), red.time, red.stress)))
+        grade = lab_checks(red, transit_time(sheet))["validity"]
+        times = record_times(Path(p).stem, Path(p), red.time, red.stress)
+        loaded.append((sheet, replace(times, validity=grade["class"], reasons=tuple(grade["reasons"]))))
     loaded.sort(key=lambda st: _test_order(st[1].name))
     for key, what in ((lambda s: s.geometry, "specimen.geometry"),
                       (lambda s: (s.rock.get("lithology") or "").lower() or None, "rock.lithology")):
@@ -198,7 +208,7 @@ def read_sheets(paths: list[str | Path]) -> tuple[list, list[RecordTimes]]:
 
 
 def init_config(paths: list[str | Path], *, name: str | None = None, diagnosis: bool = False,
-                heldout: str | None = None, seed: int = 31) -> tuple[str, dict]:
+                heldout: str | None = None, seed: int = 31, allow_invalid: bool = False) -> tuple[str, dict]:
     """``(YAML text with comments, the same document as a dict)``: one calibration experiment from ``paths``.
 
     The rock is compared by the sheets' ``rock.lithology``; sheets that give only E, nu, rho are taken
@@ -225,8 +235,16 @@ def init_config(paths: list[str | Path], *, name: str | None = None, diagnosis: 
         held = heldout or names[-1]
     elif heldout is not None:
         raise InitConfigError("--heldout: only with --diagnosis (a plain calibration holds no record out)")
-    window, why_window = choose_window(times)
+    invalid = [t for t in times if t.validity == "invalid" and t.name != held]
+    if invalid and not allow_invalid:
+        # the workflow refuses them before any job (issue 56); saying so here saves the user a dry run
+        raise InitConfigError(
+            "invalid as calibration records (python -m shpb reduce SHEET shows the checks): "
+            + "; ".join(f"{t.path}: {', '.join(t.reasons)}" for t in invalid)
+            + ". Leave them out, fix their sheets, or give --allow-invalid to calibrate on them anyway "
+              "(written as observations.allow_invalid: true)")
+    window, why_window = choose_window(times, held)
     boxes, why_box = rock_box(lithology, geometry)
     return experiment_yaml(name=name, geometry=geometry, lithology=lithology, times=times, window=window,
                            why_window=why_window, dt=choose_dt(window), boxes=boxes, why_box=why_box,
-                           heldout=held, seed=seed)
+                           heldout=held, seed=seed, invalid=[t.name for t in invalid])

@@ -84,7 +84,7 @@ def _diagnosis_lines(heldout_path: str, seed: int) -> list[str]:
 
 
 def experiment_yaml(*, name, geometry, lithology, times, window, why_window, dt, boxes, why_box, heldout,
-                    seed) -> tuple[str, dict]:
+                    seed, invalid=()) -> tuple[str, dict]:
     """``(text, parsed experiment)``; ``times`` in test order, ``heldout`` a record name or None."""
     calib = [t for t in times if t.name != heldout]
     held = [t for t in times if t.name == heldout]
@@ -96,7 +96,7 @@ def experiment_yaml(*, name, geometry, lithology, times, window, why_window, dt,
             "# Each record (onset / peak / fall at half the peak, face time):"]
     head += [f"#   {t.name}: {t.onset * 1e6:.0f} / {t.peak * 1e6:.0f} us ({t.peak_stress / 1e6:.1f} MPa) / "
              + (f"{t.fall * 1e6:.0f} us" if t.fall is not None else "no fall in its reduced window")
-             + (" (held out)" if t.name == heldout else "") for t in times]
+             + f", {t.validity}" + (" (held out)" if t.name == heldout else "") for t in times]
     what = "closing the loop with one record held out" if heldout else "a calibration"
     body = [line(0, "run", [name], "only this experiment, not config/config.yaml's default run"), "",
             "experiments:", f"  {name}:",
@@ -123,6 +123,9 @@ def experiment_yaml(*, name, geometry, lithology, times, window, why_window, dt,
             *[f"        - {flow(record_path(t.path))}" for t in calib],
             line(6, "error", {"kind": "ar1", "sigma_scale": 1.0}, "each record's pre-trigger noise level and its "
                  "AR(1) correlation in time")]
+    if invalid:
+        body.append(line(6, "allow_invalid", True, f"--allow-invalid: {', '.join(invalid)} graded invalid by "
+                         f"python -m shpb reduce, calibrated on anyway"))
     if heldout:
         body.append(line(6, "model_error", {"simulator_replicates": 3}, "the mesh's own scatter, as "
                          "config/diagnosis.yaml"))
