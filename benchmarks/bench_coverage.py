@@ -3,7 +3,8 @@
 Each twin is the default twin (``config/config.yaml``'s ``twin_ref``: the Brazilian disc at ``fast``,
 N = 25, three emulator-assisted ES-MDA analyses, its observation window 0-160 us with the failure peak
 and the post-peak, 1 % white noise, its error model and stop rule) with its own truth and seed, run
-through the workflow's own analysis step (:func:`calibration.experiment.analysis_step`), its own mesh
+through the workflow's own calibration process (:func:`calibration.experiment.build_process`, told each
+iteration's runs as the workflow's analysis jobs tell it, :func:`calibration.experiment.analysis_record`), its own mesh
 realizations (the twin's data on a mesh of its own, every member and replicate on its own), its
 replicates at each iteration's ensemble mean, its choice of the reported ensemble and its reported
 intervals (prediction intervals of one more draw, :func:`enkf.prediction_interval_dict`). The truths are a scrambled Latin hypercube of the *whole* Table 2
@@ -80,7 +81,7 @@ import pandas as pd
 from scipy import stats
 from scipy.stats import qmc
 
-from calibration.experiment import (ExperimentSpec, analysis_step, initial_ensemble, mesh_seed, params_frame,
+from calibration.experiment import (ExperimentSpec, analysis_record, build_process, mesh_seed, params_frame,
                                     reported_ensemble, rng_for, run_mesh_seed)
 from enkf import prediction_interval_dict
 from calibration.posterior import refine_design, sample_posterior
@@ -235,25 +236,25 @@ def simulate_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: st
                             relative_sigma=o["noise"]["relative_sigma"])
     if approx is not None:
         obs = with_approximation_error(obs, *approx)
-    params, responses, analyses = [initial_ensemble(spec)], [], []
-    for k in range(spec.max_iterations + 1):
-        P = params[k][names].to_numpy()
+    # the workflow's own calibration process, told each iteration's runs as the analysis jobs tell it
+    process = build_process(spec, obs)
+    params, responses, analyses = [], [], []
+    while True:
+        k = process.iteration
+        params.append(params_frame(process.ask(), names))
+        P = params[-1][names].to_numpy()  # the frame's (column-major) copy: the centre's mean summed as before
         tasks = [task(p, exp["preset"], run_mesh_seed(exp, "member", k, i)) for i, p in enumerate(P)]
         centre = spec.transform.to_bounded(spec.transform.to_unbounded(P).mean(axis=0)[None, :])[0]
         tasks += [task(centre, exp["preset"], run_mesh_seed(exp, "replicate", k, r)) for r in range(spec.replicates)]
         out = np.array(pool.map(_simulate, tasks))
         Y, reps = out[:len(P)], out[len(P):]
         ok = np.all(np.isfinite(Y), axis=1)
-        status = pd.DataFrame({"member": params[k]["member"], "status": np.where(ok, "ok", "failed"),
-                               "reason": np.where(ok, "", "simulation failed")})
-        a = analysis_step(spec, k, params[k], Y, status, obs, params[0], list(zip(params[:k], responses)),
-                          replicates=reps)
-        analyses.append(a)
+        step = process.tell(Y, ok=ok, reasons={int(i): "simulation failed" for i in np.flatnonzero(~ok)},
+                            replicates=reps)
+        analyses.append(analysis_record(spec, obs, step))
         responses.append(Y)
-        if a["decision"]["stop"] or a["next_params"] is None:
-            break
-        params.append(params_frame(np.array(a["next_params"]["values"]), names))
-    return spec, params, responses, analyses, obs
+        if process.done:
+            return spec, params, responses, analyses, obs
 
 
 def _mcmc_record(spec, truth, seed, params, responses, analyses, obs, refine=None) -> dict:

@@ -47,7 +47,7 @@ from .sensitivity import AUTO, selected_parameters
 from .verdict import calibration_verdict, member_chi2, reported_iteration
 
 __all__ = ["PURPOSES", "MESH_STAGES", "rng_for", "mesh_seed", "run_mesh_seed", "ExperimentSpec", "initial_ensemble",
-           "build_process", "analysis_step", "decide", "capped_truncation",
+           "build_process", "analysis_step", "analysis_record", "decide", "capped_truncation",
            "all_runs", "diagnosis_settings", "final_iteration", "final_verdict", "reported_ensemble", "linear_sensitivity", "record_misfits", "summary"]
 
 #: Independent random streams of an experiment (the ``spawn_key`` of :func:`rng_for`).
@@ -204,7 +204,9 @@ def build_process(spec: ExperimentSpec, obs: Observations, params: pd.DataFrame 
 def analysis_step(spec: ExperimentSpec, k: int, params: pd.DataFrame, responses: np.ndarray,
                   member_status: pd.DataFrame, obs: Observations, prior_params: pd.DataFrame,
                   history: Sequence[tuple[pd.DataFrame, np.ndarray]] = (), replicates: np.ndarray | None = None) -> dict:
-    """The ``iter_<k>/analysis.json`` dict: misfits, failures, spread, decision, analysis ensemble.
+    """The ``iter_<k>/analysis.json`` dict: misfits, failures, spread, decision, analysis ensemble. One
+    workflow job: the experiment's process rebuilt from its iteration files (:func:`build_process`) and
+    told this iteration's responses.
 
     Parameters
     ----------
@@ -223,7 +225,6 @@ def analysis_step(spec: ExperimentSpec, k: int, params: pd.DataFrame, responses:
     EnsembleFailure
         If fewer than ``min_alive_fraction`` of the members survived (the message lists why they failed).
     """
-    names = list(spec.names)
     Y = np.asarray(responses, float)
     N = len(params)
     if Y.shape != (N, obs.m):
@@ -232,10 +233,18 @@ def analysis_step(spec: ExperimentSpec, k: int, params: pd.DataFrame, responses:
     step = process.tell(Y, ok=member_status["status"].to_numpy(str) == "ok",
                         reasons={i: member_status.iloc[i].get("reason") for i in range(N)},
                         member_ids=member_status["member"].to_numpy(int), replicates=replicates)
+    return analysis_record(spec, obs, step, params["member"].to_numpy(int))
+
+
+def analysis_record(spec: ExperimentSpec, obs: Observations, step, member_ids=None) -> dict:
+    """The ``iter_<k>/analysis.json`` dict of one :meth:`enkf.CalibrationProcess.tell` (``step``) of the
+    experiment's process (:func:`build_process`); ``member_ids``: the ``member`` column (default 0..N-1)."""
+    names, k = list(spec.names), step.iteration
+    Y, N = step.responses, step.params.shape[0]
     err, d, alive, res = obs.error_model(), obs.values, step.alive, step.result
     misfit_out = step.misfit
     members = misfit_table(Y, d, err, alive).rename(columns={"rmse": "rmse_Pa"})
-    members["member"] = params["member"].to_numpy(int)
+    members["member"] = np.arange(N) if member_ids is None else np.asarray(member_ids, int)
     update = None if res is None else res.to_dict()
     if spec.method == "emulated_esmda":
         if res.error is not None:
@@ -265,7 +274,7 @@ def analysis_step(spec: ExperimentSpec, k: int, params: pd.DataFrame, responses:
         "members": members.to_dict(orient="records"),
         "posterior": posterior_dict(step.params, names, alive),
         "spread_unbounded": None if spread is None else dict(zip(names, spread.tolist())),
-        "prior_spread_unbounded": dict(zip(names, process.prior_spread.tolist())),
+        "prior_spread_unbounded": dict(zip(names, step.prior_spread.tolist())),
         "decision": step.decision.to_dict(),
         "stop_criteria": spec.criteria.to_dict(),
         "update": update,

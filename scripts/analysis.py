@@ -1,4 +1,5 @@
-"""iter_<k>/analysis.json: misfit, failed members, stop decision and the next ensemble (checkpoint)."""
+"""iter_<k>/analysis.json: misfit, failed members, stop decision and the next ensemble (checkpoint): the
+experiment's calibration process rebuilt from the iteration files and told this iteration's runs."""
 from calibration.job_log import log_to
 
 _console = log_to(snakemake.log[0])  # the job's output to its log; the analysis line also to the run's stdout

@@ -211,3 +211,40 @@ def test_the_workflow_analysis_step_is_the_process_tell():
     step = process.tell(Y)
     assert a["next_params"]["values"] == step.next_params.tolist()
     assert a["decision"] == step.decision.to_dict() and a["misfit"] == step.misfit
+
+
+class _StandInPool:
+    """The coverage benchmark's pool with a linear stand-in for the disc (a sine of sigma_t plus a ramp of
+    E_t, a 0.2 % ripple drawn from the run's mesh seed; sigma_t below 6 MPa fails); keeps every batch."""
+
+    def __init__(self):
+        self.batches = []
+
+    def map(self, fn, tasks, chunksize=None):
+        out = []
+        for _preset, p, _t_end, _dt, grid, seed in tasks:
+            y = p["sigma_t"] * np.sin(np.pi * grid / grid[-1]) + 1e4 * p["E_t"] * grid / grid[-1]
+            y = y * (1 + 0.002 * np.random.default_rng(seed).standard_normal(grid.size))
+            out.append(np.full(grid.size, np.nan) if p["sigma_t"] < 6e6 else y)
+        self.batches.append(np.array(out))
+        return out
+
+
+def test_the_coverage_benchmark_drives_the_process_the_workflow_jobs_rebuild():
+    """benchmarks/bench_coverage.py's twin loop (one process told each iteration) leaves the analyses the
+    workflow's jobs write (the process rebuilt from the files at each analysis), bit for bit."""
+    import benchmarks.bench_coverage as bc
+
+    pool = _StandInPool()
+    spec, params, responses, analyses, obs = bc.simulate_twin(pool, bc.twin_experiment(), np.array([30e6, 900.0]),
+                                                              41, "fast")
+    assert len(analyses) == spec.max_iterations + 1 and analyses[-1]["decision"]["stop"]
+    assert any(a["failed_members"] for a in analyses)  # the low-sigma_t corner of the box fails
+    for k, a in enumerate(analyses):
+        Y, reps = responses[k], pool.batches[k + 1][len(params[k]):]  # batch 0 is the twin's truth
+        ok = np.all(np.isfinite(Y), axis=1)
+        status = pd.DataFrame({"member": params[k]["member"], "status": np.where(ok, "ok", "failed"),
+                               "reason": np.where(ok, "", "simulation failed")})
+        job = analysis_step(spec, k, params[k], Y, status, obs, params[0], list(zip(params[:k], responses)),
+                            replicates=reps)
+        assert json.dumps(job, sort_keys=True) == json.dumps(a, sort_keys=True)
