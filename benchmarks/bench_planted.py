@@ -1,0 +1,279 @@
+"""The planted-effect benchmark on FDEM (issue 53, item 1): does the shipped loop name what was planted?
+
+    python benchmarks/bench_planted.py [--plan benchmarks/planted_plan.json] [--cases rate_strength,null]
+        [--seeds benchmark|development|5391,...] [--records N] [--preset standard] [--work DIR] [--out JSON]
+
+For each case x seed of the plan (benchmarks/planted_plan.json, committed before any run): the series is
+made by tools/make_planted_series.py in a work folder (the truth mesh, the plan's drivers, one effect
+planted, its size measured against the same meshes with the effect off), configured the way a lab
+configures its own records, ``python -m shpb init-config --diagnosis`` (one record held out), with one
+edit: ``diagnosis.exclude`` emptied, so the whole catalogue is offered (init-config leaves out damping and
+seating, two of the planted cases). The shipped loop then runs, ``snakemake --cores N --configfile``, from
+the repository; its ``results/<experiment>/diagnosis/report.json`` and ``check.json`` are read and scored:
+
+* what was named: the first addition the confirmation walk confirmed on real FDEM runs, else the verdict
+  (``base_kept``, or whatever else the report says, e.g. ``unexplained``);
+* a confusion matrix planted -> named over every series; the null's false-positive rate (any confirmed
+  effect); the out-of-catalogue cases' share ending ``base_kept`` or ``unexplained``; the planted
+  parameter inside the shipped model's reported 90 % interval (q05-q95; a per-record parameter: each
+  calibration record's copy against its own planted value);
+* wall time and cores per series; every miss with its reason.
+
+Writes ``--out`` (default benchmarks/results/bench_planted.json) after every series, so a stopped run
+keeps what it measured. The scoring functions (:func:`named`, :func:`parameter_coverage`, :func:`score`)
+are pure: tests/test_bench_planted.py checks them on hand-made reports.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+PLAN = ROOT / "benchmarks" / "planted_plan.json"
+OUT = ROOT / "benchmarks" / "results" / "bench_planted.json"
+#: Outcomes that are not an effect's name.
+NOT_NAMED = ("base_kept", "unexplained")
+#: An effect "moves the curve by more than the mesh scatter" when its largest change of a test's peak is
+#: above this many of the fast mesh's peak standard deviations (bench_sim_variability.json).
+SCATTER_MULTIPLE = 2.0
+
+#: The drivers the plan names (planted_plan.json ``series``): the cylinders' measured incident waves, the
+#: discs' trapezoid pulse amplitudes [m/s].
+CAMA = "data/freiburg-rae-rock-shpb/Rae2021/SHPBdata/CaMa/"
+CYLINDER_DRIVERS = tuple(CAMA + f for f in ("CaMa_SHPB_016_Ti25_40b_Al12b_0_001.txt", "CaMa_SHPB_006_Ti25_70b_Al12b_0_001.txt",
+                                            "CaMa_SHPB_015_Ti25_65b_Al12b_0_001.txt", "CaMa_SHPB_019_Ti25_73b_Al12b_0_001.txt"))
+DISC_PULSES_M_S = (2.2, 2.6, 3.0, 3.4)
+
+sys.path.insert(0, str(ROOT))
+
+
+# ---------------------------------------------------------------------------------------------- scoring
+def named(report: dict) -> str:
+    """What a diagnosis report names: its first confirmed addition, else its verdict."""
+    conf = report.get("confirmation") or {}
+    effects = conf.get("effects") or report.get("added") or []
+    if report.get("verdict") == "confirmed" and effects:
+        return str(effects[0])
+    return str(report.get("verdict") or "base_kept")
+
+
+def _shipped_posterior(report: dict) -> dict:
+    """The posterior summary (name -> mean, q05, q95) of the model the report ships."""
+    effects = list((report.get("confirmation") or {}).get("effects") or report.get("added") or [])
+    for step in (report.get("selection") or {}).get("steps", []):
+        if list(step.get("effects", [])) == effects:
+            return step.get("posterior") or {}
+    return {}
+
+
+def parameter_coverage(report: dict, truth: dict) -> dict:
+    """Whether each planted parameter lies inside the shipped model's reported 90 % interval.
+
+    A shared parameter is read once; a per-record one (``<param>@<record>`` in the report) per calibration
+    record, against that record's planted value (truth.json ``tests[].planted``). A parameter the shipped
+    model does not carry is not covered. Returns ``{"checks": [...], "covered": share or None}``."""
+    post = _shipped_posterior(report)
+    planted = {t["name"]: t.get("planted") or {} for t in truth.get("tests", [])}
+    checks = []
+    for param, value in (truth.get("plant") or {}).items():
+        copies = {k.split("@", 1)[1]: v for k, v in post.items() if k.startswith(param + "@")}
+        if param in post:
+            q = post[param]
+            checks.append({"param": param, "truth": value, "q05": q["q05"], "q95": q["q95"],
+                           "inside": bool(q["q05"] <= value <= q["q95"])})
+        elif copies:
+            for rec, q in sorted(copies.items()):
+                v = planted.get(rec, {}).get(param, value)
+                checks.append({"param": f"{param}@{rec}", "truth": v, "q05": q["q05"], "q95": q["q95"],
+                               "inside": bool(q["q05"] <= v <= q["q95"])})
+        else:
+            checks.append({"param": param, "truth": value, "q05": None, "q95": None, "inside": False,
+                           "why": "the shipped model does not carry it"})
+    share = sum(c["inside"] for c in checks) / len(checks) if checks else None
+    return {"checks": checks, "covered": share}
+
+
+def is_correct(case: dict, name: str, report: dict) -> bool:
+    """The series is read right: an effect case names its effect (a gradual closure also when the walk
+    confirmed face_gap first and closure after it), a null or out-of-catalogue case names nothing."""
+    if case["class"] in ("null", "out_of_catalogue"):
+        return name in NOT_NAMED
+    planted = case["case"].removeprefix("disc_")
+    if name == planted:
+        return True
+    added = (report.get("confirmation") or {}).get("effects") or []
+    return planted == "closure" and "closure" in added
+
+
+def score(results: list[dict]) -> dict:
+    """The benchmark's numbers from its series (each: ``case`` (the plan's case), ``seed``, ``named``,
+    ``correct``, ``coverage``, ``above_scatter``; ``error`` for a series that did not finish)."""
+    matrix: dict[str, dict[str, int]] = {}
+    done = [r for r in results if not r.get("error")]
+    for r in done:
+        row = matrix.setdefault(r["case"]["case"], {})
+        row[r["named"]] = row.get(r["named"], 0) + 1
+
+    def share(rows, key):
+        return (sum(bool(key(r)) for r in rows) / len(rows)) if rows else None
+
+    effect_rows = [r for r in done if r["case"]["class"] in ("physical", "measurement")]
+    physical_big = [r for r in done if r["case"]["class"] == "physical" and r.get("above_scatter")]
+    named_rows = [r for r in effect_rows if r["correct"]]
+    nulls = [r for r in done if r["case"]["class"] == "null"]
+    ooc = [r for r in done if r["case"]["class"] == "out_of_catalogue"]
+    misses = [{"case": r["case"]["case"], "seed": r["seed"], "named": r["named"], "why": r.get("why", "")}
+              for r in done if not r["correct"]]
+    misses += [{"case": r["case"]["case"], "seed": r["seed"], "named": None, "why": r["error"]}
+               for r in results if r.get("error")]
+    return {
+        "series": len(results), "finished": len(done),
+        "confusion": matrix,
+        "physical_named_top_share": share(physical_big, lambda r: r["correct"]),
+        "physical_below_scatter": sorted({r["case"]["case"] for r in done
+                                          if r["case"]["class"] == "physical" and r.get("above_scatter") is False}),
+        "effect_named_share": share(effect_rows, lambda r: r["correct"]),
+        "parameter_in_90_share": share(named_rows, lambda r: (r["coverage"]["covered"] or 0.0) >= 1.0),
+        "parameter_in_90_share_all": share(effect_rows, lambda r: (r["coverage"]["covered"] or 0.0) >= 1.0),
+        "null_false_positive_rate": share(nulls, lambda r: r["named"] not in NOT_NAMED),
+        "out_of_catalogue_ok_share": share(ooc, lambda r: r["named"] in NOT_NAMED),
+        "misses": misses,
+    }
+
+
+def acceptance(scores: dict, bars: dict) -> dict:
+    """Each of the plan's bars against the measured share (None: nothing measured for it)."""
+    def at_least(x, bar):
+        return None if x is None else bool(x >= bar)
+    fp = scores["null_false_positive_rate"]
+    return {"physical_named": at_least(scores["physical_named_top_share"], bars["physical_named_top_share_min"]),
+            "parameter_in_90": at_least(scores["parameter_in_90_share"], bars["parameter_in_90_interval_share_min"]),
+            "null_adds_nothing": None if fp is None else bool(1.0 - fp >= bars["null_adds_nothing_share_min"]),
+            "out_of_catalogue": at_least(scores["out_of_catalogue_ok_share"],
+                                         bars["out_of_catalogue_unexplained_or_base_kept_share_min"])}
+
+
+def effect_size(truth: dict, mesh_sd_rel: float) -> dict:
+    """The planted effect's change of each test's peak (truth.json, same meshes with the effect off) against
+    the fast mesh's relative peak sd."""
+    changes = [t["peak_change_rel"] for t in truth.get("tests", []) if "peak_change_rel" in t]
+    if not changes:
+        return {"peak_change_rel": [], "above_scatter": None}
+    big = max(abs(c) for c in changes)
+    return {"peak_change_rel": changes, "spread_rel": max(changes) - min(changes), "mesh_sd_rel": mesh_sd_rel,
+            "above_scatter": bool(big > SCATTER_MULTIPLE * mesh_sd_rel)}
+
+
+# ---------------------------------------------------------------------------------------------- running
+def mesh_sd_rel(geometry: str) -> float:
+    """The fast mesh's peak standard deviation over its mean (benchmarks/results/bench_sim_variability.json:
+    the marble cylinder's or the twin disc's mesh realizations)."""
+    d = json.loads((ROOT / "benchmarks/results/bench_sim_variability.json").read_text())
+    case = d["cases"]["marble" if geometry == "cylinder" else "twin"]["mesh_variability"]["peak_stress_Pa"]
+    return float(case["std"] / case["mean"])
+
+
+def series_kwargs(plan: dict, case: dict, seed: int, preset: str, records: int | None) -> dict:
+    """make_series' arguments for one case and seed of the plan."""
+    spec = plan["series"][case["series"]]
+    geometry = "cylinder" if case["series"] == "cylinder" else "brazilian_disc"
+    if geometry == "cylinder":
+        drivers = [str(ROOT / p) for p in CYLINDER_DRIVERS]
+        lithology = "CaMa"
+    else:
+        drivers = [f"pulse:{v}" for v in DISC_PULSES_M_S]
+        lithology = "granite_godinez2021"
+    n = records or len(drivers)
+    return {"geometry": geometry, "drivers": drivers[:n], "params": dict(spec["base_truth"]),
+            "plant": dict(case.get("plant") or {}), "spread": dict(case.get("per_record_sd") or {}),
+            "artefact": dict(case.get("artefact") or {}), "preset": preset, "seed": int(seed),
+            "lithology": lithology, "prefix": "Plant" + "".join(w.title() for w in case["case"].split("_")),
+            "null_peaks": bool(case.get("plant")) and case["class"] == "physical"}
+
+
+def run_series(plan: dict, case: dict, seed: int, work: Path, preset: str, records: int | None,
+               cores: int) -> dict:
+    """Make, configure, run and score one series; returns its result row."""
+    from tools.make_planted_series import make_series
+
+    name = f"planted_{case['case']}_{seed}"
+    folder = work / name
+    row = {"case": case, "seed": int(seed), "experiment": name, "cores": cores}
+    t0 = time.perf_counter()
+    try:
+        kw = series_kwargs(plan, case, seed, preset, records)
+        truth = make_series(folder / "series", **kw, command=f"benchmarks/bench_planted.py ({name})")
+        row["make_wall_s"] = round(time.perf_counter() - t0, 1)
+        row["effect_size"] = effect_size(truth, mesh_sd_rel(kw["geometry"]))
+        row["above_scatter"] = row["effect_size"]["above_scatter"]
+        sheets = sorted(str(p) for p in (folder / "series").glob("*.yaml"))
+        cfg = folder / "config.yaml"
+        subprocess.run([sys.executable, "-m", "shpb", "init-config", *sheets, "--diagnosis", "--name", name,
+                        "--out", str(cfg)], cwd=ROOT, check=True)
+        doc = yaml.safe_load(cfg.read_text())
+        doc["experiments"][name]["diagnosis"]["exclude"] = []     # the whole catalogue (module docstring)
+        cfg.write_text(yaml.safe_dump(doc, sort_keys=False))
+        t1 = time.perf_counter()
+        log = folder / "snakemake.log"
+        with open(log, "w") as fh:
+            subprocess.run(["snakemake", "--cores", str(cores), "--configfile", str(cfg)], cwd=ROOT,
+                           stdout=fh, stderr=subprocess.STDOUT, check=True)
+        row["loop_wall_s"] = round(time.perf_counter() - t1, 1)
+        diag = ROOT / "results" / name / "diagnosis"
+        report = json.loads((diag / "report.json").read_text())
+        check = json.loads((diag / "check.json").read_text())
+        row["named"] = named(report)
+        row["correct"] = is_correct(case, row["named"], report)
+        row["coverage"] = parameter_coverage(report, truth)
+        row["why"] = report.get("why", "")
+        row["heldout"] = {r: {"rmse_before_Pa": v["before"]["rmse"], "rmse_after_Pa": v["after"]["rmse"],
+                              "band_coverage_after": v["after"].get("band_coverage")}
+                          for r, v in (check.get("heldout") or {}).items()}
+    except (subprocess.CalledProcessError, OSError, KeyError, ValueError, SystemExit) as exc:
+        row["error"] = f"{type(exc).__name__}: {exc}"
+    row["wall_s"] = round(time.perf_counter() - t0, 1)
+    return row
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--plan", default=str(PLAN))
+    ap.add_argument("--cases", help="comma-separated case names (default: every case of the plan)")
+    ap.add_argument("--seeds", default="benchmark", help="benchmark | development | comma-separated seeds")
+    ap.add_argument("--records", type=int, help="tests per series (default: the plan's drivers)")
+    ap.add_argument("--preset", default=None, help="the truth's mesh (default: the plan's truth_mesh)")
+    ap.add_argument("--cores", type=int, default=2)
+    ap.add_argument("--work", default=str(ROOT / "results" / "bench_planted"))
+    ap.add_argument("--out", default=str(OUT))
+    args = ap.parse_args(argv)
+    plan = json.loads(Path(args.plan).read_text())
+    cases = [c for c in plan["cases"] if not args.cases or c["case"] in args.cases.split(",")]
+    if args.seeds in ("benchmark", "development"):
+        seeds = plan["seeds"][args.seeds]["per_case"] if args.seeds == "benchmark" else plan["seeds"]["development"]
+    else:
+        seeds = [int(s) for s in args.seeds.split(",")]
+    results, work, t0 = [], Path(args.work), time.perf_counter()
+    for case in cases:
+        for seed in seeds:
+            row = run_series(plan, case, seed, work, args.preset or plan["truth_mesh"], args.records, args.cores)
+            results.append(row)
+            print(f"{case['case']} seed {seed}: {row.get('named', row.get('error'))} ({row['wall_s']:.0f} s)", flush=True)
+            scores = score(results)
+            out = {"plan": str(Path(args.plan).relative_to(ROOT)) if Path(args.plan).is_relative_to(ROOT) else args.plan,
+                   "seeds": args.seeds, "cores": args.cores, "cpu_count": os.cpu_count(),
+                   "wall_s": round(time.perf_counter() - t0, 1), "scores": scores,
+                   "acceptance": acceptance(scores, plan["acceptance"]), "series": results}
+            Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+            Path(args.out).write_text(json.dumps(out, indent=1, default=float) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

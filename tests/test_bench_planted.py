@@ -1,0 +1,151 @@
+"""The planted-effect benchmark's scoring (benchmarks/bench_planted.py) on hand-made reports, and its
+series maker (tools/make_planted_series.py) at a tiny size: sheets that ``python -m shpb reduce`` reads,
+a truth.json that says what the arguments asked for."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from benchmarks.bench_planted import (acceptance, effect_size, is_correct, named,  # noqa: E402
+                                      parameter_coverage, score)
+from tools.make_planted_series import ar1_noise, make_series, planted_values  # noqa: E402
+
+PLAN = json.loads((ROOT / "benchmarks" / "planted_plan.json").read_text())
+CASES = {c["case"]: c for c in PLAN["cases"]}
+
+
+def _report(verdict, effects=(), posterior=None):
+    """A diagnosis report with what the scoring reads: the verdict, the confirmed effects, and the
+    selection's steps (the base and the shipped model) with their posterior summaries."""
+    steps = [{"index": 0, "effects": [], "posterior": {"sigma_t": {"mean": 3e7, "q05": 2.8e7, "q95": 3.2e7}}}]
+    if effects:
+        steps.append({"index": 1, "effects": list(effects), "posterior": posterior or {}})
+    return {"verdict": verdict, "added": list(effects), "why": "hand-made",
+            "confirmation": {"effects": list(effects), "model": "+".join(effects) or "base"},
+            "selection": {"steps": steps}}
+
+
+def _q(lo, hi):
+    return {"mean": 0.5 * (lo + hi), "q05": lo, "q95": hi}
+
+
+def _row(case, seed, report, truth, above=True):
+    name = named(report)
+    return {"case": CASES[case], "seed": seed, "named": name, "correct": is_correct(CASES[case], name, report),
+            "coverage": parameter_coverage(report, truth), "above_scatter": above, "why": report["why"]}
+
+
+def test_plan_keeps_benchmark_and_development_seeds_apart():
+    bench = set(PLAN["seeds"]["benchmark"]["per_case"])
+    dev = set(PLAN["seeds"]["development"]) | set(PLAN["seeds"]["shipped_example"])
+    assert bench and dev and not bench & dev
+    assert {c["class"] for c in PLAN["cases"]} == {"physical", "measurement", "null", "out_of_catalogue"}
+
+
+def test_named_and_coverage_of_hand_made_reports():
+    rate = {"plant": {"rate_strength.k": 0.3}, "tests": []}
+    rep = _report("confirmed", ["rate_strength"], {"rate_strength.k": _q(0.22, 0.41)})
+    assert named(rep) == "rate_strength"
+    cov = parameter_coverage(rep, rate)
+    assert cov["covered"] == 1.0 and cov["checks"][0]["inside"]
+    # the truth outside the interval, and a model that does not carry the parameter
+    assert parameter_coverage(_report("confirmed", ["rate_strength"], {"rate_strength.k": _q(0.05, 0.2)}),
+                              rate)["covered"] == 0.0
+    assert parameter_coverage(_report("base_kept"), rate)["covered"] == 0.0
+    assert named(_report("base_kept")) == "base_kept" and named(_report("unexplained")) == "unexplained"
+    # a per-record parameter: each calibration record's copy against its own planted value (1 of 2 inside)
+    gap = {"plant": {"face_gap.gap_m": 1e-4},
+           "tests": [{"name": "A", "planted": {"face_gap.gap_m": 0.8e-4}},
+                     {"name": "B", "planted": {"face_gap.gap_m": 1.3e-4}}]}
+    rep = _report("confirmed", ["face_gap"], {"face_gap.gap_m@A": _q(0.7e-4, 0.9e-4),
+                                              "face_gap.gap_m@B": _q(0.9e-4, 1.1e-4)})
+    assert parameter_coverage(rep, gap)["covered"] == 0.5
+    # the closure case is read right when closure follows a confirmed face_gap, not on face_gap alone
+    assert is_correct(CASES["closure"], "face_gap", _report("confirmed", ["face_gap", "closure"]))
+    assert not is_correct(CASES["closure"], "face_gap", _report("confirmed", ["face_gap"]))
+
+
+def test_score_gives_the_matrix_and_the_rates():
+    rate = {"plant": {"rate_strength.k": 0.3}, "tests": []}
+    rows = [
+        _row("rate_strength", 1, _report("confirmed", ["rate_strength"], {"rate_strength.k": _q(0.2, 0.4)}), rate),
+        _row("rate_strength", 2, _report("confirmed", ["rate_strength"], {"rate_strength.k": _q(0.35, 0.5)}), rate),
+        _row("rate_strength", 3, _report("confirmed", ["seating"]), rate),
+        _row("rate_strength", 4, _report("base_kept"), rate),
+        _row("damping", 1, _report("base_kept"), {"plant": {"damping.beta": 0.1}}, above=False),
+        _row("null", 1, _report("base_kept"), {"plant": {}}),
+        _row("null", 2, _report("confirmed", ["face_gap"]), {"plant": {}}),
+        _row("null", 3, _report("unexplained"), {"plant": {}}),
+        _row("null", 4, _report("base_kept"), {"plant": {}}),
+        _row("gauge_ringing", 1, _report("unexplained"), {"plant": {}}),
+        _row("gauge_ringing", 2, _report("confirmed", ["lowpass"]), {"plant": {}}),
+        {"case": CASES["gauge_nonlinearity"], "seed": 1, "error": "CalledProcessError: snakemake"},
+    ]
+    s = score(rows)
+    assert s["confusion"]["rate_strength"] == {"rate_strength": 2, "seating": 1, "base_kept": 1}
+    assert s["confusion"]["null"] == {"base_kept": 2, "face_gap": 1, "unexplained": 1}
+    assert s["series"] == 12 and s["finished"] == 11
+    assert s["physical_named_top_share"] == pytest.approx(2 / 4)      # damping (below the scatter) not counted
+    assert s["physical_below_scatter"] == ["damping"]
+    assert s["effect_named_share"] == pytest.approx(2 / 5)
+    assert s["parameter_in_90_share"] == pytest.approx(1 / 2)         # of the two named: one covers 0.3
+    assert s["null_false_positive_rate"] == pytest.approx(1 / 4)
+    assert s["out_of_catalogue_ok_share"] == pytest.approx(1 / 2)
+    assert len(s["misses"]) == 2 + 1 + 1 + 1 + 1                      # 2 rate, damping, null, ringing, the error
+    acc = acceptance(s, PLAN["acceptance"])
+    assert acc == {"physical_named": False, "parameter_in_90": False, "null_adds_nothing": False,
+                   "out_of_catalogue": False}
+    assert effect_size({"tests": [{"peak_change_rel": 0.05}, {"peak_change_rel": 0.01}]}, 0.017)["above_scatter"]
+    assert not effect_size({"tests": [{"peak_change_rel": 0.02}]}, 0.017)["above_scatter"]
+
+
+def test_ar1_noise_and_per_record_draws():
+    rng = np.random.default_rng(1)
+    x = ar1_noise(20000, 2.0, 0.46, rng)
+    # 20,000 samples: the sd's standard error is about 0.6 %, the lag-1 correlation's about 0.006
+    assert np.std(x) == pytest.approx(2.0, rel=0.03)
+    assert np.corrcoef(x[:-1], x[1:])[0, 1] == pytest.approx(0.46, abs=0.02)
+    v = planted_values({"face_gap.gap_m": 3.9e-4}, {"face_gap.gap_m": 5e-5}, 50, np.random.default_rng(2))
+    gaps = np.array([d["face_gap.gap_m"] for d in v])
+    assert gaps.max() <= 4e-4 and len(set(gaps)) > 10                # drawn per record, clipped to the box
+    with pytest.raises(SystemExit):
+        planted_values({"rate_strength.k": 0.3}, {"rate_strength.k": 0.05}, 2, np.random.default_rng(3))
+
+
+def test_tiny_series_reduces_and_its_truth_matches_the_arguments(tmp_path):
+    out = tmp_path / "series"
+    truth = make_series(out, geometry="brazilian_disc", drivers=["pulse:2.6", "pulse:3.0"],
+                        params={"sigma_t": 3.8e7, "E_t": 650.0}, plant={"gauge_gain.g": 0.9},
+                        spread={"gauge_gain.g": 0.02}, preset="fast", seed=5391, prefix="Tiny",
+                        lithology="granite_godinez2021", t_end=1.3e-4)
+    written = json.loads((out / "truth.json").read_text())
+    assert written == json.loads(json.dumps(truth))
+    assert written["plant"] == {"gauge_gain.g": 0.9} and written["seed"] == 5391
+    assert written["effect"] == ["gauge_gain"] and written["params"] == {"sigma_t": 3.8e7, "E_t": 650.0}
+    assert [t["driver"] for t in written["tests"]] == ["pulse:2.6", "pulse:3.0"]
+    gains = [t["planted"]["gauge_gain.g"] for t in written["tests"]]
+    assert gains[0] != gains[1] and all(abs(g - 0.9) < 0.1 for g in gains)
+    # the lab's command reads a sheet (one: each start costs seconds; the other is read in-process by
+    # make_series through the same reduce_sheet, its numbers checked below)
+    first = written["tests"][0]["name"]
+    done = subprocess.run([sys.executable, "-m", "shpb", "reduce", str(out / f"{first}.yaml"), "--out",
+                           str(tmp_path / "reduced")], cwd=ROOT, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "reduced").is_dir() and f"{first}: peak" in done.stdout
+    for t in written["tests"]:
+        # the reduction gives back the simulated peak (gain applied): 1D waves written and read by the same
+        # theory, so what differs is the noise (0.36 % of the peak per sample) and the 0.8 us sampling
+        assert t["reduced"]["peak_stress_Pa"] == pytest.approx(t["model_peak_stress_Pa"], rel=0.03)
+        frame = pd.read_csv(out / f"{t['name']}.csv")
+        pre = frame.transmitted_strain[frame.time_s < -10e-6].to_numpy()
+        # about 110 pre-trigger samples, AR(1) 0.46: some 40 independent ones, the sd within 35 % (3 se)
+        assert np.std(pre) == pytest.approx(t["noise_sd_strain"], rel=0.35)
