@@ -44,7 +44,7 @@ from .observations import Observations
 from .protocol import check_runs, confirm, real_curves, select
 
 __all__ = ["FOLD_SEPARATOR", "blind", "candidate_effects", "emulated_model", "protocol_errors", "select_effects",
-           "calibration_discrepancy", "check_rows", "covariate_table", "assemble", "predictive_bands", "loro_folds",
+           "calibration_discrepancy", "check_rows", "covariate_table", "assemble", "fit_sources", "predictive_bands", "loro_folds",
            "loro_table"]
 
 #: Between an experiment's name and a held-out record's in a leave-one-record-out fold's name.
@@ -124,11 +124,12 @@ def _jittered(S: np.ndarray) -> DenseError:
 
 def select_effects(model: EmulatedSHPB, *, base_names: Sequence[str], candidates: Sequence[str], obs: Observations,
                    noise: Mapping[str, ObservationError], simulator: Mapping[str, ObservationError],
-                   heldout_records: Sequence[str], settings: Mapping, mesh_mode: str = "per_run"):
+                   heldout_records: Sequence[str], settings: Mapping, mesh_mode: str = "per_run", base_fit=None):
     """:func:`calibration.protocol.select` with the experiment's ``diagnosis`` settings; reads the
     calibration records' observations only. With ``per_run`` meshes the design runs each carry their
     own realization, so the emulator's leave-one-out error already holds ``S``: it is not added again on
-    the emulator's side (only for a ``shared`` mesh)."""
+    the emulator's side (only for a ``shared`` mesh). ``base_fit``: the workflow's posterior as the base
+    model (:func:`calibration.protocol.workflow_base`)."""
     if mesh_mode != "shared":
         simulator = {}
     return select(model, base_names=list(base_names), candidates=[fx.get_effect(c) for c in candidates],
@@ -136,7 +137,8 @@ def select_effects(model: EmulatedSHPB, *, base_names: Sequence[str], candidates
                   noise=noise, heldout_records=list(heldout_records), simulator=simulator,
                   scopes=settings.get("scopes") or None, max_additions=int(settings["max_additions"]),
                   alpha=float(settings["alpha"]), seed=int(settings["seed"]), n_members=int(settings["members"]),
-                  esmda_steps=int(settings["esmda_steps"]), gate=str(settings.get("emulator_gate", "improvement")))
+                  esmda_steps=int(settings["esmda_steps"]), gate=str(settings.get("emulator_gate", "improvement")),
+                  base_fit=base_fit)
 
 
 def covariate_table(selection, model: EmulatedSHPB, obs: Observations):
@@ -277,6 +279,32 @@ def predictive_bands(selection, real: Mapping, k: int, obs: Observations, heldou
     return out, (pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=cols))
 
 
+def fit_sources(selection) -> dict:
+    """``{"base_posterior", "base_estimates", "fits"}`` of report.json: where the base model's posterior comes
+    from (``"workflow"``: posterior.csv with summary.json's estimates; ``"emulator"``: an ES-MDA on the
+    emulator) and the source of every other fit of the protocol."""
+    base = selection.steps[0].final
+    src = base.source
+    out = {"base_posterior": src,
+           "base_estimates": {n: {k: v[k] for k in ("mean", "q05", "q95") if k in v} for n, v in base.posterior().items()}}
+    if src == "workflow":
+        out["base_posterior_file"] = base.info.get("file")
+        out["base_posterior_method"] = base.info.get("method")
+        base_text = (f"the workflow's posterior ({base.info.get('file')}, posterior_method "
+                     f"{base.info.get('method')}; {base.info.get('draws_used')} of its {base.info.get('draws')} draws "
+                     "predict): it is reported, predicts the held-out records and is what the effects are compared "
+                     "against; not re-fitted on the emulator")
+    else:
+        base_text = "ES-MDA on the emulator of the FDEM design, on every calibration record"
+    out["fits"] = {"base": base_text,
+                   "base_cross_validation": "ES-MDA on the emulator, each calibration record left out in turn (the "
+                                            "workflow's posterior holds every calibration record)",
+                   "added_effects": "ES-MDA on the emulator (cross-validation and the calibration on every "
+                                    "calibration record of each model with an added effect)",
+                   "check": "real FDEM runs at the cross-validation points and the held-out prediction points"}
+    return out
+
+
 def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: EmulatedSHPB, obs: Observations,
              heldout: Observations | None, noise: Mapping, simulator: Mapping,
              discrepancy: Mapping[str, np.ndarray]) -> tuple[dict, dict, dict, pd.DataFrame]:
@@ -327,7 +355,7 @@ def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: Emulated
     report = {"protocol": "frozen (docs/closing-the-loop.md): effects chosen by cross-validation within the "
                           "calibration records on the emulator, confirmed on real FDEM runs at the "
                           "cross-validation points, the held-out records read last",
-              "verdict": verdict, "why": why, "calib_records": list(obs.records),
+              "verdict": verdict, "why": why, **fit_sources(selection), "calib_records": list(obs.records),
               "heldout_records": [] if heldout is None else list(heldout.records),
               "added": list(shipped.spec.effect_names), "shipped_step": k,
               "selection": selection.to_dict(), "confirmation": conf, "heldout": held,

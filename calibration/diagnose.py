@@ -37,7 +37,8 @@ from shpb import effects as fx
 from .observations import curve_on_grid
 
 __all__ = ["EmulatedSHPB", "base_design_box", "curve_on_model_grid", "design_points", "emulators_from_design",
-           "interpolation_matrix", "measured_curve", "model_grid", "physical_design_ranges", "record_params"]
+           "interpolation_matrix", "measured_curve", "model_grid", "physical_design_ranges", "record_params",
+           "workflow_sample"]
 
 
 def design_points(base_lower, base_upper, physical_lower, physical_upper, n: int, *, seed: int,
@@ -144,16 +145,26 @@ class EmulatedSHPB:
         return f
 
 
+def workflow_sample(posterior, names: Sequence[str]) -> np.ndarray:
+    """``(N, len(names))``: the workflow's reported posterior sample from ``posterior.csv`` (a frame): an
+    ensemble's alive members (its ``alive`` column), or every row of an MCMC sample (no such column).
+    These are the draws ``summary.json``'s ``posterior`` summarises."""
+    keep = np.asarray(posterior["alive"], bool) if "alive" in posterior else np.ones(len(posterior), bool)
+    return np.column_stack([np.asarray(posterior[n], float)[keep] for n in names])
+
+
 def base_design_box(posterior, names: Sequence[str], prior_lower, prior_upper, *, width_sd: float,
                     min_rel_width: float) -> tuple[np.ndarray, np.ndarray]:
     """Design box of the base parameters: the calibrated posterior's mean +- ``width_sd`` sd, at least
-    +- ``min_rel_width`` of the mean (the effects a base calibration absorbed move it that far), clipped
-    to the prior box. ``posterior``: the final ensemble (one column per name)."""
-    P = np.column_stack([np.asarray(posterior[n], float) for n in names])
+    +- ``min_rel_width`` of the mean (the effects a base calibration absorbed move it that far), widened
+    to hold every draw of the posterior (the protocol's base model predicts with those draws on the
+    emulator, which is not evaluated outside its design), clipped to the prior box. ``posterior``:
+    ``posterior.csv`` (one column per name; :func:`workflow_sample`)."""
+    P = workflow_sample(posterior, names)
     mean, sd = P.mean(axis=0), P.std(axis=0, ddof=1)
     half = np.maximum(width_sd * sd, min_rel_width * np.abs(mean))
-    lo = np.maximum(np.asarray(prior_lower, float), mean - half)
-    hi = np.minimum(np.asarray(prior_upper, float), mean + half)
+    lo = np.maximum(np.asarray(prior_lower, float), np.minimum(mean - half, P.min(axis=0)))
+    hi = np.minimum(np.asarray(prior_upper, float), np.maximum(mean + half, P.max(axis=0)))
     if np.any(hi <= lo):
         raise ValueError(f"empty design box for {list(names)}: {lo} .. {hi}")
     return lo, hi

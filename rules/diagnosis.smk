@@ -83,6 +83,8 @@ checkpoint diagnosis_select:
     """The selection on the emulator (calibration records only); lists the real FDEM runs of the check."""
     input:
         unpack(diagnosis_inputs),
+        # the base model of the selection: the workflow's reported posterior (summary.json's draws)
+        posterior="results/{exp}/posterior.csv",
     output:
         selection="results/{exp}/diagnosis/selection.pkl",
         rows="results/{exp}/diagnosis/check_runs.json",

@@ -15,6 +15,7 @@ from calibration.diagnose import model_grid
 from calibration.experiment import diagnosis_settings
 from calibration.model_error import check_replicate_count
 from calibration.observations import read_curve, read_observations
+from calibration.protocol import workflow_base
 from calibration.workflow_io import atomic_write_bytes, atomic_write_csv, atomic_write_json, read_json
 
 inp, out, e = snakemake.input, snakemake.output, snakemake.params.exp
@@ -25,7 +26,8 @@ X = pd.read_csv(inp.design)[names].to_numpy(float)
 obs = read_observations(inp.obs, inp.obs_meta)
 # the held-out records' curves are not read here: their times and noise only (diagnosis_check reads them)
 held = blind(read_observations(inp.heldout, inp.heldout_meta)) if "heldout" in inp.keys() else None
-analysis = read_json(list(inp.analyses)[int(read_json(inp.summary)["posterior_iteration"])])
+summary = read_json(inp.summary)
+analysis = read_json(list(inp.analyses)[int(summary["posterior_iteration"])])
 
 root = Path(inp.design).parent
 curves = {rec: [read_curve(root / p / rec / "curve.csv") for p in snakemake.params.points]
@@ -35,9 +37,11 @@ obs_times.update({r: held.grid(r) for r in (held.records if held is not None els
 model, n_failed = emulated_model(X, names, meta["lower"], meta["upper"], curves, model_grid(e["simulation"]),
                                  obs_times, label=f"diagnosis of {snakemake.wildcards.exp}")
 noise, simulator = protocol_errors(obs, analysis, held)
+# the base model is the workflow's posterior (posterior.csv, summary.json), not a second fit on the emulator
+base = workflow_base(model, meta["base_names"], obs.records, pd.read_csv(inp.posterior), summary, file=inp.posterior)
 selection = select_effects(model, base_names=meta["base_names"], candidates=snakemake.params.candidates, obs=obs,
                            noise=noise, simulator=simulator, heldout_records=held.records if held is not None else [],
-                           settings=d, mesh_mode=e["simulation"].get("mesh_realizations") or "per_run")
+                           settings=d, mesh_mode=e["simulation"].get("mesh_realizations") or "per_run", base_fit=base)
 atomic_write_bytes(out.selection, pickle.dumps({"selection": selection, "model": model, "noise": noise,
                                                 "simulator": simulator, "design_failed_runs": n_failed,
                                                 "discrepancy": calibration_discrepancy(obs, analysis)}))

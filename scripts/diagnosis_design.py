@@ -8,13 +8,14 @@ import pandas as pd
 
 from calibration.experiment import ExperimentSpec, diagnosis_settings
 from calibration.closing import candidate_effects
-from calibration.diagnose import base_design_box, design_points, physical_design_ranges
+from calibration.diagnose import base_design_box, design_points, physical_design_ranges, workflow_sample
 from calibration.workflow_io import atomic_write_csv, atomic_write_json
 
 e, exp = snakemake.params.exp, snakemake.wildcards.exp
 d = diagnosis_settings(e)
 spec = ExperimentSpec.from_config(exp, e)
 post = pd.read_csv(snakemake.input.posterior)
+sample = workflow_sample(post, spec.names)  # the draws summary.json's posterior summarises
 blo, bhi = base_design_box(post, spec.names, spec.lower, spec.upper, width_sd=d["base_width_sd"],
                            min_rel_width=d["base_min_rel_width"])
 pnames, plo, phi = physical_design_ranges(candidate_effects(d), d["physical_upper"])
@@ -26,5 +27,5 @@ atomic_write_csv(frame, snakemake.output.design)
 atomic_write_json(snakemake.output.meta, {"names": names, "base_names": list(spec.names), "physical_names": pnames,
                                           "lower": np.concatenate([blo, plo]).tolist(),
                                           "upper": np.concatenate([bhi, phi]).tolist(),
-                                          "posterior_mean": {n: float(post[n].mean()) for n in spec.names},
-                                          "posterior_std": {n: float(post[n].std(ddof=1)) for n in spec.names}})
+                                          "posterior_mean": dict(zip(spec.names, sample.mean(axis=0).tolist())),
+                                          "posterior_std": dict(zip(spec.names, sample.std(axis=0, ddof=1).tolist()))})

@@ -80,7 +80,7 @@ from ..transforms import BoxTransform
 from .population import Population, fit_population, record_name
 
 __all__ = ["CVResult", "Fit", "ForwardModel", "ModelSpec", "Prediction", "RecordErrors", "calibrate",
-           "compare_cv", "compare_replicated", "cross_validate", "fit_populations", "holm", "predict_record",
+           "compare_cv", "compare_replicated", "cross_validate", "fit_populations", "given_fit", "holm", "predict_record",
            "scope_of", "seed_for", "squared_error_difference"]
 
 SCOPES = ("per_record", "shared")
@@ -198,7 +198,12 @@ class RecordErrors:
 
 @dataclass
 class Fit:
-    """An ES-MDA calibration: the posterior ensemble ``params`` (alive members) over ``names``."""
+    """A posterior sample ``params`` (rows: draws, e.g. an ES-MDA's alive members) over ``names``.
+
+    ``summary``: the posterior as its source reported it (``{name: {mean, q05, q95, ...}}``) when the
+    sample was not fitted here (:func:`given_fit`: the workflow's posterior), so that the protocol
+    reports the very numbers the workflow does; None: the sample's own summary. ``info["source"]``
+    names where the sample came from (``"emulator"``: :func:`calibrate`)."""
 
     names: list[str]
     records: tuple[str, ...]
@@ -206,6 +211,7 @@ class Fit:
     lower: np.ndarray
     upper: np.ndarray
     info: dict = field(default_factory=dict)
+    summary: dict | None = None
 
     def column(self, name: str) -> np.ndarray:
         return self.params[:, self.names.index(name)]
@@ -214,7 +220,36 @@ class Fit:
         return dict(zip(self.names, self.params.mean(axis=0).tolist()))
 
     def posterior(self) -> dict:
+        if self.summary is not None:
+            return {n: dict(self.summary[n]) for n in self.names}
         return posterior_dict(self.params, self.names)
+
+    @property
+    def source(self) -> str:
+        return str(self.info.get("source", "emulator"))
+
+
+def given_fit(model: ForwardModel, names: Sequence[str], records: Sequence[str], params, *, summary: Mapping,
+              info: Mapping | None = None) -> Fit:
+    """A posterior fitted elsewhere (the workflow's on the real simulator) as the protocol's :class:`Fit` of
+    ``names`` on ``records``: its draws ``params`` (rows) predict, ``summary`` (every name) is what it
+    reports. Every draw must lie inside ``model.box(names)`` (an emulator is not evaluated outside its
+    design): ValueError otherwise, never a clipped draw."""
+    names = list(names)
+    P = np.array(params, dtype=float, ndmin=2)
+    if P.shape[1] != len(names) or P.shape[0] < 2 or not np.all(np.isfinite(P)):
+        raise ValueError(f"a given posterior needs >= 2 finite draws of {names}, got shape {P.shape}")
+    missing = [n for n in names if n not in summary]
+    if missing:
+        raise ValueError(f"the given posterior's summary has no {missing}")
+    lo, hi = (np.asarray(v, float) for v in model.box(names))
+    out = (P < lo) | (P > hi)
+    if np.any(out):
+        j = int(np.nonzero(out.any(axis=0))[0][0])
+        raise ValueError(f"{int(out.any(axis=1).sum())} of {P.shape[0]} draws of the given posterior lie outside the "
+                         f"model's box, e.g. {names[j]} outside [{lo[j]:g}, {hi[j]:g}]: widen the design box to hold them")
+    return Fit(names, tuple(records), P, lo, hi, {"source": "given", **dict(info or {})},
+               {n: dict(summary[n]) for n in names})
 
 
 def calibrate(model: ForwardModel, names: Sequence[str], records: Sequence[str], obs: Mapping[str, np.ndarray],
@@ -230,7 +265,8 @@ def calibrate(model: ForwardModel, names: Sequence[str], records: Sequence[str],
                      errors.calibration_error(records), rng=rng, method="esmda", alphas=esmda_alphas(esmda_steps),
                      transform=BoxTransform(lo, hi), names=names)
     return Fit(names, records, res.params[res.alive], lo, hi,
-               {"stop_reason": res.decision.reason, "n_members": n_members, "esmda_steps": esmda_steps})
+               {"source": "emulator", "stop_reason": res.decision.reason, "n_members": n_members,
+                "esmda_steps": esmda_steps})
 
 
 def fit_populations(model: ForwardModel, spec: ModelSpec, fit: Fit, *, scales: Mapping[str, str] | None = None,

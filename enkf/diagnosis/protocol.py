@@ -18,7 +18,8 @@ candidates; nothing about FDEM or SHPB):
    calibration record's peak and predicts none it has not seen) above a rate law (which predicts
    them); see tests/test_protocol_selection.py. The result is a nested sequence M0 < M1 < ... (:class:`ModelStep`),
    each with its cross-validation (per calibration record the parameter point its prediction was made
-   at, for a real-simulator check there), its calibration on all calibration records, the populations
+   at, for a real-simulator check there), its calibration on all calibration records (for M0 it may be
+   given, ``base_fit``: a posterior sampled elsewhere, e.g. on the real simulator), the populations
    of its per-record parameters, and the held-out records' prediction points and bands.
 3. :func:`confirm_additions`: given the real simulator's curves at those cross-validation points,
    walk M1, M2, ...: confirm M_r over the last confirmed model when its real cross-validated squared
@@ -80,6 +81,7 @@ class ModelStep:
     def summary(self) -> dict:
         return {"index": self.index, "model": self.spec.label(), "effects": self.spec.effect_names,
                 "in_play": self.in_play, "cv": self.cv.summary(), "posterior": self.final.posterior(),
+                "posterior_source": self.final.source, "cv_source": "emulator",
                 "populations": {p: pop.to_dict() for p, pop in self.populations.items()},
                 "heldout": {h: p.summary() for h, p in self.heldout.items()},
                 "structure": {k: self.structure.get(k) for k in ("passed", "failed", "chi2")}}
@@ -108,10 +110,15 @@ class Selection:
 
 
 def _final_step(model, spec: ModelSpec, cv: CVResult, index: int, in_play: int, calib: list, heldout: list,
-                obs: Mapping, errors: RecordErrors, kw: dict) -> ModelStep:
-    """Calibrate ``spec`` on all calibration records and predict the held-out records from it."""
-    fit = calibrate(model, spec.names(calib), calib, obs, errors, seed=kw["seed"], n_members=kw["n_members"],
-                    esmda_steps=kw["esmda_steps"])
+                obs: Mapping, errors: RecordErrors, kw: dict, fit: Fit | None = None) -> ModelStep:
+    """Calibrate ``spec`` on all calibration records (or take ``fit``, a posterior given on them) and
+    predict the held-out records from it."""
+    if fit is None:
+        fit = calibrate(model, spec.names(calib), calib, obs, errors, seed=kw["seed"], n_members=kw["n_members"],
+                        esmda_steps=kw["esmda_steps"])
+    elif list(fit.names) != spec.names(calib) or list(fit.records) != list(calib):
+        raise ValueError(f"the given posterior is of {list(fit.names)} on {list(fit.records)}; the step needs "
+                         f"{spec.names(calib)} on {list(calib)}")
     pops = fit_populations(model, spec, fit, scales=kw["scales"], **(kw["population_kw"] or {}))
     held = {h: predict_record(model, spec, fit, h, pops, seed=kw["seed"], band_level=kw["band_level"])
             for h in heldout}
@@ -205,7 +212,7 @@ def select_effects(model: ForwardModel, *, base_names: Sequence[str], candidates
                    esmda_steps: int = 4, scales: Mapping[str, str] | None = None, band_level: float = 0.90,
                    population_kw: Mapping | None = None, max_trials: int | None = None,
                    fd_fraction: float = 1e-3, prediction_spread: bool = False,
-                   gate: str = "significance") -> Selection:
+                   gate: str = "significance", base_fit: Fit | None = None) -> Selection:
     """Greedy forward selection of effects by cross-validation within the calibration records (module
     docstring, step 2).
 
@@ -228,6 +235,11 @@ def select_effects(model: ForwardModel, *, base_names: Sequence[str], candidates
         at all, the best one first. Use ``"improvement"`` when the forward model is an emulator too coarse
         to resolve the gains (its error dominates the difference's sd) and every addition is then
         confirmed on the real simulator (:func:`confirm_additions`), which carries the test.
+    base_fit : the base model's posterior on all calibration records, given (:func:`~.crossval.given_fit`:
+        e.g. the workflow's, sampled on the real simulator): step 0 reports it and predicts the held-out
+        records with its draws, and no calibration of the base on all records is run here. The fits it
+        cannot provide stay on ``model``: the base's cross-validation (each calibration record left
+        out in turn) and every model with an added effect. None: the base is calibrated on ``model``.
     """
     if gate not in ("significance", "improvement"):
         raise ValueError(f"gate must be 'significance' or 'improvement', got {gate!r}")
@@ -240,7 +252,7 @@ def select_effects(model: ForwardModel, *, base_names: Sequence[str], candidates
           "scopes": scopes, "fd_fraction": fd_fraction, "prediction_spread": prediction_spread, "gate": gate}
     spec = ModelSpec.of(base_names)
     cv = cross_validate(model, spec, calib, cal_obs, errors, **_cv_kw(kw))
-    steps = [_final_step(model, spec, cv, 0, 0, calib, heldout, cal_obs, errors, kw)]
+    steps = [_final_step(model, spec, cv, 0, 0, calib, heldout, cal_obs, errors, kw, fit=base_fit)]
     remaining, rounds = list(candidates), []
     why = f"the maximum of {max_additions} addition(s) was reached"
     for _ in range(max_additions):
@@ -263,7 +275,8 @@ def select_effects(model: ForwardModel, *, base_names: Sequence[str], candidates
         steps.append(_final_step(model, spec, cv, len(steps), rnd["in_play"], calib, heldout, cal_obs, errors, kw))
         rnd["text"] = next(t["text"] for t in rnd["trials"] if t["effect"] == c.name)
     settings = {k: v for k, v in kw.items() if k not in ("scopes",)}
-    settings.update(max_additions=max_additions, scopes=dict(scopes or {}), model_correlation=errors.model_correlation)
+    settings.update(max_additions=max_additions, scopes=dict(scopes or {}), model_correlation=errors.model_correlation,
+                    base_posterior=steps[0].final.source)
     return Selection(steps, rounds, why, calib, heldout, settings)
 
 
