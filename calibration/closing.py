@@ -44,7 +44,8 @@ from .observations import Observations
 from .protocol import check_runs, confirm, real_curves, select
 
 __all__ = ["FOLD_SEPARATOR", "blind", "candidate_effects", "emulated_model", "protocol_errors", "select_effects",
-           "calibration_discrepancy", "check_rows", "covariate_table", "assemble", "fit_sources", "predictive_bands", "loro_folds",
+           "base_posterior_mismatches", "calibration_discrepancy", "check_rows", "covariate_table", "assemble",
+           "fit_sources", "predictive_bands", "loro_folds",
            "loro_table"]
 
 #: Between an experiment's name and a held-out record's in a leave-one-record-out fold's name.
@@ -302,6 +303,28 @@ def fit_sources(selection) -> dict:
                    "added_effects": "ES-MDA on the emulator (cross-validation and the calibration on every "
                                     "calibration record of each model with an added effect)",
                    "check": "real FDEM runs at the cross-validation points and the held-out prediction points"}
+    return out
+
+
+def base_posterior_mismatches(summary: Mapping, report: Mapping) -> list[str]:
+    """What keeps a run's diagnosis from having the workflow's base posterior: ``report`` (diagnosis/report.json)
+    not naming ``"workflow"`` with summary.json's ``posterior_method``, or a base estimate (mean, q05, q95 of
+    each base parameter, in ``base_estimates`` and in the selection's step 0) that differs from ``summary``'s
+    (summary.json) as printed. Empty: one run, one base posterior."""
+    out = []
+    if report.get("base_posterior") != "workflow":
+        out.append(f"base_posterior is {report.get('base_posterior')!r}, not 'workflow'")
+    if report.get("base_posterior_method") != summary.get("posterior_method"):
+        out.append(f"base_posterior_method {report.get('base_posterior_method')!r} against summary.json's "
+                   f"{summary.get('posterior_method')!r}")
+    steps = (report.get("selection") or {}).get("steps") or [{}]
+    for where, est in (("base_estimates", report.get("base_estimates") or {}),
+                       ("selection step 0", steps[0].get("posterior") or {})):
+        for n, v in summary["posterior"].items():
+            for k in ("mean", "q05", "q95"):
+                got = (est.get(n) or {}).get(k)
+                if got != v[k]:
+                    out.append(f"{where}: {n} {k} {got!r} against summary.json's {v[k]!r}")
     return out
 
 

@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from calibration.closing import assemble, check_rows, fit_sources
+from calibration.closing import assemble, base_posterior_mismatches, check_rows, fit_sources
 from calibration.diagnose import base_design_box, workflow_sample
 from calibration.protocol import MAX_BASE_DRAWS, select, workflow_base
 from enkf import BoxTransform, member_table
@@ -154,6 +154,16 @@ def test_report_json_names_the_workflow_posterior_and_prints_its_estimates(tmp_p
         for k in ("mean", "q05", "q95"):
             assert rep["base_estimates"][n][k] == summ["posterior"][n][k]
             assert rep["selection"]["steps"][0]["posterior"][n][k] == summ["posterior"][n][k]
+    assert base_posterior_mismatches(summ, rep) == []
+    # the check a re-run's files are held to fails a diagnosis with its own base fit or another method
+    summ["posterior"]["sigma_p"]["q95"] += 1.0
+    assert base_posterior_mismatches(summ, rep) == [
+        f"base_estimates: sigma_p q95 {rep['base_estimates']['sigma_p']['q95']!r} against summary.json's "
+        f"{summ['posterior']['sigma_p']['q95']!r}",
+        f"selection step 0: sigma_p q95 {rep['base_estimates']['sigma_p']['q95']!r} against summary.json's "
+        f"{summ['posterior']['sigma_p']['q95']!r}"]
+    assert len(base_posterior_mismatches({**summ, "posterior_method": "ensemble"},
+                                         {**rep, "base_posterior": "emulator"})) == 4
     # the held-out record's base prediction point is the workflow's mean (of the thinned draws: within 0.1 sd)
     point = rep["heldout"]["H"]["before"]["point"]
     assert point["sigma_p"] == pytest.approx(summ["posterior"]["sigma_p"]["mean"], abs=0.1e6)
