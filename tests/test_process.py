@@ -26,9 +26,9 @@ SCHEMA = REPO / "config" / "schema.yaml"
 
 
 def _shipped_experiments() -> dict[str, tuple[str, dict]]:
-    """Every distinct experiment block of the shipped configs (config.yaml alone and merged with each other
-    config/*.yaml, as Snakemake merges them), validated; keyed ``file:experiment``."""
-    out, seen = {}, set()
+    """Every experiment of the shipped configs (config.yaml alone and merged with each other config/*.yaml,
+    as Snakemake merges them), validated; keyed ``file:experiment``."""
+    out = {}
     extras = [None] + sorted(p.name for p in (REPO / "config").glob("*.yaml") if p.name not in ("config.yaml", "schema.yaml"))
     for extra in extras:
         sources = config_sources([REPO / "config" / "config.yaml"] + ([REPO / "config" / extra] if extra else []))
@@ -37,14 +37,24 @@ def _shipped_experiments() -> dict[str, tuple[str, dict]]:
             update_config(merged, copy.deepcopy(data))
         cfg = validate_config(merged, SCHEMA, base_dir=REPO, sources=sources)
         for name, exp in cfg["experiments"].items():
-            key = json.dumps(exp, sort_keys=True, default=str)
-            if key not in seen:
-                seen.add(key)
-                out[f"{extra or 'config.yaml'}:{name}"] = (name, exp)
+            out[f"{extra or 'config.yaml'}:{name}"] = (name, exp)
     return out
 
 
+def _process_inputs(name: str, exp: dict) -> str:
+    """What the process is built from: the experiment's inference settings and its observation window
+    (experiments that differ only in their simulation, e.g. the mesh preset, build the same process)."""
+    spec = ExperimentSpec.from_config(name, exp)
+    fields = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in vars(spec).items() if k != "name"}
+    o = exp["observations"]
+    return json.dumps([fields, o.get("t_start"), o["t_end"], o["dt"]], sort_keys=True, default=str)
+
+
 SHIPPED = _shipped_experiments()
+DISTINCT = {}
+for _key, (_name, _exp) in SHIPPED.items():
+    DISTINCT.setdefault(_process_inputs(_name, _exp), _key)
+DISTINCT = sorted(DISTINCT.values())
 
 
 def _stand_in(spec: ExperimentSpec, exp: dict):
@@ -71,12 +81,20 @@ def _box_error(spec, P, truth) -> float:
     return float(np.sqrt(np.mean(((P.mean(axis=0) - truth) / (spec.upper - spec.lower)) ** 2)))
 
 
-def test_the_shipped_configs_hold_the_methods_the_process_runs():
-    assert len(SHIPPED) >= 10
+def test_every_experiment_of_every_shipped_config_builds_its_process():
+    assert len(SHIPPED) >= 40 and len(DISTINCT) >= 10
     assert {exp["method"] for _, exp in SHIPPED.values()} == {"esmda", "emulated_esmda"}
+    for key, (name, exp) in SHIPPED.items():
+        spec = ExperimentSpec.from_config(name, exp)
+        process = build_process(spec, _stand_in(spec, exp)[2])
+        P = process.ask()
+        assert P.shape == (spec.ensemble_size, len(spec.names)), key
+        assert np.all((P > spec.lower) & (P < spec.upper)), key
+        assert process.schedule.method == spec.method and process.criteria.max_iterations == spec.max_iterations, key
+        assert process.failure.min_alive_fraction == spec.min_alive_fraction and not process.done, key
 
 
-@pytest.mark.parametrize("key", sorted(SHIPPED))
+@pytest.mark.parametrize("key", DISTINCT)
 def test_each_shipped_experiment_builds_a_process_whose_first_analysis_moves_toward_the_truth(key, tmp_path):
     name, exp = SHIPPED[key]
     spec = ExperimentSpec.from_config(name, exp)
