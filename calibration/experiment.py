@@ -37,9 +37,8 @@ from enkf import (AnalysisSettings, BoxTransform, CalibrationProcess, DenseError
 from enkf.process import all_runs as _all_runs, capped_truncation  # noqa: F401 (capped_truncation: re-exported)
 from enkf.ces import interval_summary
 
-from .model_error import (MESH_PURPOSE, MESH_STAGES, analysis_error, discrepancy_kind, mesh_mode,  # noqa: F401
-                          mesh_seed, misfit_block, posterior_predictive, posterior_tempering, replicate_count,
-                          run_mesh_seed)
+from .model_error import (MESH_PURPOSE, MESH_STAGES, discrepancy_kind, mesh_mode,  # noqa: F401
+                          mesh_seed, posterior_predictive, posterior_tempering, replicate_count, run_mesh_seed)
 from .identifiability import linear_sensitivity
 from .observations import Observations
 from .process import WorkflowLikelihood, step_schedule, stop_misfit
