@@ -263,8 +263,8 @@ def make_series(out, *, geometry: str, drivers: list[str], params: dict, plant: 
         name = f"{prefix}_{i + 1:02d}"
         frame, made = bar_signals(sim, kw, gauges, measurement, artefact, noise_sd_over_peak, noise_rho1, rng)
         atomic_write_text(out / f"{name}.csv", frame.to_csv(index=False, float_format="%.9g"))
-        note = f"synthetic: {preset} mesh, driven by {label}, planted {values[i] or 'nothing'}" + \
-               (f", artefact {artefact}" if artefact else "")
+        # what was planted stays in truth.json: a sheet is what the calibration and its reader see
+        note = f"synthetic: {preset} mesh, driven by {label}; the truth in truth.json"
         atomic_write_text(out / f"{name}.yaml", sheet_text(name, sim.run, gauges, lithology, note))
         test = {"name": name, "driver": spec, "mesh_seed": mesh_seeds[i], "planted": values[i],
                 "model_peak_stress_Pa": made["peak_stress_Pa"], "noise_sd_Pa": made["noise_sd_Pa"],
