@@ -203,8 +203,9 @@ def series_kwargs(plan: dict, case: dict, seed: int, preset: str, records: int |
 
 
 def run_series(plan: dict, case: dict, seed: int, work: Path, preset: str, records: int | None,
-               cores: int) -> dict:
-    """Make, configure, run and score one series; returns its result row."""
+               cores: int, dry_run: bool = False) -> dict:
+    """Make, configure, run and score one series; returns its result row. ``dry_run``: the loop is only
+    planned (``snakemake -n``) and nothing is scored, to check the wiring."""
     from tools.make_planted_series import make_series
 
     name = f"planted_{case['case']}_{seed}"
@@ -227,9 +228,13 @@ def run_series(plan: dict, case: dict, seed: int, work: Path, preset: str, recor
         t1 = time.perf_counter()
         log = folder / "snakemake.log"
         with open(log, "w") as fh:
-            subprocess.run(["snakemake", "--cores", str(cores), "--configfile", str(cfg)], cwd=ROOT,
-                           stdout=fh, stderr=subprocess.STDOUT, check=True)
+            subprocess.run(["snakemake", *(["-n"] if dry_run else []), "--cores", str(cores),
+                            "--configfile", str(cfg)], cwd=ROOT, stdout=fh, stderr=subprocess.STDOUT, check=True)
         row["loop_wall_s"] = round(time.perf_counter() - t1, 1)
+        if dry_run:
+            row["error"] = "dry run: the loop was planned, not run"
+            row["wall_s"] = round(time.perf_counter() - t0, 1)
+            return row
         diag = ROOT / "results" / name / "diagnosis"
         report = json.loads((diag / "report.json").read_text())
         check = json.loads((diag / "check.json").read_text())
@@ -254,6 +259,8 @@ def main(argv=None) -> int:
     ap.add_argument("--records", type=int, help="tests per series (default: the plan's drivers)")
     ap.add_argument("--preset", default=None, help="the truth's mesh (default: the plan's truth_mesh)")
     ap.add_argument("--cores", type=int, default=2)
+    ap.add_argument("--dry-run", action="store_true", help="make and configure each series, plan the loop "
+                    "(snakemake -n), score nothing")
     ap.add_argument("--work", default=str(ROOT / "results" / "bench_planted"))
     ap.add_argument("--out", default=str(OUT))
     args = ap.parse_args(argv)
@@ -266,7 +273,8 @@ def main(argv=None) -> int:
     results, work, t0 = [], Path(args.work), time.perf_counter()
     for case in cases:
         for seed in seeds:
-            row = run_series(plan, case, seed, work, args.preset or plan["truth_mesh"], args.records, args.cores)
+            row = run_series(plan, case, seed, work, args.preset or plan["truth_mesh"], args.records, args.cores,
+                             args.dry_run)
             results.append(row)
             print(f"{case['case']} seed {seed}: {row.get('named', row.get('error'))} ({row['wall_s']:.0f} s)",
                   flush=True)
