@@ -133,8 +133,8 @@ def score(results: list[dict]) -> dict:
     named_rows = [r for r in effect_rows if r["correct"]]
     nulls = [r for r in done if r["case"]["class"] == "null"]
     ooc = [r for r in done if r["case"]["class"] == "out_of_catalogue"]
-    misses = [{"case": r["case"]["case"], "seed": r["seed"], "named": r["named"], "why": r.get("why", "")}
-              for r in done if not r["correct"]]
+    misses = [{"case": r["case"]["case"], "seed": r["seed"], "named": r["named"], "why": r.get("why", ""),
+               "below_scatter": r.get("above_scatter") is False} for r in done if not r["correct"]]
     misses += [{"case": r["case"]["case"], "seed": r["seed"], "named": None, "why": r["error"]}
                for r in results if r.get("error")]
     return {

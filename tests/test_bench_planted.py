@@ -101,6 +101,7 @@ def test_score_gives_the_matrix_and_the_rates():
     assert s["null_false_positive_rate"] == pytest.approx(1 / 4)
     assert s["out_of_catalogue_ok_share"] == pytest.approx(1 / 2)
     assert len(s["misses"]) == 2 + 1 + 1 + 1 + 1                      # 2 rate, damping, null, ringing, the error
+    assert [m["case"] for m in s["misses"] if m.get("below_scatter")] == ["damping"]
     acc = acceptance(s, PLAN["acceptance"])
     assert acc == {"physical_named": False, "parameter_in_90": False, "null_adds_nothing": False,
                    "out_of_catalogue": False}
