@@ -13,7 +13,7 @@ everything the reduction reads:
   ``calibration/observations.py``, this module), so that a changed reduction checks every record again.
 
 A changed file is a new key and is checked again (its error reported); an entry that cannot be read,
-or names another key or record, is ignored and computed again. A record that fails its check leaves no
+or names another key, is ignored and computed again. A record that fails its check leaves no
 entry: it is read again on the next command, which reports the problem again. The verdict itself
 (:func:`check_summary`) is the same function for a fresh and a stored summary.
 
@@ -105,11 +105,13 @@ def record_key(path, code: bytes | None = None) -> str:
 
 
 def _stored(entry: Path, key: str, path: Path) -> dict | None:
-    """The entry's summary, None when it is missing, unreadable or not this record's."""
+    """The entry's summary, None when it is missing, unreadable or under another key. The record's path is
+    kept in the entry for a reader, not compared: the key holds its name, its lithology folder's
+    spreadsheet and its content, so one record named by two paths (relative, absolute) shares one entry."""
     try:
         doc = json.loads(entry.read_text())
         summary = doc["summary"]
-        ok = (doc["key"] == key and doc["record"] == str(path) and isinstance(summary["stress_finite"], bool)
+        ok = (doc["key"] == key and isinstance(summary["stress_finite"], bool)
               and isinstance(summary["end_time_s"], float) and summary["validity"]["class"] in
               ("valid", "questionable", "invalid") and isinstance(summary["validity"]["reasons"], list))
     except (OSError, ValueError, KeyError, TypeError):

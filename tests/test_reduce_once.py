@@ -105,10 +105,13 @@ def test_the_cache_reduces_once_checks_a_changed_file_again_and_ignores_a_bad_en
     entry.write_text(entry.read_text()[:40])
     assert cached_check_record(rec, 3.0e-4, cache_dir=cache) == first
     assert record_check.REDUCTIONS["count"] == n0 + 2
-    # an entry whose key or record is not this one's is ignored too
+    # an entry under another key is ignored too
     doc = json.loads(entry.read_text())
     entry.write_text(json.dumps({**doc, "key": "0" * 64}))
     cached_check_record(rec, 3.0e-4, cache_dir=cache)
+    assert record_check.REDUCTIONS["count"] == n0 + 3
+    # the same record named by another path shares the entry: nothing reduced
+    assert cached_check_record(rec.parent / ".." / rec.parent.name / rec.name, cache_dir=cache) == first
     assert record_check.REDUCTIONS["count"] == n0 + 3
     # a changed file is a new key: checked again, and its problem reported
     lines = rec.read_text().splitlines(keepends=True)
