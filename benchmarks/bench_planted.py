@@ -199,7 +199,7 @@ def series_kwargs(plan: dict, case: dict, seed: int, preset: str, records: int |
             "plant": dict(case.get("plant") or {}), "spread": dict(case.get("per_record_sd") or {}),
             "artefact": dict(case.get("artefact") or {}), "preset": preset, "seed": int(seed),
             "lithology": lithology, "prefix": "Plant" + "".join(w.title() for w in case["case"].split("_")),
-            "null_peaks": bool(case.get("plant")) and case["class"] == "physical"}
+            "null_peaks": bool(case.get("plant"))}     # a measurement effect's costs no run: the same curve
 
 
 def run_series(plan: dict, case: dict, seed: int, work: Path, preset: str, records: int | None,
