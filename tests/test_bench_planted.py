@@ -150,3 +150,30 @@ def test_tiny_series_reduces_and_its_truth_matches_the_arguments(tmp_path):
         pre = frame.transmitted_strain[frame.time_s < -10e-6].to_numpy()
         # about 110 pre-trigger samples, AR(1) 0.46: some 40 independent ones, the sd within 35 % (3 se)
         assert np.std(pre) == pytest.approx(t["noise_sd_strain"], rel=0.35)
+
+
+def test_the_shipped_planted_series_is_what_its_provenance_says():
+    """data/examples/planted_rate: each sheet reduces to the peak and rate truth.json recorded when it was
+    made, within 0.5 % of the simulated peak, with the stated noise, and its rate law moves every peak by
+    more than twice the fast mesh's peak scatter (PROVENANCE.md)."""
+    from benchmarks.bench_planted import effect_size, mesh_sd_rel
+    from tools.make_planted_series import _reduced_summary
+
+    folder = ROOT / "data" / "examples" / "planted_rate"
+    truth = json.loads((folder / "truth.json").read_text())
+    assert truth["plant"] == {"rate_strength.k": 0.3} and truth["params"] == {"sigma_t": 2.5e7, "E_t": 1.2e4}
+    assert truth["preset"] == "standard" and len(truth["tests"]) == 4
+    rates = []
+    for t in truth["tests"]:
+        got = _reduced_summary(folder / f"{t['name']}.yaml")
+        # the same files read by the same code: only float formatting could differ
+        assert got["peak_stress_Pa"] == pytest.approx(t["reduced"]["peak_stress_Pa"], rel=1e-9)
+        assert got["peak_stress_Pa"] == pytest.approx(t["model_peak_stress_Pa"], rel=0.005)
+        rates.append(got["strain_rate_per_s"])
+        frame = pd.read_csv(folder / f"{t['name']}.csv")
+        pre = frame.transmitted_strain[frame.time_s < -10e-6].to_numpy()
+        assert np.std(pre) == pytest.approx(t["noise_sd_strain"], rel=0.35)   # ~110 samples, AR(1) 0.46
+    assert len({round(r, -1) for r in rates}) >= 3 and min(rates) > 90 and max(rates) < 300
+    size = effect_size(truth, mesh_sd_rel("cylinder"))
+    assert size["above_scatter"] and min(size["peak_change_rel"]) > 2 * size["mesh_sd_rel"]
+    assert size["peak_change_rel"] == pytest.approx([0.098, 0.119, 0.143, 0.171], abs=0.001)
