@@ -5,40 +5,19 @@ and the same analysis; the in-process driver (:func:`enkf.assimilate`) is a loop
 
 from __future__ import annotations
 
-import copy
 import json
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
-from snakemake.utils import update_config
 
-from calibration.config_files import config_sources
 from calibration.experiment import ExperimentSpec, analysis_step, build_process, rng_for
 from calibration.observations import observation_grid, twin_observations
-from calibration.workflow_io import validate_config
 from enkf import (BoxTransform, CalibrationProcess, DiagonalError, EnsembleFailure, FailurePolicy, FixedError,
                   SeededSteps, StepSchedule, StopPolicy, assimilate, latin_hypercube)
 
-REPO = Path(__file__).resolve().parents[1]
-SCHEMA = REPO / "config" / "schema.yaml"
-
-
-def _shipped_experiments() -> dict[str, tuple[str, dict]]:
-    """Every experiment of the shipped configs (config.yaml alone and merged with each other config/*.yaml,
-    as Snakemake merges them), validated; keyed ``file:experiment``."""
-    out = {}
-    extras = [None] + sorted(p.name for p in (REPO / "config").glob("*.yaml") if p.name not in ("config.yaml", "schema.yaml"))
-    for extra in extras:
-        sources = config_sources([REPO / "config" / "config.yaml"] + ([REPO / "config" / extra] if extra else []))
-        merged: dict = {}
-        for _, data in sources:
-            update_config(merged, copy.deepcopy(data))
-        cfg = validate_config(merged, SCHEMA, base_dir=REPO, sources=sources)
-        for name, exp in cfg["experiments"].items():
-            out[f"{extra or 'config.yaml'}:{name}"] = (name, exp)
-    return out
+from _shipped import REPO, SCHEMA, shipped_experiments
 
 
 def _process_inputs(name: str, exp: dict) -> str:
@@ -50,7 +29,7 @@ def _process_inputs(name: str, exp: dict) -> str:
     return json.dumps([fields, o.get("t_start"), o["t_end"], o["dt"]], sort_keys=True, default=str)
 
 
-SHIPPED = _shipped_experiments()
+SHIPPED = shipped_experiments()
 DISTINCT = {}
 for _key, (_name, _exp) in SHIPPED.items():
     DISTINCT.setdefault(_process_inputs(_name, _exp), _key)
