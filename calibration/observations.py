@@ -13,6 +13,12 @@ Two sources (docs/workflow.md, "The loop"):
   stress (``ReducedRecord.noise_std_Pa['stress']``, times a configurable factor), and the AR(1)
   correlation time is estimated from the same pre-trigger samples (:func:`enkf.estimate_noise`).
 
+The workflow reduces each record once (rule ``reduced_record``, :func:`write_reduced_record`: the folder
+``results/<experiment>/observations/<record>/`` of :mod:`shpb.lab.reduced_store`) and builds the
+observations from those files (:func:`stored_observations`, the same numbers as
+:func:`measured_observations`); the Snakefile's check before any job (:func:`cached_check_record`) reads
+a record's summary from a cache keyed by its content (:mod:`calibration.record_check`).
+
 Several records are concatenated in one observation vector (record by record, in the config's order);
 their errors are independent (``groups`` of :mod:`enkf.covariance`).
 
