@@ -177,6 +177,20 @@ def test_a_rock_without_a_class_gets_the_stated_wide_box():
     assert boxes["E_t"] == [200.0, 2400.0]
 
 
+def test_a_rock_without_a_class_gets_sigma_t_from_its_calibration_peaks():
+    """The new-user trial's limestone (peaks 27-29 MPa) ended box_limited at sigma_t 5.0 MPa [4.5, 6.0]
+    against the union box's 4 MPa end; from its peak the box is 1.4-29 MPa, that interval well inside.
+    The classes keep their shipped boxes whatever the peaks."""
+    boxes, why = rock_box("Savonnieres_Limestone", "cylinder", 28.6e6)
+    assert boxes["sigma_t"] == [1.4e6, 2.9e7] and "highest calibration peak (28.6 MPa)" in why["sigma_t"]
+    lo, hi = boxes["sigma_t"]
+    assert lo < 0.5 * 4.5e6 and 6.0e6 < 0.25 * hi
+    # the granite disc's own ratio (sigma_t 45 MPa, splitting peak 33 MPa) lies inside a no-class disc box
+    lo, hi = rock_box(None, "brazilian_disc", 33.4e6)[0]["sigma_t"]
+    assert lo < 45e6 < hi
+    assert rock_box("Carrara_marble", "cylinder", 28.6e6)[0]["sigma_t"] == [1.0e7, 1.2e8]
+
+
 # --------------------------------------------------------------------------------------------------
 # refused sets
 # --------------------------------------------------------------------------------------------------

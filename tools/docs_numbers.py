@@ -51,6 +51,7 @@ RESULT = re.compile(
 # the number's context (80 characters either side) and must cover the number itself.
 NOT_RESULTS: list[tuple[str, str, str]] = [
     ("*", r"section \d+(?:\.\d+)*", "a section of a paper"),
+    ("docs/own-data.md", r"0\.05-1\s+times it for a cylinder, 0\.25-5 times it", "init-config's PEAK_MULTIPLES, a setting"),
     ("*", r">= ?\d+(?:\.\d+)+", "a version"),
     ("*", r"YAML 1\.1", "a version"),
     ("*", r"Figs?\. \d+(?:/\d+)?", "a figure of the paper"),

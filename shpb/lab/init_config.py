@@ -88,6 +88,7 @@ ROCK_CLASSES: dict[str, RockClass] = {
 }
 #: Any other rock (no lithology, or a limestone, quartzite, gneiss, ... that no shipped run calibrated):
 #: the union of the classes' boxes, wide on purpose; narrow it once a first run shows where the rock sits.
+#: Its sigma_t box applies only without records (init-config sets it from their peaks: :data:`PEAK_MULTIPLES`).
 WIDE_DEFAULT = RockClass((4.0e6, 1.2e8), (200.0, 2400.0), (100.0, 5.0e4),
                          "no rock class known: the union of the shipped classes' boxes (shpb/lab/init_config.py)",
                          f"the widest shipped box: {_CYL_E_T}")
@@ -169,13 +170,33 @@ def rock_class(lithology: str | None) -> tuple[str | None, RockClass]:
     return None, WIDE_DEFAULT
 
 
-def rock_box(lithology: str | None, geometry: str) -> tuple[dict[str, list[float]], dict[str, str]]:
-    """Prior boxes ``{sigma_t, E_t}`` and a reason for each."""
+#: A rock of no class: sigma_t's box as multiples of the highest calibration record's peak stress. The
+#: shipped calibrations put the joint's shear strength at about 0.2 of a compression cylinder's peak (the
+#: Carrara marble: ~40 MPa for 170-200 MPa peaks) and about 1.4 times a disc's splitting peak (the granite
+#: disc: 45 MPa for 33 MPa); each box spans about four times either way. A fixed box failed a weak rock: the
+#: Savonnieres limestone's 27-29 MPa peaks put sigma_t against the 4 MPa end of the union box (box_limited).
+PEAK_MULTIPLES = {"cylinder": (0.05, 1.0), "brazilian_disc": (0.25, 5.0)}
+
+
+def _round2(x: float) -> float:
+    return float(f"{x:.2g}")
+
+
+def rock_box(lithology: str | None, geometry: str, peak_stress: float | None = None
+             ) -> tuple[dict[str, list[float]], dict[str, str]]:
+    """Prior boxes ``{sigma_t, E_t}`` and a reason for each; ``peak_stress``: the highest calibration
+    record's peak [Pa], which sets sigma_t's box of a rock of no class (:data:`PEAK_MULTIPLES`)."""
     name, cls = rock_class(lithology)
     label = f"rock class {name} (lithology {lithology})" if name else f"lithology {lithology or 'not given'}"
     e_t = cls.E_t_cylinder if geometry == "cylinder" else cls.E_t_disc
     boxes = {"sigma_t": [*cls.sigma_t], "E_t": [*e_t]}
-    reasons = {"sigma_t": f"joint shear strength [Pa], {label}: {cls.sigma_t_source}",
+    sigma_why = cls.sigma_t_source
+    if name is None and peak_stress is not None:
+        lo, hi = PEAK_MULTIPLES[geometry]
+        boxes["sigma_t"] = [_round2(lo * peak_stress), _round2(hi * peak_stress)]
+        sigma_why = (f"no rock class known: {lo:g}-{hi:g} x the highest calibration peak "
+                     f"({peak_stress / 1e6:.1f} MPa), around the shipped {geometry}'s ratio (shpb/lab/init_config.py)")
+    reasons = {"sigma_t": f"joint shear strength [Pa], {label}: {sigma_why}",
                "E_t": f"mode II energy [J/m^2] of a {geometry} at `fast`, {label}: "
                       f"{cls.E_t_cylinder_source if geometry == 'cylinder' else _DISC_BOX}"}
     return boxes, reasons
@@ -244,7 +265,7 @@ def init_config(paths: list[str | Path], *, name: str | None = None, diagnosis: 
             + ". Leave them out, fix their sheets, or give --allow-invalid to calibrate on them anyway "
               "(written as observations.allow_invalid: true)")
     window, why_window = choose_window(times, held)
-    boxes, why_box = rock_box(lithology, geometry)
+    boxes, why_box = rock_box(lithology, geometry, max(t.peak_stress for t in times if t.name != held))
     return experiment_yaml(name=name, geometry=geometry, lithology=lithology, times=times, window=window,
                            why_window=why_window, dt=choose_dt(window), boxes=boxes, why_box=why_box,
                            heldout=held, seed=seed, invalid=[t.name for t in invalid])
