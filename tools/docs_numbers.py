@@ -13,14 +13,16 @@ and their values) and outside link targets, less every quote that ``tests/test_d
 checks against its JSON (``QUOTES`` there, passed in as ``checked``).
 
 Which numbers look like results (``RESULT``): a number with a decimal fraction, a percentage, a
-duration (s, min, h), a memory size, a factor (``3.1x``) or a count of successes (``7/9``, ``5 of 5``).
-A bare integer with a physical unit (``45 MPa``, ``160 us``, ``25 members``) is how this project writes
-inputs, so it is not flagged; that is what keeps the pattern from flagging the config. The inputs that
-still have that shape (a safety factor 0.6, a section number 5.2, a version 2.0.1, an interval level
-90 %, a threshold "at most 10 %", a literature value) are listed in ``NOT_RESULTS`` as (file, regex on
-the number with its words around it, reason); a space in a regex matches any white space. The cost of
-that choice: an integer result with a unit (``285 FDEM runs``) is not flagged; the quotes check such
-numbers where they are results all the same.
+duration (s, min, h), a memory size, a factor (``3.1x``), a count of successes (``7/9``, ``5 of 5``)
+and an integer (or a range of them) with a unit or a count noun: ``45 MPa``, ``13 -> 28 us``,
+``171 um``, ``230 simulations``, ``22 Slurm jobs``, ``25 members``. Most of the latter are inputs (a
+config value, a box, a window, an ensemble's size, a literature value, a pulse); those are listed in
+``NOT_RESULTS`` as (file, regex on the number with its words around it, reason), with the other inputs
+of a result's shape (a safety factor 0.6, a section number 5.2, a version 2.0.1, an interval level 90 %,
+a threshold "at most 10 %"). A space in a regex matches any white space, and inline code is blanked
+before the regex is read, so a parameter's name (`` `sigma_t` 45 MPa``) reads as a run of spaces.
+``PENDING`` names results of files only their owner may rewrite that no JSON holds yet; they are
+printed, not counted, and a test fails once their words are gone.
 """
 from __future__ import annotations
 
@@ -45,6 +47,8 @@ RESULT = re.compile(
     r"|" + _N + r"(?:\s?-\s?" + _N + r")?\s?(?:%|x\b|s\b|min\b|h\b|MB\b|GB\b|ms\b)"  # 88-90 %, 704 s, 3.1x
     r"|\d+\s?/\s?\d+(?![\w/^.])"                         # 7/9 (not 1/s, not J/m^2)
     r"|\d+(?:-\d+)?\sof\s(?:the\s)?\d+"                   # 5 of 5, 28-35 of 40
+    r"|" + _N + r"(?:\s?(?:-|->|to)\s?" + _N + r")?\s?(?:[kMG]Pa|us|um|mm|m/s|kJ/m\^2|J/m\^2|1/s|nats|"  # 45 MPa, 13 -> 28 us
+    r"(?:FDEM\s|Slurm\s)?(?:runs?|simulations?|jobs?|members?|records?|twins?|steps?|folds?|discs?|cylinders?))\b"
     r")")
 
 # (file or "*", regex): numbers that have a result's shape and are not results. The regex is searched in
@@ -111,6 +115,52 @@ NOT_RESULTS: list[tuple[str, str, str]] = [
     ("docs/own-data.md", r"\(0\.57 c0 for nu = 0\.32\)|for nu = 0\.32", "the Rayleigh speed's ratio, physics"),
     ("docs/own-data.md", r"short \(0\.15 m, the wave enters 0\.15 m", "the disc's bars, inputs"),
     ("docs/own-data.md", r"0\.05-1\s+times it for a cylinder, 0\.25-5 times it", "init-config's PEAK_MULTIPLES, a setting"),
+    # integers with a unit: inputs, settings, data and literature
+    # inline code is blanked before this is read, so a parameter's name reads as a run of spaces
+    ("*", r"\x20{3,}\s*=?\s*\d[\d,]*(?:-\d[\d,]*)?\s(?:MPa|J/m\^2|um)\b",
+     "a number right after a parameter's name: its value, box or default, an input"),
+    ("*", r"(?:granite|marble|sandstone) \d[\d,]*-\d[\d,]* MPa|\d[\d,]*-\d[\d,]* J/m\^2 for a (?:disc|cylinder)"
+          r"|[Bb]ox (?:is )?(?:\[0, )?\d[\d,]*(?:-\d[\d,]*)? (?:um|J/m\^2)|box reaches 50 kJ/m\^2", "a prior box, a setting"),
+    ("*", r"the truth, 500 J/m\^2", "the twin's truth, an input"),
+    ("*", r"(?:[Ww]indow:? \(?|over |window's |that file's |the (?:whole )?|simulate a longer window \()(?:0-)?(?:160|170|280|360|600) us"
+          r"(?: against 160| after arrival| window)?|(?:a|on a) [12] us grid|[Ww]indows?\.\*\* Disc: 0-160 us|Cylinder: 0-360 us"
+          r"|run to 600 us|crushed by 160 us", "a window or a grid, a setting"),
+    ("*", r"(?:\(|, |its own |rests on |same size \(|size \(|\(`fast` preset, |itself \(|makes it a small )"
+          r"(?:6|8|10|25|100|400) (?:members|runs)(?: x 2 records)?|(?:400 members.{0,60}?)?8 steps\)"
+          r"|with 10 members|n_params \+ 2 runs|1,000 step members|2 ES-MDA steps, 20 simulations"
+          r"|(?:24 points|before/after) x 3 records|\(x 3 records|four ensembles, 100 simulations",
+     "an ensemble's or a design's size, a setting"),
+    ("*", r"(?:\(|at |SHPB_004 \(|SHPB_014 \()\d+(?:-\d+)? 1/s", "a measured record's strain rate, data"),
+    ("docs/closing-the-loop.md", r"level at 3-5 records", "the population sizes the study simulated, inputs"),
+    ("docs/closing-the-loop.md", r"N\(100, 25 um\)|`g` 135 um and `Delta` 150 um|100 us of quiet bar",
+     "the planted records' inputs"),
+    ("docs/own-data.md", r"-20 us on the Freiburg", "10 cm over the bar's wave speed, physics"),
+    ("docs/own-data.md", r"a 10 us rise on 50 mm|on 50 mm titanium", "the dispersion test's pulse and bars, inputs"),
+    ("docs/own-data.md", r"at least 10 us\), rounded up to 10 us", "init-config's window rule, a setting"),
+    ("docs/own-data.md", r"truth of the example is sigma_t = 45 MPa, E_t = 500 J/m\^2|the 160 us window",
+     "the example's truth and config, inputs"),
+    ("docs/sensitivity.md", r"post-peak slope \(over 20 us\)|within 20 us of the window's end", "the outputs' definitions"),
+    ("docs/sensitivity.md", r"Window 0-(?:280|160) us, [12] us grid", "the design's window, a setting"),
+    ("docs/sensitivity.md", r"`E_n` 50-200 J/m\^2|(?:`sigma_n`|`sigma_t`) \d+-\d+ MPa|`E_t` 200-2,400 J/m\^2|`E_n` 20-200 J/m\^2"
+     r"|`E_t` 100-5,000 J/m\^2", "the design's box, an input"),
+    ("docs/shpb-models.md", r"\(statically, the tensile strength `sigma_n` 15 MPa|Why `sigma_n` is 15 MPa|about 13 MPa, Saksala"
+     r"|Why is 15 MPa|earlier default, 25 MPa|25 and 15 MPa|at 15 MPa the centre|had cured it at 25 MPa|13-16\.9 MPa in two",
+     "the joint strength: literature and the default chosen from it"),
+    ("docs/shpb-models.md", r"2013: 21 MPa", "Saksala et al. 2013's law"),
+    ("docs/shpb-models.md", r"slower pulse \(rise 200 us\)", "a pulse tried, an input"),
+    ("docs/shpb-models.md", r"50 x 25 mm, steel bars 50 mm \(200 GPa|titanium bars \(110 GPa, 4430 kg/m\^3, 50 mm\)",
+     "the paper's disc and the bars, inputs"),
+    ("docs/shpb-models.md", r"the 5 m/s striker|\(115 MPa: rise 120 us, plateau 45 us, fall 115 us|the 225 MPa Kuru pulse",
+     "the Kuru granite pulses, inputs"),
+    ("docs/shpb-models.md", r"At `sigma_t` 4 MPa \(the box's low end\)", "the box's end, a setting"),
+]
+
+# Result numbers in README.md and docs/workflow.md that no committed JSON holds yet: the lead regenerates
+# those two files from a new default run, and only the lead edits their words. Listed (and printed by
+# main) rather than hidden: each must become a quote or words when the files are rewritten.
+PENDING: list[tuple[str, str, str]] = [
+    ("docs/workflow.md", r"the rise from about 20 us", "the disc's rise in the window: no JSON records it"),
+    ("docs/workflow.md", r"measured peaks at 230-270 us", "the marble records' peak times: read from data/, no JSON"),
 ]
 
 
@@ -132,7 +182,7 @@ def masked(text: str, checked: list[str] = ()) -> str:
 def _excused(name: str, text: str, start: int, end: int) -> str | None:
     lo, hi = max(0, start - 80), min(len(text), end + 80)
     window = text[lo:hi]
-    for doc, rx, why in NOT_RESULTS:
+    for doc, rx, why in NOT_RESULTS + PENDING:
         if doc not in ("*", name):
             continue
         # a space in a pattern is any run of white space (the docs wrap lines anywhere)
@@ -175,8 +225,10 @@ def main(argv: list[str]) -> int:
     for path in docs():
         name = str(path.relative_to(ROOT))
         for line, num, ctx in unchecked(name, path.read_text(), checked.get(name, [])):
-            print(f"{name}:{line}\t{num}\t{ctx}")
+            print(f"{name}:{line}\t{' '.join(num.split())}\t{ctx}")
             n += 1
+    for doc, rx, why in PENDING:
+        print(f"{doc}\tpending (not counted), {rx!r}: {why}", file=sys.stderr)
     print(f"{n} stale quotes and unchecked result numbers", file=sys.stderr)
     return 1 if n else 0
 
