@@ -4,13 +4,16 @@ that JSON, rounded as the doc rounds them, and must stand in the doc as written.
 the result-looking numbers that are neither; that list must be empty.
 
 A quote's numbers are filled in by ``values(J)``, ``J(path)`` reading a committed JSON; a quote whose numbers
-another test already derives from the JSON names that test in ``by`` and gives the words as they stand."""
+another test already derives from the JSON names that test in ``by`` and gives the words as they stand. One quote
+(the marble records' peak times) has no JSON and reads the repository's raw records through init-config."""
 
 from __future__ import annotations
 
 import functools
 import json
+import os
 import re
+import tempfile
 from statistics import NormalDist
 from dataclasses import dataclass
 from pathlib import Path
@@ -124,6 +127,26 @@ def _gaps_003():
 
 def _pop():
     return J("studies/results/population_average_cv.json")
+
+
+@functools.lru_cache(maxsize=None)
+def _marble_peak_times() -> dict:
+    """``{record: peak time [s]}`` of marble_loop's records, in the workflow's time frame, as init-config
+    reads them from the repository's raw Freiburg files (no JSON holds them; about a second)."""
+    from shpb.lab.init_config import init_config
+    from shpb.lab.sheet_freiburg import freiburg_sheet, write_sheet
+    cama = ROOT / "data/freiburg-rae-rock-shpb/Rae2021/SHPBdata/CaMa"
+    cwd = os.getcwd()
+    with tempfile.TemporaryDirectory() as tmp:
+        sheets = [ROOT / "data/examples/sheets/CaMa_SHPB_004.yaml", Path(tmp) / "CaMa_SHPB_014.yaml"]
+        write_sheet(freiburg_sheet(cama / "CaMa_SHPB_014_Ti25_55b_Al12b_0_001.txt", Path(tmp)), sheets[1])
+        os.chdir(tmp)
+        try:
+            text = init_config(sheets)[0]
+        finally:
+            os.chdir(cwd)
+    # the header's "#   name: onset / peak us (... MPa) / fall us" lines
+    return {m[1]: float(m[2]) * 1e-6 for m in re.finditer(r"^#\s+(\S+): \d+ / (\d+) us", text, re.M)}
 
 
 OD = "docs/own-data.md"
@@ -353,6 +376,9 @@ QUOTES: list[Quote] = [
     Quote("docs/workflow.md", "each of the {completed_runs} runs that got to the end identical", lambda J: J(
         "benchmarks/results/bench_kill.json")),
     Quote(OD, "{fdem_runs} FDEM runs of the fast disc in the committed run", lambda J: J(f"{OWN}/run.json")),
+    Quote("docs/workflow.md", "Cylinder: 0-360 us (the measured peaks at {span} us", lambda J: {
+        "span": _span([_marble_peak_times()[r] for r in ("CaMa_SHPB_004", "CaMa_SHPB_014")],
+                      lambda x: f"{round(x * 1e6, -1):.0f}")}),
     Quote(OD, "`init-config` gives 170 us",
           by="tests/test_init_config.py::test_the_granite_disc_gets_its_window_dt_and_table_2_box"),
 ]

@@ -160,7 +160,6 @@ NOT_RESULTS: list[tuple[str, str, str]] = [
 # main) rather than hidden: each must become a quote or words when the files are rewritten.
 PENDING: list[tuple[str, str, str]] = [
     ("docs/workflow.md", r"the rise from about 20 us", "the disc's rise in the window: no JSON records it"),
-    ("docs/workflow.md", r"measured peaks at 230-270 us", "the marble records' peak times: read from data/, no JSON"),
 ]
 
 
