@@ -48,7 +48,7 @@ RESULT = re.compile(
     r"|\d+\s?/\s?\d+(?![\w/^.])"                         # 7/9 (not 1/s, not J/m^2)
     r"|\d+(?:-\d+)?\sof\s(?:the\s)?\d+"                   # 5 of 5, 28-35 of 40
     r"|" + _N + r"(?:\s?(?:-|->|to)\s?" + _N + r")?\s?(?:[kMG]Pa|us|um|mm|m/s|kJ/m\^2|J/m\^2|1/s|nats|"  # 45 MPa, 13 -> 28 us
-    r"(?:FDEM\s|Slurm\s)?(?:runs?|simulations?|jobs?|members?|records?|twins?|steps?|folds?|discs?|cylinders?))\b"
+    r"k?Hz|degrees|(?:FDEM\s|Slurm\s)?(?:runs?|simulations?|jobs?|members?|records?|twins?|steps?|folds?|discs?|cylinders?|samples?|points?|iterations?|analyses|ensembles?|nodes?|elements?|triangles?|joints?|SIGKILLs?|kills?|populations?|realizations?|predictions?))\b"
     r")")
 
 # (file or "*", regex): numbers that have a result's shape and are not results. The regex is searched in
@@ -153,6 +153,11 @@ NOT_RESULTS: list[tuple[str, str, str]] = [
     ("docs/shpb-models.md", r"the 5 m/s striker|\(115 MPa: rise 120 us, plateau 45 us, fall 115 us|the 225 MPa Kuru pulse",
      "the Kuru granite pulses, inputs"),
     ("docs/shpb-models.md", r"At `sigma_t` 4 MPa \(the box's low end\)", "the box's end, a setting"),
+    ("docs/shpb-models.md", r"2 alpha (?:= )?\d+(?:-\d+)? degrees|friction angle (?: )?\d+ degrees",
+     "the loading angles tried and the friction angles (literature, the Freiburg sheet), inputs"),
+    ("docs/shpb-models.md", r"runs 8 realizations", "the benchmark's size, a setting"),
+    ("docs/inference.md", r"N = 25, 3 iterations|100 runs, 101 samples", "a test's and an analysis' sizes, settings"),
+    ("docs/workflow.md", r"\): 20 SIGKILLs", "the kill benchmark's number of kills, a setting"),
 ]
 
 # Result numbers in README.md and docs/workflow.md that no committed JSON holds yet: the lead regenerates
