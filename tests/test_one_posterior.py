@@ -1,9 +1,12 @@
-"""One posterior for every experiment (issue 52): every experiment of every shipped config, the
-leave-one-record-out folds they expand to, and every config `python -m shpb init-config` writes report
-the same posterior, `emulator_mcmc` (calibration.posterior: MCMC on the emulator of every run, its
-likelihood self-calibrated, the emulator's error heteroscedastic and measured at a refinement batch),
-the form the validation harness (benchmarks/bench_coverage.py) scores; the default run's summaries say
-so, and its diagnosis's base model is that posterior."""
+"""The reported posterior (issue 52): every twin experiment of the shipped configs reports the form the
+validation harness (benchmarks/bench_coverage.py) scores, `emulator_mcmc` with self-calibration, the
+heteroscedastic emulator error and a refinement batch; the default run's twin says so; and a measured
+experiment's closing-the-loop diagnosis starts from the workflow's own posterior (one base posterior per run).
+
+The measured experiments keep `posterior: ensemble`: run on the default run's marble, the harness's form
+self-calibrated its likelihood by a factor of 97 (its 32-run emulator's errors on the measured curves are
+correlated over the whole window) and returned the prior box (sigma_t 70 MPa [25, 113]) where the last
+ensemble gave 37 MPa [35, 39] (CHANGELOG)."""
 from __future__ import annotations
 
 import json
@@ -11,10 +14,9 @@ import json
 import pytest
 
 from _shipped import REPO, shipped_experiments
-from calibration.closing import base_posterior_mismatches, loro_folds
-from shpb.lab.init_config import init_config
+from calibration.closing import base_posterior_mismatches
 
-ONE = {"posterior": "emulator_mcmc", "self_calibrate": True, "emulator_error": "heteroscedastic"}
+HARNESS_FORM = {"posterior": "emulator_mcmc", "self_calibrate": True, "emulator_error": "heteroscedastic"}
 RUN = REPO / "benchmarks" / "results" / "default_run"
 
 
@@ -24,29 +26,18 @@ def _form(exp: dict) -> dict:
             "emulator_error": em.get("emulator_error")}
 
 
-def test_every_shipped_experiment_and_fold_reports_the_one_posterior():
-    experiments = shipped_experiments()
-    assert len(experiments) >= 20
-    for key, (name, exp) in experiments.items():
-        assert _form(exp) == ONE, key
-        # a refinement batch measures the emulator's error where the posterior lies
+def test_every_shipped_twin_reports_the_harness_form():
+    twins = {k: exp for k, (_, exp) in shipped_experiments().items() if exp["kind"] == "twin"}
+    assert len(twins) >= 5
+    for key, exp in twins.items():
+        assert _form(exp) == HARNESS_FORM, key
         assert exp["emulated"]["refine_runs"] >= len(exp["parameters"]) + 2, key
-        if exp.get("kind") == "measured" and (exp.get("diagnosis") or {}).get("validation") == "loro":
-            for fold, fexp in loro_folds(name, exp).items():
-                assert _form(fexp) == ONE, (key, fold)
 
 
-def test_init_config_writes_the_one_posterior():
-    disc = REPO / "data" / "examples" / "granite_disc" / "granite_disc.yaml"
-    _, doc = init_config([disc])
-    (exp,) = doc["experiments"].values()
-    assert _form(exp) == ONE and exp["emulated"]["refine_runs"] == exp["ensemble_size"]
-
-
-@pytest.mark.parametrize("exp", ["twin_ref", "marble_loop"])
-def test_the_default_runs_summaries_name_the_one_posterior(exp):
+@pytest.mark.parametrize(("exp", "method"), [("twin_ref", "emulator_mcmc"), ("marble_loop", "ensemble")])
+def test_the_default_runs_summaries_name_their_posterior(exp, method):
     summary = json.loads((RUN / exp / "summary.json").read_text())
-    assert summary["posterior_method"] == "emulator_mcmc"
+    assert summary["posterior_method"] == method
 
 
 def test_the_default_runs_diagnosis_base_model_is_its_posterior():

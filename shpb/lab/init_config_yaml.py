@@ -55,30 +55,17 @@ def record_path(path: Path) -> str:
     return absolute if rel.startswith("..") else rel
 
 
-def _posterior_lines(n: int) -> list[str]:
-    """The one reported posterior of every shipped experiment (twin_ref's, the form the harness scores)."""
-    return [line(4, "posterior", "emulator_mcmc", "MCMC on the emulator of every run, as every shipped experiment "
-                 "(docs/inference.md)"),
-            line(4, "emulated", why="its likelihood self-calibrated on the runs, the emulator's error scaled "
-                 "across the box and measured at more runs after the loop, as twin_ref"),
-            line(6, "self_calibrate", True, "scale the likelihood by what the runs ask as data of known parameters"),
-            line(6, "emulator_error", "heteroscedastic", "the simulator's scatter may differ across the box"),
-            line(6, "refine_runs", n, "one more ensemble's worth of runs, spread over the posterior")]
-
-
 def _method_lines(heldout: str | None) -> list[str]:
     if heldout is None:
         return [line(4, "ensemble_size", 25, "as config/own_data.yaml: enough for two parameters (N >= 10 per "
                      "parameter) at ~5 s a `fast` run"),
                 line(4, "method", "emulated_esmda", "as config/own_data.yaml and twin_ref: each analysis an ES-MDA "
                      "on an emulator of every run so far (docs/inference.md)"),
-                line(4, "max_iterations", 3, "as config/own_data.yaml: three analyses, then the stop rule decides"),
-                *_posterior_lines(25)]
+                line(4, "max_iterations", 3, "as config/own_data.yaml: three analyses, then the stop rule decides")]
     return [line(4, "ensemble_size", 8, "as config/diagnosis.yaml: the closing-the-loop design adds runs of its own"),
             line(4, "method", "esmda", "as config/diagnosis.yaml"),
             line(4, "esmda", {"steps": 2}, "two analyses, three ensembles (config/diagnosis.yaml)"),
-            line(4, "max_rank", 3, "n_params + 1 directions per analysis (docs/inference.md)"),
-            *_posterior_lines(8)]
+            line(4, "max_rank", 3, "n_params + 1 directions per analysis (docs/inference.md)")]
 
 
 def _diagnosis_lines(heldout_path: str, seed: int) -> list[str]:
