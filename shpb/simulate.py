@@ -121,7 +121,7 @@ def _measured_incident(record):
 
 
 def _measured_disc(record):
-    """(reduced record, brazilian_disc arguments, rock) of a disc test sheet. The lab's incident wave,
+    """(reduced record, brazilian_disc arguments, rock, the raw record's path) of a disc test sheet. The lab's incident wave,
     read at its gauge, enters the model DISC_INCIDENT_LENGTH_M from the disc as it is: the model's bars
     stay short (the wave's travel over the lab's longer distance is the 1D shift the reduction makes
     too, and it would only add simulated time), but their material and diameter are the sheet's."""
@@ -134,7 +134,7 @@ def _measured_disc(record):
           "flat_half_angle_deg": 0.5 * float(spec["flat_angle_deg"]), "bar": bars["material"],
           "bar_diameter_m": float(bars["diameter_m"])}
     rock = m["rock"]
-    return m["reduced"], kw, {"E": rock["E"], "nu": rock["nu"], "rho": rock["rho"]}
+    return m["reduced"], kw, {"E": rock["E"], "nu": rock["nu"], "rho": rock["rho"]}, m["source"]
 
 
 def _sheet_bars(bars) -> dict:
@@ -177,9 +177,9 @@ def build(geometry: str, preset: str, params: dict | None = None, record=None,
     p_given = dict(params or {})
     window = DEFAULT_WINDOW.get(geometry) if window_s is None else float(window_s)
     if geometry == "brazilian_disc":
-        red, disc_kw, base = None, {}, {}
+        red, disc_kw, base, source = None, {}, {}, None
         if record is not None:
-            red, disc_kw, base = _measured_disc(record)
+            red, disc_kw, base, source = _measured_disc(record)
         base.update(p_given)
         p = resolve(geometry, base)
         faces = _faces(p)
@@ -209,11 +209,11 @@ def build(geometry: str, preset: str, params: dict | None = None, record=None,
             if m["geometry"] != "cylinder":
                 raise ValueError(f"--record {record}: the sheet's specimen is a {m['geometry']}, not a cylinder "
                                  f"(use --geometry {m['geometry']})")
-            red, L, D, rock = m["reduced"], m["length"], m["diameter"], m["rock"]
+            red, L, D, rock, source = m["reduced"], m["length"], m["diameter"], m["rock"], m["source"]
             base = {"E": rock["E"], "nu": rock["nu"], "rho": rock["rho"]}
             bar_kw.update(_sheet_bars(m["bars"]))
         else:
-            red, (L, D), base = None, specimen_size_m, {}
+            red, (L, D), base, source = None, specimen_size_m, {}, None
         base.update(p_given)
         p = resolve(geometry, base)
         faces = _faces(p)
@@ -266,14 +266,8 @@ def build(geometry: str, preset: str, params: dict | None = None, record=None,
     probes = [f"{g.incident_bar}.gauge", f"{g.transmission_bar}.gauge", f"{g.specimen}.centre"]
     return {"model": model, "traction_bcs": bcs, "stress_probes": probes, "geometry": g,
             "params": p, "arrival_s": float(arrival), "window_s": float(window),
-            "measured": measured, "record": None if record is None else _record_source(record)}
-
-
-def _record_source(record) -> str:
-    """The raw record a simulation stands for (run.json's ``record``), also when it reads the stored one."""
-    from .lab.reduced_store import is_reduced, read_reduced
-
-    return str(read_reduced(record)["source"]) if is_reduced(record) else str(record)
+            # run.json's record: the raw file it stands for, also when the stored reduction was read
+            "measured": measured, "record": source}
 
 
 def snapshot_times(snapshots, window_s: float) -> list[float]:
