@@ -1,5 +1,5 @@
 """Results do not depend on the caller's thread settings (rules/common.smk pins one BLAS/OpenMP/Numba
-thread per job): the CI config (.test/config/config.yaml) run twice from one checkout, once with
+thread per job): a config run twice, once with
 OMP_NUM_THREADS=OPENBLAS_NUM_THREADS=2 in the environment and once with 1, and every result file
 compared (tools/compare_runs.py: CSV and JSON as data without wall-time columns and keys, logs apart,
 everything else byte for byte; a run's manifest.json differs where the checksum of a run.json with
@@ -7,10 +7,13 @@ another wall time does, and is listed apart when that is its only difference). W
 thread variables they see and their OS thread count (a BLAS with more than one thread starts its
 worker threads when numpy loads).
 
-    python benchmarks/bench_threads.py [--out benchmarks/results/bench_threads.json]
+    python benchmarks/bench_threads.py [--config ci|default] [--out ...]
 
-Two runs of the CI config: about 2 x its time (.ci/run prints it). Not a test: the suite's budget has
-no room for two workflow runs.
+--config ci (default; out benchmarks/results/bench_threads.json): the CI config (.test/config) copied
+into two work folders beside this checkout's Snakefile. --config default (out
+benchmarks/results/bench_threads_default.json): two fresh clones of the committed HEAD, each run as a
+user runs it, `snakemake --cores 2` in the clone (config/config.yaml, the default run). Two runs: about
+2 x the config's run time. Not a test: the suite's budget has no room for two workflow runs.
 """
 from __future__ import annotations
 
@@ -56,11 +59,14 @@ def _job_processes(workdir: Path) -> list[dict]:
     return seen
 
 
-def run(workdir: Path, threads: str) -> dict:
+def run(workdir: Path, threads: str, clone: bool = False) -> dict:
+    """One run in `workdir` with `threads` in the caller's environment: the CI config beside this
+    checkout's Snakefile, or (`clone`) the clone's own default run as a user starts it."""
     env = {**os.environ, "OMP_NUM_THREADS": threads, "OPENBLAS_NUM_THREADS": threads,
-           "PYTHONPATH": str(REPO)}
-    cmd = [sys.executable, "-m", "snakemake", "--snakefile", str(REPO / "Snakefile"), "--directory", str(workdir),
-           "--cores", "2", "--workflow-profile", "none"]
+           "PYTHONPATH": str(workdir if clone else REPO)}
+    cmd = ([sys.executable, "-m", "snakemake", "--cores", "2"] if clone else
+           [sys.executable, "-m", "snakemake", "--snakefile", str(REPO / "Snakefile"), "--directory", str(workdir),
+            "--cores", "2", "--workflow-profile", "none"])
     samples, stop = [], threading.Event()
 
     def sample():
@@ -71,7 +77,7 @@ def run(workdir: Path, threads: str) -> dict:
     sampler = threading.Thread(target=sample, daemon=True)
     t0 = time.time()
     sampler.start()
-    out = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=3600)
+    out = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=3 * 3600, cwd=workdir)
     stop.set()
     sampler.join()
     if out.returncode != 0:
@@ -100,19 +106,28 @@ def timing_derived(rep: dict, before: Path, after: Path) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "bench_threads.json")
+    ap.add_argument("--config", choices=("ci", "default"), default="ci")
+    ap.add_argument("--out", type=Path, default=None)
     a = ap.parse_args(argv)
+    out_name = "bench_threads.json" if a.config == "ci" else "bench_threads_default.json"
+    a.out = a.out or REPO / "benchmarks" / "results" / out_name
+    commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True, text=True,
+                            check=True).stdout.strip()
     with tempfile.TemporaryDirectory() as tmp:
         dirs = {}
         for threads in ("2", "1"):
             d = Path(tmp) / f"threads_{threads}"
-            shutil.copytree(REPO / ".test" / "config", d / "config")
-            dirs[threads] = (d, run(d, threads))
+            if a.config == "ci":
+                shutil.copytree(REPO / ".test" / "config", d / "config")
+            else:
+                subprocess.run(["git", "clone", "--quiet", str(REPO), str(d)], check=True)
+            dirs[threads] = (d, run(d, threads, clone=a.config == "default"))
         rep = compare(dirs["2"][0] / "results", dirs["1"][0] / "results")
         derived = timing_derived(rep, dirs["2"][0] / "results", dirs["1"][0] / "results")
     rep["counts"]["differ"] = len(rep["differ"])
     rep["counts"]["manifests_differing_by_timings_only"] = len(derived)
-    result = {"runs": [r for _, r in dirs.values()], "counts": rep["counts"], "differ": rep["differ"],
+    result = {"config": a.config, "commit": commit, "cores": os.cpu_count(),
+              "load_average_after": list(os.getloadavg()), "runs": [r for _, r in dirs.values()], "counts": rep["counts"], "differ": rep["differ"],
               "manifests_differing_by_timings_only": derived,
               "one_sided_keys": rep["one_sided_keys"], "only_with_2_threads": rep["only_before"],
               "only_with_1_thread": rep["only_after"], "identical_but_timings": rep["identical_but_timings"]}
