@@ -7,21 +7,32 @@ member's ``curve.csv`` and ``run.json`` behind whatever happened, except for a c
 (:class:`SimulatorCrash`), which raise so that Snakemake fails or retries the job. A simulation
 running past ``time_limit_s`` is stopped and recorded as a failed member.
 
+The shipped simulator (:data:`DEFAULT_SIMULATOR`) runs in a forked child of the calling process rather
+than in a second interpreter: its imports (NumPy, Numba, the engine) are done once here and inherited,
+which saves the interpreter's start and the re-import of what the job already holds; the child runs the
+same command-line entry with the same arguments, so exit codes, files and log are those of the
+subprocess. A user's own simulator command runs as a subprocess.
+
 The curve columns and exit codes are the simulator's own definitions (:mod:`shpb.contract`), so that a
 failed member's header cannot drift from a successful member's. Nothing here imports Snakemake.
 """
 
 from __future__ import annotations
 
+import locale
 import math
 import numbers
 import os
+import select
 import shlex
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
+import traceback
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -140,7 +151,7 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
     t0 = time.perf_counter()
     try:
         try:
-            proc = _run_with_limit(argv, time_limit_s)
+            proc = (_fork_with_limit if _forkable(command) else _run_with_limit)(argv, time_limit_s)
         except subprocess.TimeoutExpired as exc:
             _still_wanted(parent)
             return _timed_out(exc, argv=argv, wall=time.perf_counter() - t0, geometry=geometry, preset=preset,
@@ -209,6 +220,126 @@ def _run_with_limit(argv, time_limit_s):
             proc.kill()
             raise
     return subprocess.CompletedProcess(argv, proc.returncode, out, err)
+
+
+def _forkable(command: Sequence[str]) -> bool:
+    """Run in a forked child: the command is the shipped simulator with this Python, the platform forks,
+    and this process holds a single thread once the simulator is imported (a fork copies only the
+    calling thread, so a lock held by another one would stay locked in the child; the member jobs pin
+    OpenBLAS and Numba to one thread, rules/common.smk). Otherwise the subprocess, as for any command."""
+    if list(command) != simulator_command() or not hasattr(os, "fork"):
+        return False
+    import shpb.__main__  # noqa: F401 (the entry; imported here so that the thread count below sees
+    import shpb.simulate  # noqa: F401  NumPy's BLAS threads, and the child inherits these modules)
+
+    try:
+        threads = len(os.listdir("/proc/self/task"))
+    except OSError:
+        threads = 1
+    return threads == 1 and threading.active_count() == 1
+
+
+def _fork_with_limit(argv, time_limit_s):
+    """:func:`_run_with_limit` for the shipped simulator: ``shpb.__main__.main(argv[3:])`` in a forked
+    child (dying with this process, stdout and stderr to unnamed files), killed at the time limit
+    (:class:`subprocess.TimeoutExpired`), its exit status mapped as a subprocess's (``-N``: signal N)."""
+    from shpb import __main__ as entry
+
+    arm = child_dies_with_parent(os.getpid())  # loads libc here: the child should not load libraries
+    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
+        for stream in (sys.stdout, sys.stderr):  # else the child would write this process's buffered text
+            if stream is not None:
+                stream.flush()
+        pid = os.fork()
+        if pid == 0:
+            _child(entry, argv, out.fileno(), err.fileno(), arm)
+        try:
+            status = _wait(pid, time_limit_s)
+        except BaseException:
+            _kill(pid)
+            raise
+        if status is None:
+            _kill(pid)
+            raise subprocess.TimeoutExpired(argv, time_limit_s, output=_text(out), stderr=_text(err))
+        return subprocess.CompletedProcess(argv, os.waitstatus_to_exitcode(status), _text(out), _text(err))
+
+
+def _child(entry, argv, out_fd: int, err_fd: int, arm) -> None:
+    """The forked child: the command-line entry as ``python -m shpb`` would run it; never returns.
+    Python's own exit rules: ``SystemExit``'s code, an uncaught exception's traceback and exit code 1."""
+    code = 1
+    try:
+        if arm is not None:
+            arm()
+        for sig in signal.valid_signals():  # as after exec: the caller's Python handlers do not apply
+            handler = signal.getsignal(sig)
+            if callable(handler) and handler is not signal.default_int_handler:
+                signal.signal(sig, signal.SIG_DFL)
+        os.dup2(out_fd, 1)
+        os.dup2(err_fd, 2)
+        # fresh streams on the descriptors: the caller's may write elsewhere (a test's capture)
+        encoding = locale.getpreferredencoding(False)
+        sys.stdout = open(1, "w", encoding=encoding, closefd=False)
+        sys.stderr = open(2, "w", encoding=encoding, errors="backslashreplace", closefd=False, buffering=1)
+        sys.argv = [entry.__file__, *argv[3:]]
+        code = entry.main(argv[3:])
+    except SystemExit as exc:
+        if exc.code is None or isinstance(exc.code, int):
+            code = exc.code or 0
+        else:
+            print(exc.code, file=sys.stderr)
+            code = 1
+    except BaseException:
+        traceback.print_exc()
+        code = 1
+    finally:
+        try:
+            sys.stdout.flush()
+            sys.stderr.flush()
+        finally:
+            os._exit(int(code or 0) & 0xFF)
+
+
+def _wait(pid: int, timeout: float | None):
+    """The child's wait status, or None once ``timeout`` seconds passed without it ending."""
+    if timeout is None:
+        return os.waitpid(pid, 0)[1]
+    deadline = time.monotonic() + timeout
+    try:
+        fd = os.pidfd_open(pid)  # readable once the child ends (Linux >= 5.3)
+    except (AttributeError, OSError):
+        fd = None
+    try:
+        while True:
+            done, status = os.waitpid(pid, os.WNOHANG)
+            left = deadline - time.monotonic()
+            if done:
+                return status
+            if left <= 0:
+                return None
+            if fd is None:
+                time.sleep(min(left, 0.02))
+            else:
+                select.select([fd], [], [], left)
+    finally:
+        if fd is not None:
+            os.close(fd)
+
+
+def _kill(pid: int) -> None:
+    try:
+        os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)
+    except (ProcessLookupError, ChildProcessError):  # already ended and reaped
+        pass
+
+
+def _text(fh) -> str:
+    """A child's output as ``subprocess.run(..., text=True)`` decodes it (locale encoding, universal
+    newlines); an undecodable byte is replaced instead of failing the job."""
+    fh.seek(0)
+    data = fh.read().decode(locale.getpreferredencoding(False), errors="replace")
+    return data.replace("\r\n", "\n").replace("\r", "\n")
 
 
 def _timed_out(exc: subprocess.TimeoutExpired, *, argv, wall, geometry, preset, params, curve_path, run_path,

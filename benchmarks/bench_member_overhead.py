@@ -1,0 +1,120 @@
+"""What a member job costs beyond its solver: the shipped simulator run by ``calibration.runner.run_member``
+in a second interpreter (``python -m shpb simulate`` as a subprocess, the old path) against a forked child
+of the job process (the new path), for the same member.
+
+    python benchmarks/bench_member_overhead.py [--repeats 5] [--case disc_fast] [--out benchmarks/results/bench_member_overhead.json]
+
+Each run is a fresh job process, as Snakemake starts one per member: ``python -c`` importing what the
+rule adapter scripts/simulate.py imports and calling ``run_member`` once (without Snakemake's own
+preamble, which both paths pay alike; its import is timed apart, ``snakemake_script_import_s``). The job
+is timed from outside; ``run.json`` gives the simulator's ``wall_s`` (from its set-up to its end) and
+``solver_wall_s`` (the time loop, holding Numba's load of the cached engine). ``overhead_s`` = job wall
+minus ``solver_wall_s``. Old and new alternate, after one warm-up run each (warm Numba cache, warm file
+cache). Threads pinned to one, as in a member job. Writes JSON with the cores, Python and load average.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(REPO)]
+
+from shpb.atomic import emit_json  # noqa: E402
+
+RECORD = "data/freiburg-rae-rock-shpb/Rae2021/SHPBdata/CaMa/CaMa_SHPB_004_Ti25_50b_Al12b_0_001.txt"
+CASES = {  # as the default run's member jobs run them (studies/bench_member_startup.py's cases)
+    "disc_fast": dict(geometry="brazilian_disc", preset="fast", params={"sigma_t": 4.5e7, "E_t": 500.0},
+                      t_end=1.6e-4, sample_dt=5e-7),
+    "cylinder_fast_CaMa_SHPB_004": dict(geometry="cylinder", preset="fast", params={"sigma_t": 4e7, "E_t": 2e4},
+                                        record=RECORD, t_end=3.6e-4, sample_dt=5e-7),
+}
+THREADS = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")}
+
+# one member job; "subprocess" turns the fork off, which leaves run_member's old path unchanged
+JOB = """
+import json, sys
+from calibration.ensemble_files import simulation_params  # noqa: F401 (the adapter's imports)
+from calibration import runner
+from calibration.workflow_io import run_member, simulator_command
+mode, folder, case = sys.argv[1], sys.argv[2], json.loads(sys.argv[3])
+if mode == "subprocess":
+    runner._forkable = lambda command: False
+run_member(command=simulator_command(None), curve_path=folder + "/curve.csv", run_path=folder + "/run.json",
+           log_path=folder + "/simulate.log", **case)
+"""
+
+
+def one_job(mode: str, case: dict) -> dict:
+    with tempfile.TemporaryDirectory() as out:
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-c", JOB, mode, out, json.dumps(case)], cwd=REPO, check=True,
+                       env={**os.environ, **THREADS}, capture_output=True)
+        job = time.perf_counter() - t0
+        run = json.loads((Path(out) / "run.json").read_text())
+    assert run["status"] == "ok", run
+    return {"job_s": job, "wall_s": run["wall_s"], "solver_wall_s": run["solver_wall_s"],
+            "overhead_s": job - run["solver_wall_s"], "outside_simulator_s": job - run["wall_s"]}
+
+
+def summary(rows: list[dict]) -> dict:
+    out = {"runs": len(rows)}
+    for key in ("job_s", "wall_s", "solver_wall_s", "overhead_s", "outside_simulator_s"):
+        values = [r[key] for r in rows]
+        out[f"{key}_median"] = round(statistics.median(values), 3)
+        out[f"{key}_min"] = round(min(values), 3)
+    return out
+
+
+def import_time(module: str, repeats: int) -> float:
+    """Median wall of ``python -c 'import module'`` minus a bare ``python -c pass``."""
+    def wall(code):
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-c", code], cwd=REPO, check=True, env={**os.environ, **THREADS})
+        return time.perf_counter() - t0
+    bare = statistics.median(wall("pass") for _ in range(repeats))
+    return round(statistics.median(wall(f"import {module}") for _ in range(repeats)) - bare, 3)
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--case", choices=sorted(CASES), action="append")
+    ap.add_argument("--out", default=str(REPO / "benchmarks/results/bench_member_overhead.json"))
+    a = ap.parse_args(argv)
+    cases = a.case or ["disc_fast"]
+    load0 = list(os.getloadavg())
+    t0 = time.perf_counter()
+    rows = {(m, c): [] for c in cases for m in ("subprocess", "fork")}
+    for c in cases:
+        for m in ("subprocess", "fork"):
+            one_job(m, CASES[c])  # warm-up, not counted
+    for _ in range(a.repeats):
+        for c in cases:
+            for m in ("subprocess", "fork"):
+                rows[(m, c)].append(one_job(m, CASES[c]))
+    result = {"benchmark": "bench_member_overhead", "cores": os.cpu_count(), "threads_per_job": 1,
+              "python": platform.python_version(), "repeats": a.repeats,
+              "load_average_before": load0, "load_average_after": list(os.getloadavg()),
+              "bench_wall_s": round(time.perf_counter() - t0, 1),
+              "snakemake_script_import_s": import_time("snakemake.script", 5),
+              "cases": {}}
+    for c in cases:
+        old, new = summary(rows[("subprocess", c)]), summary(rows[("fork", c)])
+        result["cases"][c] = {"subprocess": old, "fork": new,
+                              "overhead_saved_s_median": round(old["overhead_s_median"] - new["overhead_s_median"], 3),
+                              "job_saved_s_median": round(old["job_s_median"] - new["job_s_median"], 3),
+                              "runs": {m: rows[(m, c)] for m in ("subprocess", "fork")}}
+    return emit_json(result, a.out)
+
+
+if __name__ == "__main__":
+    main()
