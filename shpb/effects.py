@@ -129,7 +129,6 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import signal
 
 #: Reference strain rate of the rate-strength law [1/s]: DIF = 1 at and below it.
 RATE0_PER_S = 1.0
@@ -279,6 +278,10 @@ def lowpass(time_s, stress_Pa, tau_s: float) -> np.ndarray:
     t, s = _as_curve(time_s, stress_Pa)
     if float(tau_s) == 0.0:
         return s.copy()
+    # here, not at the top: the workflow's parse reads the catalogue, and scipy.signal imports SciPy's
+    # stats (~1.5 s of every dry run, issue 54)
+    from scipy import signal
+
     b, a = lowpass_coefficients(uniform_step(t), float(tau_s))
     zi = signal.lfilter_zi(b, a) * s[0]
     y, _ = signal.lfilter(b, a, s, zi=zi)
