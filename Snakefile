@@ -54,7 +54,7 @@ for _name, _exp in list(config["experiments"].items()):
         _exp.get("kind") == "measured"
         and (_exp.get("diagnosis") or {}).get("validation") == "loro"
     ):
-        from calibration.closing import loro_folds
+        from calibration.diagnosis_config import loro_folds
 
         config["experiments"].update(loro_folds(_name, _exp))
 

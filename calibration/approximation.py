@@ -25,10 +25,8 @@ from collections.abc import Mapping
 import numpy as np
 import pandas as pd
 
-from enkf import latin_hypercube
-from enkf.approximation import approximation_error
-
-from .experiment import ExperimentSpec, rng_for
+# enkf and calibration.experiment (SciPy under both) are imported by the functions that compute: the
+# workflow's parse reads the run names and settings from here and must not pay for SciPy (issue 54)
 from .model_error import mesh_seed
 from .observations import Observations, response_matrix, with_approximation_error
 
@@ -47,6 +45,10 @@ def approximation_settings(exp: Mapping) -> dict | None:
 def approximation_design(name: str, exp: Mapping) -> np.ndarray:
     """``(pairs, n_params)``: the design points, a Latin hypercube of the prior box from the
     experiment's seed (its own stream, so the members' prior is not moved by it)."""
+    from enkf import latin_hypercube
+
+    from .experiment import ExperimentSpec, rng_for
+
     spec = ExperimentSpec.from_config(name, exp)
     n = int(approximation_settings(exp)["pairs"])
     return latin_hypercube(spec.lower, spec.upper, n, rng_for(spec.seed, "approximation"))
@@ -92,6 +94,8 @@ def apply_approximation_error(obs: Observations, exp: Mapping,
 def approximation_from_runs(exp: Mapping, Y: np.ndarray, times, groups=None) -> tuple:
     """``(offset, M, info)`` of the runs' curves ``Y`` on the observation grid, one row per run in the
     order of :func:`approximation_run_ids` (NaN rows: failed runs)."""
+    from enkf.approximation import approximation_error
+
     s = approximation_settings(exp)
     n, k = int(s["pairs"]), int(s["coarse_realizations"])
     Y = np.asarray(Y, float).reshape(n, 1 + k, -1)

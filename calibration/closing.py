@@ -39,6 +39,8 @@ from enkf.diagnosis.crossval import seed_for
 from shpb import effects as fx
 
 from .diagnose import EmulatedSHPB, emulators_from_design
+# light, for the Snakefile's parse: re-exported here, where the rest of closing the loop lives
+from .diagnosis_config import FOLD_SEPARATOR, candidate_effects, loro_folds  # noqa: F401
 from .model_error import stored_error
 from .observations import Observations
 from .protocol import check_runs, confirm, real_curves, select
@@ -47,9 +49,6 @@ __all__ = ["FOLD_SEPARATOR", "blind", "candidate_effects", "emulated_model", "pr
            "base_posterior_mismatches", "calibration_discrepancy", "check_rows", "covariate_table", "assemble",
            "fit_sources", "predictive_bands", "loro_folds",
            "loro_table"]
-
-#: Between an experiment's name and a held-out record's in a leave-one-record-out fold's name.
-FOLD_SEPARATOR = "__"
 
 
 def blind(heldout: Observations | None) -> Observations | None:
@@ -61,13 +60,6 @@ def blind(heldout: Observations | None) -> Observations | None:
     frame = heldout.frame.copy()
     frame["stress_Pa"] = np.nan
     return Observations(frame, heldout.error_kind, dict(heldout.corr_time), dict(heldout.meta))
-
-
-def candidate_effects(diagnosis: Mapping) -> list[str]:
-    """The effects the loop may add: the whole catalogue, less ``exclude`` (``candidates`` narrows it
-    further where given)."""
-    names = list(diagnosis.get("candidates") or [e.name for e in fx.effects()])
-    return [n for n in names if n not in set(diagnosis.get("exclude") or [])]
 
 
 def emulated_model(X, names: Sequence[str], lower, upper, curves: Mapping[str, Sequence], model_times,
@@ -412,23 +404,6 @@ def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: Emulated
 # --------------------------------------------------------------------------------------------------
 # leave one record out
 # --------------------------------------------------------------------------------------------------
-def loro_folds(name: str, exp: Mapping) -> dict[str, dict]:
-    """``{<name>__<record>: experiment}``: one experiment per record of ``exp``'s ``observations.records``,
-    that record held out and the others calibrated, everything else as ``exp`` (its seed included, so
-    the folds differ only in their split)."""
-    from .contracts import record_name
-
-    records = list(exp["observations"]["records"])
-    folds = {}
-    for path in records:
-        rec = record_name(path)
-        fold = {**exp, "observations": {**exp["observations"], "records": [p for p in records if p != path]},
-                "diagnosis": {**exp["diagnosis"], "validation": "holdout", "heldout_records": [path]},
-                "description": f"leave-one-record-out fold of {name}: {rec} held out", "loro_of": name}
-        folds[f"{name}{FOLD_SEPARATOR}{rec}"] = fold
-    return folds
-
-
 def loro_table(folds: Mapping[str, Mapping], record_info: Mapping[str, Mapping] | None = None) -> dict:
     """Per fold (``{fold: report.json}``) and in total: the effects kept and their estimates, the held-out
     record's FDEM errors before and after (RMSE, peak, time to peak) and its 90 % predictive band's coverage

@@ -24,7 +24,7 @@ from pathlib import Path
 
 from shpb.lab.sheet import is_sheet
 from .contracts import ConfigError, known_parameters, record_name
-from .config_files import coerce_numbers, config_sources, error_origin, load_config_file  # noqa: F401
+from .config_files import coerce_numbers, config_sources, error_origin, load_config_file, safe_load  # noqa: F401
 from .config_ranges import nonfinite_errors, range_errors
 
 __all__ = ["ConfigError", "load_yaml", "load_config_file", "config_sources", "validate_config", "apply_defaults",
@@ -34,10 +34,8 @@ _NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_-]*$")
 
 
 def load_yaml(path: str | Path) -> dict:
-    import yaml
-
     with open(path) as fh:
-        return yaml.safe_load(fh)
+        return safe_load(fh.read())
 
 
 def _key(path: Sequence) -> str:
@@ -253,7 +251,7 @@ def _diagnosis_errors(where: str, exp: Mapping, obs: Mapping, base: Path) -> lis
         if record_name(r) in calib:
             errors.append(f"{where}.diagnosis.heldout_records: {record_name(r)} is also a calibration "
                           f"record; held-out data must not be used to calibrate")
-    from .closing import candidate_effects
+    from .diagnosis_config import candidate_effects
 
     offered = candidate_effects(diag)
     for key in diag.get("physical_upper") or {}:
@@ -351,7 +349,7 @@ def validate_config(config: Mapping, schema: Mapping | str | Path, *, base_dir: 
         cfg = apply_defaults(cfg, schema)
         errors = _semantic_errors(cfg, Path(base_dir)) + range_errors(cfg)
         if not errors:
-            from .sensitivity import config_errors as sensitivity_errors  # on call: it loads pandas and enkf
+            from .sensitivity import config_errors as sensitivity_errors  # on call: it loads pandas
             errors = sensitivity_errors(cfg)
     if errors:
         if sources:

@@ -14,7 +14,23 @@ from pathlib import Path
 
 from .contracts import ConfigError
 
-__all__ = ["load_config_file", "config_sources", "error_origin", "coerce_numbers"]
+__all__ = ["safe_load", "load_config_file", "config_sources", "error_origin", "coerce_numbers"]
+
+
+def safe_load(text: str):
+    """``yaml.safe_load(text)``, parsed by libyaml where PyYAML was built with it: the same Python
+    constructor and resolver build the same data, several times faster (config/schema.yaml: 0.14 s
+    of every workflow start in pure Python, 0.02 s with libyaml; issue 54). A document libyaml refuses
+    is read again by the pure-Python parser, so an error reads exactly as ``yaml.safe_load``'s."""
+    import yaml
+
+    loader = getattr(yaml, "CSafeLoader", None)
+    if loader is not None:
+        try:
+            return yaml.load(text, Loader=loader)
+        except yaml.YAMLError:
+            pass
+    return yaml.safe_load(text)
 
 
 def load_config_file(path: str | Path):
@@ -31,7 +47,7 @@ def load_config_file(path: str | Path):
     except ValueError:
         pass
     try:
-        return yaml.safe_load(text)
+        return safe_load(text)
     except yaml.YAMLError as exc:
         mark, cmark = getattr(exc, "problem_mark", None), getattr(exc, "context_mark", None)
         mark = mark or cmark

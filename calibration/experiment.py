@@ -37,6 +37,7 @@ from enkf import (AnalysisSettings, BoxTransform, CalibrationProcess, DenseError
 from enkf.process import all_runs as _all_runs, capped_truncation  # noqa: F401 (capped_truncation: re-exported)
 from enkf.ces import interval_summary
 
+from .diagnosis_config import diagnosis_settings  # here and re-exported; defined apart, light for the parse
 from .model_error import (MESH_PURPOSE, MESH_STAGES, discrepancy_kind, mesh_mode,  # noqa: F401
                           mesh_seed, posterior_predictive, posterior_tempering, replicate_count, run_mesh_seed)
 from .identifiability import linear_sensitivity
@@ -432,15 +433,6 @@ def final_verdict(spec: ExperimentSpec, analyses: Sequence[Mapping], params: Seq
                                upper=spec.upper, names=spec.names, diagnosed=_diagnosed(exp),
                                n_obs=int(analyses[0]["n_obs"]),
                                discrepancy=(analyses[R].get("model_error") or {}).get("discrepancy"))
-
-
-def diagnosis_settings(exp: Mapping | None) -> Mapping | None:
-    """The experiment's ``diagnosis`` block if it runs the diagnosis (a measured experiment with the
-    block enabled), else None; its ``seed`` is the experiment's where the block gives none."""
-    d = (exp or {}).get("diagnosis")
-    if not (d and d.get("enabled", True) and (exp or {}).get("kind") == "measured"):
-        return None
-    return d if d.get("seed") is not None else {**d, "seed": int(exp["seed"])}
 
 
 def _diagnosed(exp: Mapping | None) -> bool:

@@ -36,16 +36,16 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from enkf import AR1Error, DenseError, ObservationError
-from enkf.diagnostics import member_misfit, member_standardized_misfit, mean_misfit
-from enkf.discrepancy import combined_error, estimate_discrepancy, inflated_noise_factor, record_loglik, stored_term
-from enkf.predictive import predictive_coverage
-from enkf.variability import simulator_variability
-
 from .observations import Observations
+
+# enkf (SciPy under it) is imported by the functions that compute: the workflow's parse reads this
+# module's config functions (replicate_count, run_mesh_seed) and must not pay for SciPy (issue 54)
+if TYPE_CHECKING:
+    from enkf import AR1Error, DenseError, ObservationError
 
 __all__ = ["MESH_MODES", "MESH_STAGES", "mesh_seed", "run_mesh_seed", "ErrorModel", "discrepancy_kind", "mesh_mode", "replicate_count", "check_replicate_count", "analysis_error",
            "stored_error", "misfit_block", "posterior_predictive", "variability_from_replicates"]
@@ -106,6 +106,8 @@ def run_mesh_seed(exp: Mapping, stage: str, k: int = 0, index: int = 0, record: 
 
 
 def _dense(C: np.ndarray) -> DenseError:
+    from enkf import DenseError
+
     return DenseError(C, _symmetric=True)
 
 
@@ -158,6 +160,8 @@ class ErrorModel:
 
 def variability_from_replicates(obs: Observations, replicates) -> tuple[AR1Error | None, dict | None]:
     """``S`` from the replicate curves ``(M, m)`` on the observation grid (None without replicates)."""
+    from enkf.variability import simulator_variability
+
     if replicates is None or np.size(replicates) == 0:
         return None, None
     peaks = peak_times(obs)
@@ -170,6 +174,8 @@ def analysis_error(kind: str, obs: Observations, Y: np.ndarray, alive: np.ndarra
                    mode: str = "per_run", measured: bool = True) -> tuple[ErrorModel, dict]:
     """``(terms, model_error block of analysis.json)`` for one analysis on the members ``Y`` (alive rows);
     ``measured``: the data are measured (not a twin's), so the stop test includes ``D``."""
+    from enkf.discrepancy import estimate_discrepancy, inflated_noise_factor
+
     R = obs.error_model()
     block = {"noise": R.describe(), "discrepancy": None, "mesh_realizations": mode, "measured_data": bool(measured)}
     approx = obs.meta.get("approximation_error")
@@ -221,6 +227,9 @@ def peak_times(obs: Observations) -> dict:
 
 def stored_error(obs: Observations, analysis: Mapping) -> ErrorModel:
     """The terms as stored in an ``analysis.json`` (``S`` and ``D`` zero where it has none)."""
+    from enkf import AR1Error
+    from enkf.discrepancy import combined_error, stored_term
+
     block = analysis.get("model_error") or {}
     R = obs.error_model().dense()
     s_info = block.get("simulator_variability") or {}
@@ -253,6 +262,8 @@ def misfit_block(Y: np.ndarray, obs: Observations, noise: ObservationError, term
     ``standardized_chi2_per_obs_simulator`` / ``standardized_target_simulator``: the same against
     ``R + 2 S`` (the verdict's ``misfit_unexplained``).
     """
+    from enkf.diagnostics import member_misfit, member_standardized_misfit, mean_misfit
+
     mean = mean_misfit(Y, obs.values, noise, alive)
     mem = member_misfit(Y, obs.values, noise, alive)
     out = {"rmse_Pa": mean["rmse"], "nrmse": mean["nrmse"], "chi2_per_obs": mean["chi2_per_obs"],
@@ -278,6 +289,8 @@ def posterior_predictive(obs: Observations, Y: np.ndarray, alive: np.ndarray, an
     ``level`` posterior-predictive band of the members ``Y`` with the full error model of
     ``analysis``, and the check of that fraction against its spread for data drawn from the
     predictive itself (``expected_5_95``; ``consistent`` when the fraction lies inside)."""
+    from enkf.predictive import predictive_coverage
+
     C = stored_error(obs, analysis).predictive()
     cov = predictive_coverage(Y, obs.values, C, rng, level, groups=obs.groups, alive=alive, n_replicates=400)
     fractions = {rec: cov["groups"][i] for i, rec in enumerate(obs.records)}
@@ -313,6 +326,9 @@ def compare_with_inflated_noise(obs: Observations, Y: np.ndarray, alive: np.ndar
     """The workflow's error model (``R + 2 S + D`` of ``analysis`` for a member's residual) against the simplest honest baseline, ``R``
     inflated per record until the carrying member's chi^2 per observation is 1: log-likelihood of that
     member's residual and 90 % predictive coverage, per record."""
+    from enkf.discrepancy import inflated_noise_factor, record_loglik
+    from enkf.predictive import predictive_coverage
+
     disc = (analysis.get("model_error") or {}).get("discrepancy")
     if not disc:
         raise ValueError("this analysis has no estimated discrepancy to compare")

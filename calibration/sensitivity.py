@@ -17,7 +17,6 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from enkf import jsonable
 from .contracts import ConfigError, experiment_records, known_parameters
 
 __all__ = ["METHODS", "FEATURES", "AUTO", "SensitivitySpec", "config_errors", "design", "features",
@@ -111,6 +110,8 @@ class SensitivitySpec:
 
     def settings(self) -> dict:
         """Everything the design depends on (Snakemake's params: a change re-draws it)."""
+        from enkf import jsonable  # on call: the workflow's parse reads this module (SciPy under enkf)
+
         return jsonable({"method": self.method, "samples": self.samples, "names": list(self.names),
                          "lower": self.lower, "upper": self.upper, "seed": self.seed, "held": dict(self.held)})
 
@@ -365,6 +366,8 @@ def report(spec: SensitivitySpec, indices: dict, **extra) -> dict:
     feats = {f: {"mean": e["mean"], "std": e["std"], "note": e["note"],
                  "indices": {p: {m: e["indices"][m][i] for m in indices["measures"]} for i, p in enumerate(names)}}
              for f, e in indices["features"].items()}
+    from enkf import jsonable
+
     rec = recommend(indices, spec.threshold)
     tt = indices["time"]
     return jsonable({

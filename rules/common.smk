@@ -18,9 +18,9 @@ THREAD_VARIABLES = (
 )
 os.environ.update(dict.fromkeys(THREAD_VARIABLES, "1"))
 
-from calibration.experiment import ExperimentSpec
-from calibration.experiment import final_iteration as _final_iteration
-from calibration.experiment import run_mesh_seed
+# Only what the DAG's build calls is imported here: calibration.experiment (enkf, SciPy's stats: ~1.5 s
+# of every dry run) is imported by spec() and final_k(), which a dry run before the first analysis never
+# calls (tests/test_dry_run_imports.py).
 from calibration.approximation import (
     approximation_design,
     approximation_mesh_seed,
@@ -28,7 +28,7 @@ from calibration.approximation import (
     approximation_run_ids,
     approximation_settings,
 )
-from calibration.model_error import replicate_count
+from calibration.model_error import replicate_count, run_mesh_seed
 from calibration.workflow_io import experiment_records, member_ids, read_json
 
 # The software of every job, a path relative to rules/. Deployed only on request
@@ -74,6 +74,8 @@ def records(exp):
 
 
 def spec(exp):
+    from calibration.experiment import ExperimentSpec
+
     return ExperimentSpec.from_config(exp, EXPERIMENTS[exp])
 
 
@@ -84,7 +86,10 @@ def final_k(exp):
     while True:
         path = checkpoints.analysis.get(exp=exp, it=k).output.analysis
         analyses.append(read_json(path))
-        K, decision = _final_iteration(spec(exp), analyses)
+        # imported past the first checkpoint, which a dry run before any analysis does not pass
+        from calibration.experiment import final_iteration
+
+        K, decision = final_iteration(spec(exp), analyses)
         if decision is not None:
             return K
         k += 1

@@ -3,8 +3,7 @@
 # Included by rules/common.smk after the names they use.
 from snakemake.exceptions import WorkflowError as _SensitivityWorkflowError
 
-from calibration.closing import candidate_effects
-from calibration.experiment import diagnosis_settings
+from calibration.diagnosis_config import candidate_effects, diagnosis_settings
 from calibration.sensitivity import SensitivitySpec
 from calibration.workflow_io import record_name
 

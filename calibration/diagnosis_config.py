@@ -1,0 +1,52 @@
+"""An experiment's ``diagnosis`` block read without the inference: whether the experiment runs the
+diagnosis (:func:`diagnosis_settings`), the effects it offers (:func:`candidate_effects`) and its
+leave-one-record-out folds (:func:`loro_folds`).
+
+The ``Snakefile`` and ``rules/*.smk`` call these while Snakemake parses the workflow, before any job
+runs, so this module imports no NumPy-heavy inference: :mod:`calibration.closing` and
+:mod:`calibration.experiment`, which re-export the three, import :mod:`enkf` and SciPy's stats, about
+1.5 s of every dry run's start (issue 54; tests/test_dry_run_imports.py).
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+from shpb import effects as fx
+
+from .contracts import record_name
+
+__all__ = ["FOLD_SEPARATOR", "candidate_effects", "diagnosis_settings", "loro_folds"]
+
+#: Between an experiment's name and a held-out record's in a leave-one-record-out fold's name.
+FOLD_SEPARATOR = "__"
+
+
+def diagnosis_settings(exp: Mapping | None) -> Mapping | None:
+    """The experiment's ``diagnosis`` block if it runs the diagnosis (a measured experiment with the
+    block enabled), else None; its ``seed`` is the experiment's where the block gives none."""
+    d = (exp or {}).get("diagnosis")
+    if not (d and d.get("enabled", True) and (exp or {}).get("kind") == "measured"):
+        return None
+    return d if d.get("seed") is not None else {**d, "seed": int(exp["seed"])}
+
+
+def candidate_effects(diagnosis: Mapping) -> list[str]:
+    """The effects the loop may add: the whole catalogue, less ``exclude`` (``candidates`` narrows it
+    further where given)."""
+    names = list(diagnosis.get("candidates") or [e.name for e in fx.effects()])
+    return [n for n in names if n not in set(diagnosis.get("exclude") or [])]
+
+
+def loro_folds(name: str, exp: Mapping) -> dict[str, dict]:
+    """``{<name>__<record>: experiment}``: one experiment per record of ``exp``'s ``observations.records``,
+    that record held out and the others calibrated, everything else as ``exp`` (its seed included, so
+    the folds differ only in their split)."""
+    records = list(exp["observations"]["records"])
+    folds = {}
+    for path in records:
+        rec = record_name(path)
+        fold = {**exp, "observations": {**exp["observations"], "records": [p for p in records if p != path]},
+                "diagnosis": {**exp["diagnosis"], "validation": "holdout", "heldout_records": [path]},
+                "description": f"leave-one-record-out fold of {name}: {rec} held out", "loro_of": name}
+        folds[f"{name}{FOLD_SEPARATOR}{rec}"] = fold
+    return folds
