@@ -6,7 +6,9 @@ of the job process (the new path), for the same member.
 
 Each run is a fresh job process, as Snakemake starts one per member: ``python -c`` importing what the
 rule adapter scripts/simulate.py imports and calling ``run_member`` once (without Snakemake's own
-preamble, which both paths pay alike; its import is timed apart, ``snakemake_script_import_s``). The job
+preamble, which both paths pay alike; its import is timed apart, ``snakemake_script_import_s``, and so is
+what importing ``calibration.workflow_io`` instead of ``calibration.runner`` adds, ``workflow_io_extra_s``,
+the adapter's import before it took the runner's module). The job
 is timed from outside; ``run.json`` gives the simulator's ``wall_s`` (from its set-up to its end) and
 ``solver_wall_s`` (the time loop, holding Numba's load of the cached engine). ``overhead_s`` = job wall
 minus ``solver_wall_s``. Old and new alternate, after one warm-up run each (warm Numba cache, warm file
@@ -42,9 +44,9 @@ THREADS = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_
 # one member job; "subprocess" turns the fork off, which leaves run_member's old path unchanged
 JOB = """
 import json, sys
-from calibration.ensemble_files import simulation_params  # noqa: F401 (the adapter's imports)
+from calibration.ensemble_files import simulation_params  # noqa: F401 (scripts/simulate.py's imports)
 from calibration import runner
-from calibration.workflow_io import run_member, simulator_command
+from calibration.runner import failure_card, run_member, simulator_command
 mode, folder, case = sys.argv[1], sys.argv[2], json.loads(sys.argv[3])
 if mode == "subprocess":
     runner._forkable = lambda command: False
@@ -74,14 +76,18 @@ def summary(rows: list[dict]) -> dict:
     return out
 
 
-def import_time(module: str, repeats: int) -> float:
-    """Median wall of ``python -c 'import module'`` minus a bare ``python -c pass``."""
+def import_time(modules: str, repeats: int, base: str = "") -> float:
+    """Median wall of ``python -c 'import base, modules'`` minus that of ``import base`` (a bare
+    ``python -c pass`` without ``base``); the two alternate."""
     def wall(code):
         t0 = time.perf_counter()
         subprocess.run([sys.executable, "-c", code], cwd=REPO, check=True, env={**os.environ, **THREADS})
         return time.perf_counter() - t0
-    bare = statistics.median(wall("pass") for _ in range(repeats))
-    return round(statistics.median(wall(f"import {module}") for _ in range(repeats)) - bare, 3)
+    with_, without = [], []
+    for _ in range(repeats):
+        without.append(wall(f"import {base}" if base else "pass"))
+        with_.append(wall(f"import {base + ', ' if base else ''}{modules}"))
+    return round(statistics.median(with_) - statistics.median(without), 3)
 
 
 def main(argv=None) -> dict:
@@ -105,7 +111,9 @@ def main(argv=None) -> dict:
               "python": platform.python_version(), "repeats": a.repeats,
               "load_average_before": load0, "load_average_after": list(os.getloadavg()),
               "bench_wall_s": round(time.perf_counter() - t0, 1),
-              "snakemake_script_import_s": import_time("snakemake.script", 5),
+              "snakemake_script_import_s": import_time("snakemake.script", 7),
+              "workflow_io_extra_s": import_time("calibration.workflow_io", 7,
+                                                 base="calibration.ensemble_files, calibration.runner"),
               "cases": {}}
     for c in cases:
         old, new = summary(rows[("subprocess", c)]), summary(rows[("fork", c)])
