@@ -7,6 +7,7 @@
 # naming it. A record is reduced for that check once per content (calibration.record_check keeps the
 # verdict's summary under .snakemake/fdem-records/), and once more by its observations job, which stores
 # the reduction that every simulation of it reads.
+import gc
 from pathlib import Path
 
 from snakemake.exceptions import WorkflowError
@@ -18,6 +19,12 @@ from calibration.record_check import code_digest
 from calibration.workflow_io import ConfigError, validate_config
 
 min_version("9.0")
+
+# What Snakemake built before reading this file (its modules, plugins, command line) lives as long as the
+# process: frozen out of the cyclic garbage collector, whose full passes over it were about 1 s of every
+# dry run (issue 54; objects are still freed by reference counting, only cycles among them are never
+# looked for again).
+gc.freeze()
 
 
 # The config files in merge order (config/config.yaml, each --configfile, --config), read again so that
