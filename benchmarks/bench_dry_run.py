@@ -7,8 +7,10 @@ Snakefile imports that version's packages. Per version: one cold dry run (its fi
 record check reduces every record and stores its summary), one warm-up, then `--repeats` warm runs,
 the two versions alternated run by run so that the machine's other load falls on both alike. Also
 timed the same way: Snakemake's own floor, the dry run of a one-rule Snakefile (its imports, plugin
-registry and DAG machinery, which no workflow can go below), and the import of the modules that make
-most of the rest (enkf, calibration.closing) in the new code.
+registry and DAG machinery, which no workflow can go below); the import of the modules the Snakefile
+and rules/*.smk import at parse time, in the new code; and per version, from one more warm dry run under
+``python -X importtime``, the modules of SciPy, Numba, matplotlib, enkf and fdem it imports (none is
+needed before a job runs: tests/test_dry_run_imports.py).
 
     python benchmarks/bench_dry_run.py [--old REV] [--new REV] [--repeats 5]
         [--out benchmarks/results/bench_dry_run.json]
@@ -64,6 +66,23 @@ def _import_time(workdir: Path, module: str) -> float:
     return float(out.stdout.strip().splitlines()[-1])
 
 
+HEAVY = ("scipy", "numba", "matplotlib", "enkf", "fdem")
+#: What the Snakefile and rules/*.smk import at parse time (tests/test_dry_run_imports.py's PARSE_MODULES).
+PARSE_MODULES = ("calibration.config_files", "calibration.observations", "calibration.workflow_io",
+                 "calibration.heal", "calibration.approximation", "calibration.model_error",
+                 "calibration.diagnosis_config", "calibration.sensitivity")
+
+
+def _heavy_imports(workdir: Path) -> list[str]:
+    """The modules of :data:`HEAVY` a warm dry run in ``workdir`` imports (``python -X importtime``)."""
+    env = {**os.environ, "PYTHONPATH": str(workdir)}
+    out = subprocess.run([sys.executable, "-X", "importtime", *DRY_RUN], cwd=workdir, env=env, capture_output=True,
+                         text=True, check=True)
+    names = {line.rsplit("|", 1)[1].strip() for line in out.stderr.splitlines()
+             if line.startswith("import time:") and "|" in line}
+    return sorted(n for n in names if n.split(".")[0] in HEAVY)
+
+
 def _stats(times: list[float]) -> dict:
     return {"median_s": statistics.median(times), "min_s": min(times), "max_s": max(times), "runs_s": times}
 
@@ -75,6 +94,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--out", default=str(REPO / "benchmarks/results/bench_dry_run.json"))
     args = ap.parse_args(argv)
+    load_before = list(os.getloadavg())
     revs = {"old": _git("rev-parse", args.old or _default_old()), "new": _git("rev-parse", args.new)}
     with tempfile.TemporaryDirectory(prefix="bench_dry_run_") as tmp:
         dirs = {}
@@ -93,10 +113,10 @@ def main(argv=None) -> dict:
             for _ in range(args.repeats):
                 for name, d in dirs.items():
                     warm[name].append(_timed(d))
-            # the parse time's largest share outside the record check: calibration.config_check imports
-            # calibration.closing for the diagnosis checks, which imports enkf and SciPy's stats under it
-            imports = {m: statistics.median(_import_time(dirs["new"], m) for _ in range(args.repeats))
-                       for m in ("enkf", "calibration.closing", "calibration.observations")}
+            # all the parse's modules in one import statement, and enkf for scale (what they no longer import)
+            imports = {key: statistics.median(_import_time(dirs["new"], m) for _ in range(args.repeats))
+                       for key, m in (("parse_modules", ", ".join(PARSE_MODULES)), ("enkf", "enkf"))}
+            heavy = {name: _heavy_imports(dirs[name]) for name in revs}
         finally:
             for name in revs:
                 subprocess.run(["git", "worktree", "remove", "--force", str(dirs[name])], cwd=REPO,
@@ -104,9 +124,13 @@ def main(argv=None) -> dict:
     result = {
         "what": "wall time of `python -m snakemake -n --cores 2 --quiet` of config/config.yaml (default run)",
         "commits": revs, "repeats": args.repeats, "cores": os.cpu_count(),
-        "load_average_after": list(os.getloadavg()), "python": platform.python_version(),
+        "load_average_before": load_before, "load_average_after": list(os.getloadavg()),
+        "python": platform.python_version(),
+        "PYTHONDONTWRITEBYTECODE": os.environ.get("PYTHONDONTWRITEBYTECODE"),
         "cold_s": cold, "warm": {name: _stats(t) for name, t in warm.items()},
-        "new_import_median_s": imports,
+        "new_import_median_s": imports, "parse_modules": list(PARSE_MODULES),
+        "heavy_modules_imported": {name: {"count": len(h), "top_level": sorted({n.split(".")[0] for n in h})}
+                                   for name, h in heavy.items()},
     }
     w = result["warm"]
     result["speedup_warm_old_over_new"] = w["old"]["median_s"] / w["new"]["median_s"]
