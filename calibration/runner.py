@@ -229,8 +229,11 @@ def _forkable(command: Sequence[str]) -> bool:
     OpenBLAS and Numba to one thread, rules/common.smk). Otherwise the subprocess, as for any command."""
     if list(command) != simulator_command() or not hasattr(os, "fork"):
         return False
-    import shpb.__main__  # noqa: F401 (the entry; imported here so that the thread count below sees
-    import shpb.simulate  # noqa: F401  NumPy's BLAS threads, and the child inherits these modules)
+    try:  # the entry, imported here so that the thread count below sees NumPy's BLAS threads and the
+        import shpb.__main__  # noqa: F401  child inherits these modules
+        import shpb.simulate  # noqa: F401
+    except Exception:  # a broken install: the subprocess path reports it as the simulator's crash
+        return False
 
     try:
         threads = len(os.listdir("/proc/self/task"))
