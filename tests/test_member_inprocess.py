@@ -209,3 +209,23 @@ def test_a_killed_job_takes_its_forked_simulator_with_it(tmp_path):
         time.sleep(0.05)
     assert not alive(sim) and time.time() - t_kill < 2.0  # died with the job, not at the sleep's end
     assert [p.name[:5] for p in member.iterdir()] == [".sim-"]  # nothing moved into place
+
+
+def test_only_the_shipped_command_in_a_single_threaded_process_is_forked():
+    """A user's simulator command, another interpreter, or a caller running a second thread (whose locks
+    a fork would copy held) keep the subprocess path."""
+    import threading
+
+    from calibration import runner
+
+    assert not runner._forkable([sys.executable, "my_simulator.py"])
+    assert not runner._forkable(["/usr/bin/python3-other", "-m", "shpb", "simulate"])
+    assert not runner._forkable([*runner.simulator_command(), "--preset", "fast"])  # not the bare prefix
+    stop = threading.Event()
+    thread = threading.Thread(target=stop.wait)
+    thread.start()
+    try:
+        assert not runner._forkable(runner.simulator_command())
+    finally:
+        stop.set()
+        thread.join()
