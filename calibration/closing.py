@@ -33,7 +33,7 @@ import numpy as np
 import pandas as pd
 
 from enkf.covariance import DenseError, ObservationError
-from enkf.diagnosis import heldout_evaluation, replicate_curve_errors, replicated
+from enkf.diagnosis import group_text, heldout_evaluation, replicate_curve_errors, replicated
 from enkf.diagnosis.band import replicate_variance, run_band
 from enkf.diagnosis.crossval import seed_for
 from shpb import effects as fx
@@ -298,6 +298,14 @@ def fit_sources(selection) -> dict:
     return out
 
 
+def identification(selection, k: int) -> list[dict]:
+    """Per effect kept (the first ``k`` rounds chose them), its group: the candidates of its round that
+    the calibration records do not tell apart from it (:func:`enkf.diagnosis.identification_group`), with
+    the evidence and a sentence. The real-simulator walk confirms the chosen effect's model; it does not
+    compare it with the others of its group, so the group is what the data identify."""
+    return [{**rnd["group"], "text": group_text(rnd["group"])} for rnd in selection.rounds[:k] if rnd.get("group")]
+
+
 def base_posterior_mismatches(summary: Mapping, report: Mapping) -> list[str]:
     """What keeps a run's diagnosis from having the workflow's base posterior: ``report`` (diagnosis/report.json)
     not naming ``"workflow"`` with summary.json's ``posterior_method``, or a base estimate (mean, q05, q95 of
@@ -367,15 +375,16 @@ def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: Emulated
         why = conf["text"]
     errors = _errors_table(selection, conf, real, obs, held)
     risk = cv_risk(errors, k)
+    ident = identification(selection, k)
     report = {"protocol": "frozen (docs/closing-the-loop.md): effects chosen by cross-validation within the "
                           "calibration records on the emulator, confirmed on real FDEM runs at the "
                           "cross-validation points, the held-out records read last",
               "verdict": verdict, "why": why, **fit_sources(selection), "calib_records": list(obs.records),
               "heldout_records": [] if heldout is None else list(heldout.records),
-              "added": list(shipped.spec.effect_names), "shipped_step": k,
+              "added": list(shipped.spec.effect_names), "identification": ident, "shipped_step": k,
               "selection": selection.to_dict(), "confirmation": conf, "heldout": held,
               "errors_per_record": errors, "cv_risk_worse_than_base": risk}
-    check = {"added": list(shipped.spec.effect_names), "verdict": verdict,
+    check = {"added": list(shipped.spec.effect_names), "identification": ident, "verdict": verdict,
              "fdem_confirmation": {"status": verdict, "text": why, "steps": conf["steps"],
                                    "real_cv_rmse_Pa": conf["real_cv_rmse"]},
              "errors_per_record": errors, "heldout": held, "cv_risk_worse_than_base": risk,

@@ -134,6 +134,8 @@ def _diagnosis(check: Mapping) -> list[str]:
     conf = _get(check, "fdem_confirmation", "text")
     out = [f"<p style=\"margin:0.4em 0 0 0\"><b>Diagnosis</b>: verdict {escape(str(check.get('verdict') or '?'))}, "
            f"effects kept: {escape(added)}." + (f" {escape(str(conf))}." if conf else "") + "</p>"]
+    for group in check.get("identification") or []:
+        out.append(f"<p style=\"margin:0.4em 0 0 0\">Identification: {escape(str(group.get('text', '')))}.</p>")
     per = check.get("errors_per_record")
     if isinstance(per, Mapping) and per:
         rows = []

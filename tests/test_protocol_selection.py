@@ -260,6 +260,7 @@ def test_the_score_test_orders_the_candidates_and_cross_validation_decides():
     z = {t["effect"]: t["z"] for t in rnd["trials"]}
     assert z["rate_strength"] > 10 and z["gauge_gain"] < 0 and z["trigger_shift"] < 0
     assert sel.last.spec.effect_names == ["rate_strength"] and sel.last.in_play == 3
+    assert rnd["group"]["effects"] == ["rate_strength"]  # the data single it out (tests/test_identification.py)
     short = run(1).rounds[0]
     assert short["tried"] == ["gauge_gain"] and short["in_play"] == 3 and short["chosen"] is None
     assert short["trials"][0]["level"] == pytest.approx(0.05 / 3)  # Holm's first step counts all three

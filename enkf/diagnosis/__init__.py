@@ -44,7 +44,8 @@ Three parts:
    :func:`cross_validate`, and the test of a difference of cross-validated errors, :func:`compare_cv`,
    :func:`squared_error_difference`; on replicated real runs :func:`compare_replicated`), :mod:`.protocol` (:func:`select_effects`, :func:`confirm_additions`,
    :func:`heldout_evaluation`, :func:`leave_one_record_out`), and the errors it reports,
-   :func:`curve_errors` (:mod:`.acceptance`).
+   :func:`curve_errors` (:mod:`.acceptance`). Each round's chosen effect comes with its group
+   (:mod:`.identification`): the candidates the calibration records do not tell apart from it.
 """
 
 
@@ -57,6 +58,7 @@ from .population import Population, fit_population, record_name, split_name
 from .protocol import (ModelStep, Selection, confirm_additions, heldout_evaluation, leave_one_record_out, replicated,
                        select_effects)
 from .acceptance import curve_errors, replicate_curve_errors
+from .identification import group_text, identification_group
 from .ranking import chi2_log10_sf, ensemble_sensitivity, finite_difference_sensitivity, rank_candidates, score_test
 from .structure import (autocorrelation, covariate_trends, default_windows, durbin_watson, ljung_box, runs_test,
                         spearman_exact, structure_tests, whitened_residual)
@@ -69,3 +71,5 @@ __all__ += ["CVResult", "Fit", "ForwardModel", "ModelSpec", "ModelStep", "Popula
             "Selection", "calibrate", "compare_cv", "compare_replicated", "confirm_additions", "cross_validate", "fit_population",
             "fit_populations", "given_fit", "heldout_evaluation", "holm", "leave_one_record_out", "predict_record",
             "record_name", "replicated", "select_effects", "split_name", "squared_error_difference"]
+# identification: the group of candidates the calibration records do not tell apart from the chosen one
+__all__ += ["group_text", "identification_group"]

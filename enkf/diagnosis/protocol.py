@@ -49,6 +49,7 @@ from ..predictive import predictive_band
 from .acceptance import replicate_curve_errors
 from .crossval import (CVResult, Fit, ForwardModel, ModelSpec, Prediction, RecordErrors, calibrate, compare_cv,
                        compare_replicated, cross_validate, fit_populations, holm, predict_record, scope_of)
+from .identification import identification_group
 from .population import Population, record_name
 from .ranking import finite_difference_sensitivity, rank_candidates
 from .structure import structure_tests
@@ -196,9 +197,12 @@ def _round(model, state: dict, remaining: list, calib: list, obs: Mapping, error
                                          kw["gate"])})
     passing = [t for t in trials if t["accepted"]]
     best = max(passing, key=lambda t: t["cmp"]["delta"]) if passing else None
+    group = (identification_group(best, trials, obs, errors, level=kw["alpha"],
+                                  not_tried=[c.name for c in remaining if c not in tried],
+                                  spreads=kw["prediction_spread"]) if best else None)
     return {"current": spec.label(), "current_cv_rmse": cur.rmse, "in_play": K,
             "tried": [c.name for c in tried], "ranked_by_score_test": kw["max_trials"] is not None,
-            "trials": rows, "chosen": best["candidate"].name if best else None, "_best": best}
+            "trials": rows, "chosen": best["candidate"].name if best else None, "group": group, "_best": best}
 
 
 def _cv_kw(kw: dict) -> dict:
