@@ -104,6 +104,15 @@ def parameter_coverage(report: dict, truth: dict) -> dict:
     return {"checks": checks, "covered": share}
 
 
+def named_group(report: dict) -> list[str]:
+    """The group the report names with its first confirmed addition (report.json ``identification``: the
+    candidates the calibration records did not tell apart from it); [] when nothing was confirmed."""
+    if report.get("verdict") != "confirmed":
+        return []
+    ident = report.get("identification") or []
+    return list(ident[0]["effects"]) if ident else [named(report)]
+
+
 def is_correct(case: dict, name: str, report: dict) -> bool:
     """The series is read right: an effect case names its effect (a gradual closure also when the walk
     confirmed face_gap first and closure after it), a null or out-of-catalogue case names nothing."""
@@ -146,6 +155,9 @@ def score(results: list[dict]) -> dict:
         "effect_named_share": share(effect_rows, lambda r: r["correct"]),
         "parameter_in_90_share": share(named_rows, lambda r: (r["coverage"]["covered"] or 0.0) >= 1.0),
         "parameter_in_90_share_all": share(effect_rows, lambda r: (r["coverage"]["covered"] or 0.0) >= 1.0),
+        # reported beside the plan's bars, not one of them: the planted effect inside the named group
+        "planted_in_named_group_share": share(effect_rows, lambda r: r["case"]["case"].removeprefix("disc_")
+                                              in r.get("group", [])),
         "null_false_positive_rate": share(nulls, lambda r: r["named"] not in NOT_NAMED),
         "out_of_catalogue_ok_share": share(ooc, lambda r: r["named"] in NOT_NAMED),
         "misses": misses,
@@ -239,6 +251,7 @@ def run_series(plan: dict, case: dict, seed: int, work: Path, preset: str, recor
         report = json.loads((diag / "report.json").read_text())
         check = json.loads((diag / "check.json").read_text())
         row["named"] = named(report)
+        row["group"] = named_group(report)
         row["correct"] = is_correct(case, row["named"], report)
         row["coverage"] = parameter_coverage(report, truth)
         row["why"] = report.get("why", "")

@@ -15,7 +15,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from benchmarks.bench_planted import (acceptance, effect_size, is_correct, named,  # noqa: E402
+from benchmarks.bench_planted import (acceptance, effect_size, is_correct, named, named_group,  # noqa: E402
                                       parameter_coverage, score)
 from tools.make_planted_series import ar1_noise, make_series, planted_values  # noqa: E402
 
@@ -41,7 +41,8 @@ def _q(lo, hi):
 def _row(case, seed, report, truth, above=True):
     name = named(report)
     return {"case": CASES[case], "seed": seed, "named": name, "correct": is_correct(CASES[case], name, report),
-            "coverage": parameter_coverage(report, truth), "above_scatter": above, "why": report["why"]}
+            "group": named_group(report), "coverage": parameter_coverage(report, truth), "above_scatter": above,
+            "why": report["why"]}
 
 
 def test_plan_keeps_benchmark_and_development_seeds_apart():
@@ -79,7 +80,8 @@ def test_score_gives_the_matrix_and_the_rates():
     rows = [
         _row("rate_strength", 1, _report("confirmed", ["rate_strength"], {"rate_strength.k": _q(0.2, 0.4)}), rate),
         _row("rate_strength", 2, _report("confirmed", ["rate_strength"], {"rate_strength.k": _q(0.35, 0.5)}), rate),
-        _row("rate_strength", 3, _report("confirmed", ["seating"]), rate),
+        _row("rate_strength", 3, {**_report("confirmed", ["seating"]),
+                                  "identification": [{"effects": ["seating", "rate_strength"]}]}, rate),
         _row("rate_strength", 4, _report("base_kept"), rate),
         _row("damping", 1, _report("base_kept"), {"plant": {"damping.beta": 0.1}}, above=False),
         _row("null", 1, _report("base_kept"), {"plant": {}}),
@@ -98,6 +100,9 @@ def test_score_gives_the_matrix_and_the_rates():
     assert s["physical_below_scatter"] == ["damping"]
     assert s["effect_named_share"] == pytest.approx(2 / 5)
     assert s["parameter_in_90_share"] == pytest.approx(1 / 2)         # of the two named: one covers 0.3
+    # seed 3 named seating, its group holds the planted rate law: in the group in 3 of the 5 effect series
+    assert s["planted_in_named_group_share"] == pytest.approx(3 / 5)
+    assert named_group(_report("base_kept")) == [] and named_group(_report("confirmed", ["lowpass"])) == ["lowpass"]
     assert s["null_false_positive_rate"] == pytest.approx(1 / 4)
     assert s["out_of_catalogue_ok_share"] == pytest.approx(1 / 2)
     assert len(s["misses"]) == 2 + 1 + 1 + 1 + 1                      # 2 rate, damping, null, ringing, the error
