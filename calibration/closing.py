@@ -423,6 +423,9 @@ def loro_table(folds: Mapping[str, Mapping], record_info: Mapping[str, Mapping] 
             step = rep["selection"]["steps"][int(rep["shipped_step"])]
             shared = {n: v for n, v in (step.get("posterior") or {}).items()}
             row = {"fold": fold, "heldout": h, "calib_records": rep["calib_records"], "effects": rep["added"],
+                   # per kept effect, the group the fold's calibration records could not split (None: a fold
+                   # run before the report carried it)
+                   "groups": ([g["effects"] for g in rep["identification"]] if "identification" in rep else None),
                    "verdict": rep["verdict"], "estimates": shared,
                    "heldout_values": ev["after"].get("point"), "heldout_intervals": ev["after"].get("intervals")}
             for w in ("before", "after"):

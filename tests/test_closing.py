@@ -121,8 +121,11 @@ def test_the_series_table_reports_each_fold_and_the_mean_change_with_its_spread(
                 "shipped_step": 1 if added else 0, "calib_records": ["x"], "added": added,
                 "verdict": "confirmed" if added else "base_kept",
                 "errors_per_record": {**cal, h: {"data": "heldout", "before": {"rmse": before}, "after": {"rmse": after}}}}
-    t = loro_table({"s__A": rep("A", 10.0, 6.0, ["face_gap"]), "s__B": rep("B", 8.0, 8.0, []),
+    grouped = {**rep("A", 10.0, 6.0, ["face_gap"]), "identification": [{"effects": ["face_gap", "trigger_shift"]}]}
+    t = loro_table({"s__A": grouped, "s__B": rep("B", 8.0, 8.0, []),
                     "s__C": rep("C", 12.0, 7.0, ["face_gap", "closure"])}, {"A": {"strain_rate_at_peak_per_s": 100.0}})
+    # each fold's groups as its report gives them; None for a report that predates them
+    assert [r["groups"] for r in t["rows"]] == [[["face_gap", "trigger_shift"]], None, None]
     tot = t["totals"]
     assert tot["folds"] == 3 and tot["folds_worse"] == 0 and tot["folds_better"] == 2
     assert tot["mean_rmse_change"] == pytest.approx(-3.0)
