@@ -12,7 +12,10 @@ the adapter's import before it took the runner's module). The job
 is timed from outside; ``run.json`` gives the simulator's ``wall_s`` (from its set-up to its end) and
 ``solver_wall_s`` (the time loop, holding Numba's load of the cached engine). ``overhead_s`` = job wall
 minus ``solver_wall_s``. Old and new alternate, after one warm-up run each (warm Numba cache, warm file
-cache). Threads pinned to one, as in a member job. Writes JSON with the cores, Python and load average.
+cache). ``numba_first_call``: the member run twice in one process, the first call's ``solver_wall_s``
+minus the second's (Numba's set-up and the cached engine's load, paid once per process on either path).
+``fork_without_gc_freeze``: the fork without ``gc.freeze()`` before it, the choice that measure made.
+Threads pinned to one, as in a member job. Writes JSON with the cores, Python and load average.
 """
 from __future__ import annotations
 
@@ -39,9 +42,11 @@ CASES = {  # as the default run's member jobs run them (studies/bench_member_sta
     "cylinder_fast_CaMa_SHPB_004": dict(geometry="cylinder", preset="fast", params={"sigma_t": 4e7, "E_t": 2e4},
                                         record=RECORD, t_end=3.6e-4, sample_dt=5e-7),
 }
+MODES = ("subprocess", "fork", "fork_without_gc_freeze")
 THREADS = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")}
 
-# one member job; "subprocess" turns the fork off, which leaves run_member's old path unchanged
+# one member job; "subprocess" turns the fork off, which leaves run_member's old path unchanged;
+# "fork_without_gc_freeze" forks without moving the inherited objects out of the child's collections
 JOB = """
 import json, sys
 from calibration.ensemble_files import simulation_params  # noqa: F401 (scripts/simulate.py's imports)
@@ -50,6 +55,8 @@ from calibration.runner import failure_card, run_member, simulator_command
 mode, folder, case = sys.argv[1], sys.argv[2], json.loads(sys.argv[3])
 if mode == "subprocess":
     runner._forkable = lambda command: False
+elif mode == "fork_without_gc_freeze":
+    runner.gc.freeze = lambda: None
 run_member(command=simulator_command(None), curve_path=folder + "/curve.csv", run_path=folder + "/run.json",
            log_path=folder + "/simulate.log", **case)
 """
@@ -65,6 +72,30 @@ def one_job(mode: str, case: dict) -> dict:
     assert run["status"] == "ok", run
     return {"job_s": job, "wall_s": run["wall_s"], "solver_wall_s": run["solver_wall_s"],
             "overhead_s": job - run["solver_wall_s"], "outside_simulator_s": job - run["wall_s"]}
+
+
+# the same member twice in one process: the first call's solver_wall_s holds Numba's one-off work (its CPU
+# target's set-up, the cached engine's load), the second's is the time loop alone
+TWICE = """
+import json, sys, tempfile
+from shpb.simulate import simulate
+case, walls = json.loads(sys.argv[1]), []
+for _ in range(2):
+    with tempfile.TemporaryDirectory() as out:
+        walls.append(simulate(case["geometry"], case["preset"], params=case["params"], record=case.get("record"),
+                              out_dir=out, t_end=case["t_end"], sample_dt=case["sample_dt"]).run["solver_wall_s"])
+print(json.dumps(walls))
+"""
+
+
+def numba_first_call_s(case: dict, repeats: int) -> dict:
+    rows = []
+    for _ in range(repeats):
+        proc = subprocess.run([sys.executable, "-c", TWICE, json.dumps(case)], cwd=REPO, check=True,
+                              env={**os.environ, **THREADS}, capture_output=True, text=True)
+        rows.append(json.loads(proc.stdout))
+    return {"first_solver_wall_s": [round(a, 3) for a, _ in rows], "second_solver_wall_s": [round(b, 3) for _, b in rows],
+            "first_minus_second_s_median": round(statistics.median(a - b for a, b in rows), 3)}
 
 
 def summary(rows: list[dict]) -> dict:
@@ -99,13 +130,13 @@ def main(argv=None) -> dict:
     cases = a.case or ["disc_fast"]
     load0 = list(os.getloadavg())
     t0 = time.perf_counter()
-    rows = {(m, c): [] for c in cases for m in ("subprocess", "fork")}
+    rows = {(m, c): [] for c in cases for m in MODES}
     for c in cases:
-        for m in ("subprocess", "fork"):
+        for m in MODES:
             one_job(m, CASES[c])  # warm-up, not counted
     for _ in range(a.repeats):
         for c in cases:
-            for m in ("subprocess", "fork"):
+            for m in MODES:
                 rows[(m, c)].append(one_job(m, CASES[c]))
     result = {"benchmark": "bench_member_overhead", "cores": os.cpu_count(), "threads_per_job": 1,
               "python": platform.python_version(), "repeats": a.repeats,
@@ -118,9 +149,11 @@ def main(argv=None) -> dict:
     for c in cases:
         old, new = summary(rows[("subprocess", c)]), summary(rows[("fork", c)])
         result["cases"][c] = {"subprocess": old, "fork": new,
+                              "fork_without_gc_freeze": summary(rows[("fork_without_gc_freeze", c)]),
                               "overhead_saved_s_median": round(old["overhead_s_median"] - new["overhead_s_median"], 3),
                               "job_saved_s_median": round(old["job_s_median"] - new["job_s_median"], 3),
-                              "runs": {m: rows[(m, c)] for m in ("subprocess", "fork")}}
+                              "numba_first_call": numba_first_call_s(CASES[c], 3),
+                              "runs": {m: rows[(m, c)] for m in MODES}}
     return emit_json(result, a.out)
 
 

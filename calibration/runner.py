@@ -19,6 +19,7 @@ failed member's header cannot drift from a successful member's. Nothing here imp
 
 from __future__ import annotations
 
+import gc
 import locale
 import math
 import numbers
@@ -248,12 +249,20 @@ def _fork_with_limit(argv, time_limit_s):
     (:class:`subprocess.TimeoutExpired`), its exit status mapped as a subprocess's (``-N``: signal N)."""
     from shpb import __main__ as entry
 
-    arm = child_dies_with_parent(os.getpid())  # loads libc here: the child should not load libraries
+    parent = os.getpid()
+    arm = child_dies_with_parent(parent)  # loads libc here: the child should not load libraries
     with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
         for stream in (sys.stdout, sys.stderr):  # else the child would write this process's buffered text
             if stream is not None:
                 stream.flush()
-        pid = os.fork()
+        # the inherited objects out of the child's garbage collections: their traversal would write to
+        # every page the child shares with this process, copying each (bench_member_overhead.py)
+        gc.freeze()
+        try:
+            pid = os.fork()
+        finally:
+            if os.getpid() == parent:
+                gc.unfreeze()
         if pid == 0:
             _child(entry, argv, out.fileno(), err.fileno(), arm)
         try:
