@@ -2,7 +2,8 @@
 in a second interpreter (``python -m shpb simulate`` as a subprocess, the old path) against a forked child
 of the job process (the new path), for the same member.
 
-    python benchmarks/bench_member_overhead.py [--repeats 5] [--case disc_fast] [--out benchmarks/results/bench_member_overhead.json]
+    python benchmarks/bench_member_overhead.py [--repeats 5] [--case disc_fast]
+        [--out benchmarks/results/bench_member_overhead.json]
 
 Each run is a fresh job process, as Snakemake starts one per member: ``python -c`` importing what the
 rule adapter scripts/simulate.py imports and calling ``run_member`` once (without Snakemake's own
@@ -94,7 +95,8 @@ def numba_first_call_s(case: dict, repeats: int) -> dict:
         proc = subprocess.run([sys.executable, "-c", TWICE, json.dumps(case)], cwd=REPO, check=True,
                               env={**os.environ, **THREADS}, capture_output=True, text=True)
         rows.append(json.loads(proc.stdout))
-    return {"first_solver_wall_s": [round(a, 3) for a, _ in rows], "second_solver_wall_s": [round(b, 3) for _, b in rows],
+    return {"first_solver_wall_s": [round(a, 3) for a, _ in rows],
+            "second_solver_wall_s": [round(b, 3) for _, b in rows],
             "first_minus_second_s_median": round(statistics.median(a - b for a, b in rows), 3)}
 
 

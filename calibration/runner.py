@@ -224,22 +224,22 @@ def _run_with_limit(argv, time_limit_s):
 
 
 def _forkable(command: Sequence[str]) -> bool:
-    """Run in a forked child: the command is the shipped simulator with this Python, the platform forks,
+    """Run in a forked child: the command is the shipped simulator with this Python, on Linux (elsewhere
+    system libraries may not survive a fork without exec, and the child could not die with the job),
     and this process holds a single thread once the simulator is imported (a fork copies only the
     calling thread, so a lock held by another one would stay locked in the child; the member jobs pin
     OpenBLAS and Numba to one thread, rules/common.smk). Otherwise the subprocess, as for any command."""
-    if list(command) != simulator_command() or not hasattr(os, "fork"):
+    if list(command) != simulator_command() or not sys.platform.startswith("linux"):
         return False
     try:  # the entry, imported here so that the thread count below sees NumPy's BLAS threads and the
         import shpb.__main__  # noqa: F401  child inherits these modules
         import shpb.simulate  # noqa: F401
     except Exception:  # a broken install: the subprocess path reports it as the simulator's crash
         return False
-
     try:
         threads = len(os.listdir("/proc/self/task"))
-    except OSError:
-        threads = 1
+    except OSError:  # no /proc: not knowing, keep the subprocess
+        return False
     return threads == 1 and threading.active_count() == 1
 
 
