@@ -71,9 +71,10 @@ def test_a_measured_record_is_read_and_reduced_without_pandas_or_scipy_ndimage()
 
 
 def test_the_member_job_wrapper_imports_no_numpy_and_keeps_run_json_types():
-    """scripts/simulate.py's imports (calibration.workflow_io) load neither numpy nor pandas, which every one
-    of a run's ~270 member jobs would pay for; run.json's numbers still come out as JSON numbers (numpy
-    scalars included), booleans as booleans and non-finite values as null."""
+    """The rule adapters' imports (calibration.workflow_io, calibration.runner) load neither numpy nor pandas:
+    a member job (scripts/simulate.py) loads numpy only with the shipped simulator it forks
+    (calibration.runner), and a user's own simulator command not at all; run.json's numbers still come out as
+    JSON numbers (numpy scalars included), booleans as booleans and non-finite values as null."""
     import json
     import subprocess
     import sys
@@ -82,7 +83,8 @@ def test_the_member_job_wrapper_imports_no_numpy_and_keeps_run_json_types():
 
     from calibration.runner import _jsonable
 
-    code = "import sys, calibration.workflow_io; print(sorted(x for x in ('numpy', 'pandas') if x in sys.modules))"
+    code = ("import sys, calibration.workflow_io, calibration.runner; "
+            "print(sorted(x for x in ('numpy', 'pandas') if x in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[]"
