@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -19,6 +18,7 @@ import pytest
 import yaml
 
 from calibration.config_files import safe_load
+from test_first_contact import workdir  # noqa: F401  (a folder like the repository root: config and data)
 
 REPO = Path(__file__).resolve().parents[1]
 #: Top-level packages a dry run must not import (any of their submodules counts).
@@ -37,15 +37,6 @@ def _imported(importtime_stderr: str) -> set[str]:
 
 def _heavy(names) -> list[str]:
     return sorted(n for n in names if n.split(".")[0] in HEAVY)
-
-
-@pytest.fixture
-def workdir(tmp_path) -> Path:
-    """A working folder like the repository root: the shipped config/config.yaml and the data."""
-    (tmp_path / "config").mkdir()
-    shutil.copy(REPO / "config" / "config.yaml", tmp_path / "config" / "config.yaml")
-    (tmp_path / "data").symlink_to(REPO / "data", target_is_directory=True)
-    return tmp_path
 
 
 def _dry_run(workdir: Path) -> subprocess.CompletedProcess:
