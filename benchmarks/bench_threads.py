@@ -120,7 +120,9 @@ def main(argv=None) -> int:
             if a.config == "ci":
                 shutil.copytree(REPO / ".test" / "config", d / "config")
             else:
+                # both runs on the commit read at the start, whatever is committed meanwhile
                 subprocess.run(["git", "clone", "--quiet", str(REPO), str(d)], check=True)
+                subprocess.run(["git", "checkout", "--quiet", commit], cwd=d, check=True)
             dirs[threads] = (d, run(d, threads, clone=a.config == "default"))
         rep = compare(dirs["2"][0] / "results", dirs["1"][0] / "results")
         derived = timing_derived(rep, dirs["2"][0] / "results", dirs["1"][0] / "results")
