@@ -34,6 +34,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(REPO)]
 
+from calibration.job_log import THREAD_VARIABLES  # noqa: E402 (what rules/common.smk pins)
 from shpb.atomic import emit_json  # noqa: E402
 
 RECORD = "data/freiburg-rae-rock-shpb/Rae2021/SHPBdata/CaMa/CaMa_SHPB_004_Ti25_50b_Al12b_0_001.txt"
@@ -44,7 +45,7 @@ CASES = {  # as the default run's member jobs run them (studies/bench_member_sta
                                         record=RECORD, t_end=3.6e-4, sample_dt=5e-7),
 }
 MODES = ("subprocess", "fork", "fork_without_gc_freeze")
-THREADS = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")}
+THREADS = dict.fromkeys(THREAD_VARIABLES, "1")
 
 # one member job; "subprocess" turns the fork off, which leaves run_member's old path unchanged;
 # "fork_without_gc_freeze" forks without moving the inherited objects out of the child's collections

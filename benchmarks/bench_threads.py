@@ -30,9 +30,8 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+from calibration.job_log import THREAD_VARIABLES as VARIABLES  # noqa: E402 (what rules/common.smk pins)
 from tools.compare_runs import compare  # noqa: E402
-
-VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
 
 
 def _job_processes(workdir: Path) -> list[dict]:

@@ -356,6 +356,8 @@ def _aggregated(indices: dict, key: str) -> np.ndarray:
 
 def report(spec: SensitivitySpec, indices: dict, **extra) -> dict:
     """report.json: settings, per-feature indices with CIs, the time-resolved summary, recommendation."""
+    from enkf import jsonable  # on call: the workflow's parse reads this module (SciPy under enkf)
+
     names, key, first = indices["names"], indices["total"], indices["first"]
     per_param = {p: {} for p in names}
     for m in [key] + ([first] if first else []):
@@ -366,8 +368,6 @@ def report(spec: SensitivitySpec, indices: dict, **extra) -> dict:
     feats = {f: {"mean": e["mean"], "std": e["std"], "note": e["note"],
                  "indices": {p: {m: e["indices"][m][i] for m in indices["measures"]} for i, p in enumerate(names)}}
              for f, e in indices["features"].items()}
-    from enkf import jsonable
-
     rec = recommend(indices, spec.threshold)
     tt = indices["time"]
     return jsonable({

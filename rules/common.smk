@@ -10,12 +10,8 @@ import os
 # threaded BLAS sums in an order that depends on its thread count, so a re-run with another
 # OMP_NUM_THREADS would write files that differ in the last digits. Set before any job is spawned: every
 # job process inherits it (a cluster job re-reads this file on its node).
-THREAD_VARIABLES = (
-    "OMP_NUM_THREADS",
-    "OPENBLAS_NUM_THREADS",
-    "MKL_NUM_THREADS",
-    "NUMBA_NUM_THREADS",
-)
+from calibration.job_log import THREAD_VARIABLES  # the variables each job's log reports
+
 os.environ.update(dict.fromkeys(THREAD_VARIABLES, "1"))
 
 # Only what the DAG's build calls is imported here: calibration.experiment (enkf, SciPy's stats: ~1.5 s
