@@ -61,17 +61,33 @@ def simulation_params(source: Mapping, fixed: Mapping[str, float], params_file: 
 
 
 def _ensemble_mean(params_csv: str | Path, name: str, experiments: Mapping) -> dict:
-    # imported here: numpy and pandas cost every other simulation job 0.1-0.3 s (tests/test_contract.py)
-    import pandas as pd
+    # numpy and the transform only, imported here: the experiment module (SciPy's statistics, pandas, the
+    # process) cost each replicate job 2 s, and every other simulation job needs none of them
+    import csv
 
-    from .experiment import ExperimentSpec
+    import numpy as np
 
-    spec = ExperimentSpec.from_config(name, experiments[name])
-    P = pd.read_csv(params_csv)[list(spec.names)].to_numpy(float)
+    from enkf.transforms import BoxTransform
+
+    exp = experiments[name]
+    # the columns the ensemble has are the calibrated parameters (``parameters: auto``, not a mapping: those
+    # selected, drawn over the sensitivity stage's boxes)
+    boxes = exp["parameters"] if isinstance(exp["parameters"], Mapping) else exp["sensitivity"]["parameters"]
+    with open(params_csv, newline="") as fh:
+        header, *rows = csv.reader(fh)
+    cols = [i for i, c in enumerate(header) if c != "member"]
+    names = [header[i] for i in cols]
+    unknown = [p for p in names if p not in boxes]
+    if unknown:
+        raise ValueError(f"{params_csv}: columns {unknown} are not parameters of experiments.{name}")
+    # float() reads the written digits exactly (pandas' default parser may be one unit in the last place off)
+    P = np.array([[float(r[i]) for i in cols] for r in rows if r], float)
+    transform = BoxTransform(np.array([boxes[p][0] for p in names], float),
+                             np.array([boxes[p][1] for p in names], float), kind=exp.get("transform", "logit"))
     # the mean in the unbounded space of the analysis: for a box over orders of magnitude (E_t 100-50,000
     # J/m^2) the arithmetic mean of a prior Latin hypercube sits far from where the members are
-    mean = spec.transform.to_bounded(spec.transform.to_unbounded(P).mean(axis=0)[None, :])[0]
-    return dict(zip(spec.names, map(float, mean)))
+    mean = transform.to_bounded(transform.to_unbounded(P).mean(axis=0)[None, :])[0]
+    return dict(zip(names, map(float, mean)))
 
 
 def combine_member_runs(runs: Mapping[str, Mapping]) -> dict:

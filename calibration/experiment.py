@@ -27,15 +27,15 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
 
-from enkf import (AnalysisSettings, BoxTransform, CalibrationProcess, DenseError, EmulatedSettings, FailurePolicy,
+from enkf import (AnalysisSettings, BoxTransform, DenseError, EmulatedSettings, FailurePolicy,
                   SeededSteps, StepSchedule, StopCriteria, StopPolicy, esmda_alphas, jsonable, latin_hypercube, localization_mask,
                   mean_misfit, misfit_table, posterior_dict, prediction_interval_dict)
 from enkf.process import all_runs as _all_runs, capped_truncation  # noqa: F401 (capped_truncation: re-exported)
-from enkf.ces import interval_summary
 
 from .diagnosis_config import diagnosis_settings  # here and re-exported; defined apart, light for the parse
 from .model_error import (MESH_PURPOSE, MESH_STAGES, discrepancy_kind, mesh_mode,  # noqa: F401
@@ -45,6 +45,9 @@ from .observations import Observations
 from .process import WorkflowLikelihood, step_schedule, stop_misfit
 from .sensitivity import AUTO, selected_parameters
 from .verdict import calibration_verdict, member_chi2, reported_iteration
+
+if TYPE_CHECKING:  # pragma: no cover
+    from enkf import CalibrationProcess
 
 __all__ = ["PURPOSES", "MESH_STAGES", "rng_for", "mesh_seed", "run_mesh_seed", "ExperimentSpec", "initial_ensemble",
            "build_process", "analysis_step", "analysis_record", "decide", "capped_truncation",
@@ -190,6 +193,10 @@ def build_process(spec: ExperimentSpec, obs: Observations, params: pd.DataFrame 
                          f"0..{iteration - 1}, got {len(history)} of them")
     runs = [(hp[names].to_numpy(float), np.asarray(hy, float)) for hp, hy in history] \
         if spec.method == "emulated_esmda" else []
+    # imported here: the process brings the emulators (SciPy's interpolation, 0.8 s of a job's start) that
+    # the jobs reading an experiment's settings (lhs, observations, summary) never use
+    from enkf import CalibrationProcess
+
     return CalibrationProcess(
         params[names].to_numpy(float), obs.values, WorkflowLikelihood(spec, obs),
         rng=SeededSteps(spec.seed, PURPOSES["analysis"]), schedule=step_schedule(spec), stop=StopPolicy(spec.criteria),
@@ -339,8 +346,12 @@ def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], 
     # the reported intervals hold one more draw of the members' distribution (enkf.prediction_interval_dict)
     post_ensemble = prediction_interval_dict(P[names].to_numpy(float), names, np.asarray(alive_R, bool), spec.transform)
     # posterior: emulator_mcmc reports the MCMC sample of the emulator posterior (calibration.posterior)
-    post = post_ensemble if posterior_samples is None else interval_summary(
-        posterior_samples[names].to_numpy(float), names)
+    if posterior_samples is None:
+        post = post_ensemble
+    else:
+        from enkf.ces import interval_summary  # the MCMC's summary; SciPy's statistics only where used
+
+        post = interval_summary(posterior_samples[names].to_numpy(float), names)
     out = {
         "experiment": spec.name,
         "kind": exp["kind"],

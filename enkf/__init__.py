@@ -19,49 +19,51 @@ Sees parameter matrices ``(N, n)`` and response matrices ``(N, m)``, one row per
 Reference: Godinez & Rougier (2021), Appl. Sci. 11, 2898, section 4.
 """
 
-from .analysis import (AnalysisResult, EnsembleFailure, enkf_update, esmda_alphas, esmda_update,
-                       localization_mask, truncation_rank)
-from .covariance import (AR1Error, DenseError, DiagonalError, NoiseEstimate, ObservationError,
-                         SquaredExponentialError, estimate_noise, observation_error)
-from .diagnostics import (chi2_per_obs, jsonable, mean_misfit, member_table, misfit_table, nrmse,
-                          parameter_summary, posterior_dict, prediction_interval_dict, rmse)
-from .inflation import Multiplicative, SpreadFloor, as_inflation, inflate
-from .loop import AssimilationResult, assimilate
-from .sampling import latin_hypercube, latin_hypercube_unit, stratum_index
-from .stopping import StopCriteria, StopDecision, check_stop
-from .transforms import BoxTransform, IdentityTransform
+# Names are imported on first use (PEP 562): a job that needs one transform or one error model does not
+# pay for SciPy's statistics, the emulators and the diagnosis (about 1.5 s of a job's start, measured with
+# python -X importtime). ``from enkf import X`` and ``enkf.X`` work as before.
+import importlib
 
-__all__ = [
-    "AR1Error", "AnalysisResult", "AssimilationResult", "BoxTransform", "DenseError", "DiagonalError",
-    "EnsembleFailure", "IdentityTransform", "Multiplicative", "NoiseEstimate", "ObservationError",
-    "SpreadFloor", "SquaredExponentialError", "StopCriteria", "StopDecision", "as_inflation", "assimilate",
-    "check_stop", "chi2_per_obs", "enkf_update", "esmda_alphas", "esmda_update", "estimate_noise", "inflate",
-    "jsonable", "latin_hypercube", "latin_hypercube_unit", "localization_mask", "mean_misfit",
-    "member_table", "misfit_table", "nrmse", "observation_error", "parameter_summary", "posterior_dict", "prediction_interval_dict",
-    "rmse", "stratum_index", "truncation_rank",
-]
+_EXPORTS = {
+    "analysis": ("AnalysisResult", "EnsembleFailure", "enkf_update", "esmda_alphas", "esmda_update",
+                 "localization_mask", "truncation_rank"),
+    "covariance": ("AR1Error", "DenseError", "DiagonalError", "NoiseEstimate", "ObservationError",
+                   "SquaredExponentialError", "estimate_noise", "observation_error"),
+    "diagnostics": ("chi2_per_obs", "jsonable", "mean_misfit", "member_table", "misfit_table", "nrmse",
+                    "parameter_summary", "posterior_dict", "prediction_interval_dict", "rmse"),
+    "inflation": ("Multiplicative", "SpreadFloor", "as_inflation", "inflate"),
+    "loop": ("AssimilationResult", "assimilate"),
+    "sampling": ("latin_hypercube", "latin_hypercube_unit", "stratum_index"),
+    "stopping": ("StopCriteria", "StopDecision", "check_stop"),
+    "transforms": ("BoxTransform", "IdentityTransform"),
+    # diagnosis of the calibrated model's residual and choice of model extensions (issues 8 and 32)
+    "diagnosis": ("covariate_trends", "curve_errors", "default_windows", "ensemble_sensitivity",
+                  "finite_difference_sensitivity", "rank_candidates", "score_test", "structure_tests",
+                  "whitened_residual"),
+    # emulator-assisted ES-MDA (the twin experiments' analysis, issue 6)
+    "emulated": ("EmulatedAnalysis", "emulated_esmda_update", "emulator_error_model"),
+    # the calibration process (issue 54): one object the workflow, the benchmarks and the tests drive
+    "process": ("AnalysisSettings", "CalibrationProcess", "EmulatedSettings", "FailurePolicy", "FixedError",
+                "SeededSteps", "StepSchedule", "StopPolicy"),
+}
+_WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
+__all__ = sorted(_WHERE)
 
-# Diagnosis of the calibrated model's residual and choice of model extensions (issue 8; the frozen
-# protocol, issue 32, is in enkf.diagnosis).
-from .diagnosis import (covariate_trends, curve_errors, default_windows, ensemble_sensitivity,
-                        finite_difference_sensitivity, rank_candidates, score_test, structure_tests,
-                        whitened_residual)
 
-__all__ += [
-    "covariate_trends", "curve_errors", "default_windows", "ensemble_sensitivity",
-    "finite_difference_sensitivity", "rank_candidates", "score_test", "structure_tests", "whitened_residual",
-]
+def __getattr__(name: str):
+    if name in _WHERE:
+        if name == "CalibrationProcess":  # the emulated ES-MDA registers its analysis with the process
+            importlib.import_module(".emulated_step", __name__)
+        value = getattr(importlib.import_module(f".{_WHERE[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    try:  # a submodule, as ``import enkf`` followed by ``enkf.ces`` found it when every module was loaded
+        return importlib.import_module(f".{name}", __name__)
+    except ModuleNotFoundError as err:
+        if err.name != f"{__name__}.{name}":
+            raise
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
 
-# Emulator-assisted ES-MDA (the twin experiments' analysis, issue 6).
-from .emulated import EmulatedAnalysis, emulated_esmda_update, emulator_error_model
 
-__all__ += ["EmulatedAnalysis", "emulated_esmda_update", "emulator_error_model"]
-
-# The calibration process (issue 54): one object the workflow, the benchmarks and the tests drive. Importing
-# emulated_step registers the emulated ES-MDA's analysis with it.
-from . import emulated_step  # noqa: E402,F401
-from .process import (AnalysisSettings, CalibrationProcess, EmulatedSettings, FailurePolicy, FixedError,  # noqa: E402
-                      SeededSteps, StepSchedule, StopPolicy)
-
-__all__ += ["AnalysisSettings", "CalibrationProcess", "EmulatedSettings", "FailurePolicy", "FixedError",
-            "SeededSteps", "StepSchedule", "StopPolicy"]
+def __dir__():
+    return sorted(set(globals()) | set(_WHERE))

@@ -248,6 +248,14 @@ def register_analysis(method: str, fn: Callable) -> Callable:
     return fn
 
 
+def _analysis(method: str) -> Callable:
+    if method not in _ANALYSES:
+        raise ValueError(f"no analysis registered for method {method!r} (have {sorted(_ANALYSES)}); the "
+                         "emulated ES-MDA registers itself when enkf.emulated_step is imported, as "
+                         "`from enkf import CalibrationProcess` does")
+    return _ANALYSES[method]
+
+
 class CalibrationProcess:
     """The calibration's state and its step (module docstring). ``iteration``, ``runs`` (the ``(P, Y)`` of
     iterations ``0 .. k-1``) and ``prior_spread`` restore a process at analysis ``k`` (the workflow's jobs,
@@ -318,7 +326,7 @@ class CalibrationProcess:
                     alpha=self.schedule.alpha(k))
         spent = self.schedule.method == "esmda" and step.alpha is None  # then the decision above stopped
         if not spent and (not decision.stop or self.update_on_stop):
-            step.result, step.next_params = _ANALYSES[self.schedule.method](self, step, self._rng(k))
+            step.result, step.next_params = _analysis(self.schedule.method)(self, step, self._rng(k))
         self.n_simulations += P.shape[0]
         self.history.append(step.to_dict(self.names))
         self.decision = decision

@@ -12,7 +12,6 @@ of each parameter holds exactly one sample.
 from __future__ import annotations
 
 import numpy as np
-from scipy.stats import qmc
 
 from ._rng import RngLike, as_generator
 
@@ -38,6 +37,8 @@ def latin_hypercube_unit(n_members: int, n_params: int, rng: RngLike, *, centere
     """
     if n_members < 1 or n_params < 1:
         raise ValueError("n_members and n_params must be positive")
+    from scipy.stats import qmc  # here: 1.2 s of import every transform's user would pay otherwise
+
     sampler = qmc.LatinHypercube(d=n_params, scramble=not centered, rng=as_generator(rng))
     return sampler.random(n_members)
 
