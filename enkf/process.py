@@ -285,8 +285,22 @@ class CalibrationProcess:
         self.update_on_stop = bool(update_on_stop)
         self.label = label
         self.decision: StopDecision | None = None
-        self.history: list[dict] = []
+        # each tell's entry: its Step until first read, then the Step's dict (a summary of the ensemble with
+        # quantiles, a fifth of a tell's time, that the in-process loops of the diagnosis never read)
+        self._history: list = []
         self.n_simulations = 0
+
+    @property
+    def history(self) -> list[dict]:
+        """One dict per ``tell``: iteration, n_alive, the misfit, posterior, decision and analysis."""
+        for i, entry in enumerate(self._history):
+            if isinstance(entry, Step):
+                self._history[i] = entry.to_dict(self.names)
+        return self._history
+
+    @history.setter
+    def history(self, entries) -> None:
+        self._history = list(entries)
 
     @property
     def criteria(self) -> StopCriteria:
@@ -328,7 +342,7 @@ class CalibrationProcess:
         if not spent and (not decision.stop or self.update_on_stop):
             step.result, step.next_params = _analysis(self.schedule.method)(self, step, self._rng(k))
         self.n_simulations += P.shape[0]
-        self.history.append(step.to_dict(self.names))
+        self._history.append(step)
         self.decision = decision
         if not decision.stop:
             if step.next_params is None:
