@@ -40,11 +40,16 @@ class AssimilationResult:
     params: np.ndarray
     responses: np.ndarray
     alive: np.ndarray
-    history: list[dict]
+    process: CalibrationProcess  # the process that ran: its history is made when first read
     decision: StopDecision
     n_simulations: int
     names: list[str]
     prior_spread: np.ndarray  # std of the initial ensemble in the unbounded space, per parameter
+
+    @property
+    def history(self) -> list[dict]:
+        """One dict per simulated ensemble (:attr:`enkf.process.CalibrationProcess.history`)."""
+        return self.process.history
 
     @property
     def iterations(self) -> int:
@@ -97,5 +102,5 @@ def assimilate(forward: Callable[[np.ndarray], np.ndarray], params0, obs, obs_er
     while True:
         step = process.tell(np.array(forward(process.ask()), dtype=float, ndmin=2))
         if process.done:
-            return AssimilationResult(step.params, step.responses, step.alive, process.history, process.decision,
+            return AssimilationResult(step.params, step.responses, step.alive, process, process.decision,
                                       process.n_simulations, process.names, process.prior_spread)
