@@ -46,13 +46,14 @@ def _default_old() -> str:
     return _git("rev-parse", f"{added[-1]}^")
 
 
-def _timed(workdir: Path) -> float:
+def _timed(workdir: Path, args=DRY_RUN) -> float:
+    """Wall time of ``python <args>`` in ``workdir`` with that version's packages first on the path."""
     env = {**os.environ, "PYTHONPATH": str(workdir)}
     t0 = time.perf_counter()
-    out = subprocess.run([sys.executable, *DRY_RUN], cwd=workdir, env=env, capture_output=True, text=True)
+    out = subprocess.run([sys.executable, *args], cwd=workdir, env=env, capture_output=True, text=True)
     wall = time.perf_counter() - t0
     if out.returncode != 0:
-        raise SystemExit(f"dry run in {workdir} failed:\n{out.stdout[-2000:]}\n{out.stderr[-2000:]}")
+        raise SystemExit(f"{args} in {workdir} failed:\n{out.stdout[-2000:]}\n{out.stderr[-2000:]}")
     return wall
 
 

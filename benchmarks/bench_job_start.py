@@ -31,7 +31,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
-from benchmarks.bench_dry_run import _git, _stats  # noqa: E402
+from benchmarks.bench_dry_run import _git, _stats, _timed  # noqa: E402
 
 WORKFLOW_TEST = ("tests/test_calibration_verdict.py::"
                  "test_a_box_cutting_the_posterior_ends_box_limited_end_to_end")
@@ -51,20 +51,11 @@ def script_imports(path: Path) -> str:
     return "; ".join(ast.unparse(n) for n in tree.body if isinstance(n, (ast.Import, ast.ImportFrom)))
 
 
-def _run(workdir: Path, *args: str) -> float:
-    t0 = time.perf_counter()
-    out = subprocess.run([sys.executable, *args], cwd=workdir, env={**os.environ, "PYTHONPATH": str(workdir)},
-                         capture_output=True, text=True)
-    if out.returncode != 0:
-        raise SystemExit(f"{args} in {workdir} failed:\n{out.stdout[-2000:]}\n{out.stderr[-2000:]}")
-    return time.perf_counter() - t0
-
-
 def _alternated(dirs: dict, repeats: int, args_of) -> dict:
     times = {name: [] for name in dirs}
     for _ in range(repeats):
         for name, d in dirs.items():
-            times[name].append(_run(d, *args_of(d)))
+            times[name].append(_timed(d, args_of(d)))
     return times
 
 
@@ -89,7 +80,7 @@ def main(argv=None) -> dict:
             scripts = sorted(p.name for p in (dirs["new"] / "scripts").glob("*.py")
                              if (dirs["old"] / "scripts" / p.name).is_file())
             for d in dirs.values():  # warm-up: the OS file cache, bytecode where it is written
-                _run(d, "-c", script_imports(d / "scripts" / "analysis.py"))
+                _timed(d, ("-c", script_imports(d / "scripts" / "analysis.py")))
             imports = {s: _alternated(dirs, args.repeats, lambda d, s=s: ("-c", script_imports(d / "scripts" / s)))
                        for s in scripts}
             replicate = _alternated(dirs, args.repeats, lambda d: ("-c", REPLICATE, str(params)))

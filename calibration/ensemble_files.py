@@ -24,15 +24,21 @@ def member_ids(n_members: int) -> list[str]:
     return [f"{i:0{width}d}" for i in range(n_members)]
 
 
-def member_params(params_csv: str | Path, member: str | int, fixed: Mapping[str, float] | None = None) -> dict:
-    """The simulator parameters of one member: its row of ``params.csv`` plus the fixed parameters."""
+def _params_rows(params_csv: str | Path) -> list[dict]:
+    """The rows of ``params.csv``: ``{"member": int, parameter: float}`` each. ``float()`` reads the written
+    digits exactly (pandas' default parser may be one unit in the last place off)."""
     import csv
 
     with open(params_csv, newline="") as fh:
-        rows = [r for r in csv.DictReader(fh) if int(r["member"]) == int(member)]
+        return [{c: int(v) if c == "member" else float(v) for c, v in r.items()} for r in csv.DictReader(fh)]
+
+
+def member_params(params_csv: str | Path, member: str | int, fixed: Mapping[str, float] | None = None) -> dict:
+    """The simulator parameters of one member: its row of ``params.csv`` plus the fixed parameters."""
+    rows = [r for r in _params_rows(params_csv) if r["member"] == int(member)]
     if len(rows) != 1:
         raise KeyError(f"{params_csv}: member {member} not found")
-    values = {c: float(v) for c, v in rows[0].items() if c != "member"}
+    values = {c: v for c, v in rows[0].items() if c != "member"}
     return {**(fixed or {}), **values}
 
 
@@ -63,8 +69,6 @@ def simulation_params(source: Mapping, fixed: Mapping[str, float], params_file: 
 def _ensemble_mean(params_csv: str | Path, name: str, experiments: Mapping) -> dict:
     # numpy and the transform only, imported here: the experiment module (SciPy's statistics, pandas, the
     # process) cost each replicate job 2 s, and every other simulation job needs none of them
-    import csv
-
     import numpy as np
 
     from enkf.transforms import BoxTransform
@@ -73,15 +77,12 @@ def _ensemble_mean(params_csv: str | Path, name: str, experiments: Mapping) -> d
     # the columns the ensemble has are the calibrated parameters (``parameters: auto``, not a mapping: those
     # selected, drawn over the sensitivity stage's boxes)
     boxes = exp["parameters"] if isinstance(exp["parameters"], Mapping) else exp["sensitivity"]["parameters"]
-    with open(params_csv, newline="") as fh:
-        header, *rows = csv.reader(fh)
-    cols = [i for i, c in enumerate(header) if c != "member"]
-    names = [header[i] for i in cols]
+    rows = _params_rows(params_csv)
+    names = [c for c in rows[0] if c != "member"]
     unknown = [p for p in names if p not in boxes]
     if unknown:
         raise ValueError(f"{params_csv}: columns {unknown} are not parameters of experiments.{name}")
-    # float() reads the written digits exactly (pandas' default parser may be one unit in the last place off)
-    P = np.array([[float(r[i]) for i in cols] for r in rows if r], float)
+    P = np.array([[r[p] for p in names] for r in rows], float)
     transform = BoxTransform(np.array([boxes[p][0] for p in names], float),
                              np.array([boxes[p][1] for p in names], float), kind=exp.get("transform", "logit"))
     # the mean in the unbounded space of the analysis: for a box over orders of magnitude (E_t 100-50,000
