@@ -201,8 +201,22 @@ def heal_results(root: str | Path = "results", argv: Sequence[str] | None = None
     return lines
 
 
+def _batch_files(root: Path) -> dict[str, Path]:
+    """{a run's folder: the batch file of the job that wrote it} (rule simulate's outputs under
+    ``<root>/<experiment>/simulate/``; calibration.batch.run_batch lists each run's folder)."""
+    out = {}
+    for path in root.glob("*/simulate/*/*/batch_*.json"):
+        try:
+            folders = [r["folder"] for r in json.loads(path.read_text())["runs"]]
+        except (OSError, ValueError, KeyError, TypeError):
+            continue  # unreadable: Snakemake's to notice (an incomplete job's output)
+        out.update({str(Path(f)): path for f in folders})
+    return out
+
+
 def _heal(root: Path, dry: bool) -> list[str]:
     lines, stale, bad = [], [], []
+    batches = _batch_files(root) if root.is_dir() else {}
     for folder, dirs, files in os.walk(root):
         here = Path(folder)
         for d in [d for d in dirs if d.startswith(_TEMP_DIR_PREFIX)]:
@@ -221,6 +235,10 @@ def _heal(root: Path, dry: bool) -> list[str]:
                      f"temporar{'y' if len(stale) == 1 else 'ies'} of killed jobs (.sim-* folders, .*.tmp files)"
                      + (" (dry run)" if dry else ""))
     for folder, member_files, why in bad:
+        # the job that wrote the files is its batch's (rule simulate): dated back with them, it is out of
+        # date against its inputs and runs again; the files' own rule runs no job
+        batch = batches.get(str(folder))
+        member_files = member_files + ([batch] if batch is not None and batch.is_file() else [])
         if not dry:
             for path in member_files:
                 os.utime(path, (0, 0))

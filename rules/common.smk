@@ -14,6 +14,24 @@ from calibration.job_log import THREAD_VARIABLES  # the variables each job's log
 
 os.environ.update(dict.fromkeys(THREAD_VARIABLES, "1"))
 
+# A simulation's files are written by its batch's job (rule simulate) before the rule that declares them
+# (rule simulation, no job of its own) is reached, which Snakemake reports as a warning per simulation,
+# hundreds per run: expected here, so left out of the log.
+import logging as _logging
+from snakemake.logging import logger as _snakemake_logger
+
+
+class _BatchWrittenOutputs(_logging.Filter):
+    def filter(self, record):
+        msg = str(record.msg)
+        return not (
+            "were not present when the DAG was created" in msg
+            and any(f"rule {s} " in msg for s in SIMULATION_STAGES)
+        )
+
+
+_snakemake_logger.addFilter(_BatchWrittenOutputs())
+
 # Only what the DAG's build calls is imported here: calibration.experiment (enkf, SciPy's stats: ~1.5 s
 # of every dry run) is imported by spec() and final_k(), which a dry run before the first analysis never
 # calls (tests/test_dry_run_imports.py).
@@ -164,31 +182,11 @@ def runtime_min(exp, preset=None):
     return -(-time_limit_s(exp, preset) // 60) + 5
 
 
-#: Parent name of every simulation group id: the Slurm profile's `group-components: [simulations=...]`
-#: lets a group span the disconnected simulations that share one id (Snakemake's default is one
+#: Parent name of every simulation group id (batch_group in rules/inputs.smk): the Slurm profile's
+#: `group-components: [simulations=...]` lets a group span the disconnected batches that share one id (Snakemake's default is one
 #: connected component per group job). Snakemake looks a group id up under its parent name
 #: (`workflow.parent_groupids`, filled the same way for a group name with wildcards).
 SIMULATION_GROUPS = "simulations"
-
-
-def simulation_group(exp, stage, index, n_index, record, record_names):
-    """Group id of one simulation job (the `group:` of the simulation rules; docs/cluster.md).
-
-    The n = n_index x len(record_names) simulations of one stage of one experiment (an ensemble
-    iteration, the sensitivity design, the diagnosis design, the diagnosis check, the approximation
-    error's pairs), numbered member by
-    member, are cut into max(1, n // k) contiguous groups of nearly equal size, k the config's
-    `simulations_per_cluster_job` for the experiment's preset: a group holds at least k simulations
-    (all n if n < k) and fewer than 2k, and never mixes stages, iterations or experiments. A cluster
-    run with `--group-components simulations=1000` (profiles/slurm) submits each group as one job;
-    local runs ignore groups."""
-    names = list(record_names)
-    n = int(n_index) * len(names)
-    i = int(index) * len(names) + names.index(record)
-    k = int(config["simulations_per_cluster_job"][EXPERIMENTS[exp]["preset"]])
-    gid = f"sim-{exp}-{stage}-{i * max(1, n // k) // n}"
-    workflow.parent_groupids[gid] = SIMULATION_GROUPS
-    return gid
 
 
 def simulation_preset(rule_name, wc):

@@ -46,26 +46,14 @@ rule diagnosis_design:
 
 
 # One FDEM run of the emulator design (failed runs are left out of the emulator).
-use rule simulate as diagnosis_member with:
+rule diagnosis_member:
     input:
-        params="results/{exp}/diagnosis/design/params.csv",
-        record=lambda wc: [design_records(wc.exp)[wc.record]],
+        batch=lambda wc: batch_file("diagnosis_member", wc),
     output:
         curve="results/{exp}/diagnosis/design/{point}/{record}/curve.csv",
         run="results/{exp}/diagnosis/design/{point}/{record}/run.json",
-    log:
-        "results/{exp}/diagnosis/design/{point}/{record}/simulate.log",
     wildcard_constraints:
         point="[0-9]+",
-    group:
-        lambda wc: simulation_group(
-            wc.exp,
-            "diagnosis",
-            wc.point,
-            diagnosis_cfg(wc.exp)["design_points"],
-            wc.record,
-            design_records(wc.exp),
-        )
     params:
         parameters=lambda wc: {"row": wc.point},
         record_file=lambda wc: design_records(wc.exp)[wc.record],
@@ -104,23 +92,14 @@ checkpoint diagnosis_select:
 
 # One real FDEM run of the check: a step's cross-validation point of a calibration record, or its
 # prediction point of a held-out record (check_runs.json, row `row`).
-use rule simulate as diagnosis_check_member with:
+rule diagnosis_check_member:
     input:
-        rows="results/{exp}/diagnosis/check_runs.json",
-        record=lambda wc: [
-            design_records(wc.exp)[check_rows_of(wc.exp)[int(wc.row)]["record"]]
-        ],
+        batch=lambda wc: batch_file("diagnosis_check_member", wc),
     output:
         curve="results/{exp}/diagnosis/check/{row}/curve.csv",
         run="results/{exp}/diagnosis/check/{row}/run.json",
-    log:
-        "results/{exp}/diagnosis/check/{row}/simulate.log",
     wildcard_constraints:
         row="[0-9]+",
-    group:
-        lambda wc: simulation_group(
-            wc.exp, "check", int(wc.row), len(check_rows_of(wc.exp)), "all", ["all"]
-        )
     params:
         parameters=lambda wc: {
             "values": check_rows_of(wc.exp)[int(wc.row)]["simulator"]

@@ -42,23 +42,12 @@ rule propose:
 
 
 # One ensemble member: its row of the iteration's params.csv.
-use rule simulate as member with:
+rule member:
     input:
-        unpack(member_inputs),
+        batch=lambda wc: batch_file("member", wc),
     output:
         curve="results/{exp}/iter_{it}/members/{member}/{record}/curve.csv",
         run="results/{exp}/iter_{it}/members/{member}/{record}/run.json",
-    log:
-        "results/{exp}/iter_{it}/members/{member}/{record}/simulate.log",
-    group:
-        lambda wc: simulation_group(
-            wc.exp,
-            f"iter_{wc.it}",
-            wc.member,
-            EXPERIMENTS[wc.exp]["ensemble_size"],
-            wc.record,
-            records(wc.exp),
-        )
     params:
         parameters=lambda wc: {"row": wc.member},
         mesh_seed=lambda wc: mesh_seed_of(wc.exp, "member", wc.it, wc.member, wc.record),
@@ -72,23 +61,12 @@ use rule simulate as member with:
 # One replicate run at the iteration's ensemble mean on its own mesh realization: the replicates of an
 # iteration differ only in the mesh and measure the simulator's own variability S
 # (calibration.model_error; observations.model_error.simulator_replicates).
-use rule simulate as replicate with:
+rule replicate:
     input:
-        unpack(member_inputs),
+        batch=lambda wc: batch_file("replicate", wc),
     output:
         curve="results/{exp}/iter_{it}/replicates/{member}/{record}/curve.csv",
         run="results/{exp}/iter_{it}/replicates/{member}/{record}/run.json",
-    log:
-        "results/{exp}/iter_{it}/replicates/{member}/{record}/simulate.log",
-    group:
-        lambda wc: simulation_group(
-            wc.exp,
-            f"rep_{wc.it}",
-            wc.member,
-            len(replicate_ids(wc.exp)),
-            wc.record,
-            records(wc.exp),
-        )
     params:
         parameters=lambda wc: {"ensemble_mean": wc.exp},
         mesh_seed=lambda wc: mesh_seed_of(

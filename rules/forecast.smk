@@ -25,24 +25,12 @@ rule refine_design:
 
 # One FDEM simulation of the refinement batch, on its own mesh realization; the failure policy of
 # `rule member` (a failed run is left out of the emulator).
-use rule simulate as refine_member with:
+rule refine_member:
     input:
-        params="results/{exp}/refine/params.csv",
-        record=lambda wc: record_input(wc.exp, wc.record),
+        batch=lambda wc: batch_file("refine_member", wc),
     output:
         curve="results/{exp}/refine/members/{member}/{record}/curve.csv",
         run="results/{exp}/refine/members/{member}/{record}/run.json",
-    log:
-        "results/{exp}/refine/members/{member}/{record}/simulate.log",
-    group:
-        lambda wc: simulation_group(
-            wc.exp,
-            "refine",
-            wc.member,
-            refine_runs(wc.exp),
-            wc.record,
-            records(wc.exp),
-        )
     params:
         parameters=lambda wc: {"row": wc.member},
         mesh_seed=lambda wc: mesh_seed_of(wc.exp, "refine", 0, wc.member, wc.record),
@@ -124,10 +112,9 @@ rule forecast_params:
 
 # The best-estimate simulation with the posterior-mean parameters, with fracture snapshots (a failed run
 # gets a picture saying so instead of the damage maps).
-use rule simulate as forecast with:
+rule forecast:
     input:
-        params="results/{exp}/forecast/params.json",
-        record=lambda wc: record_input(wc.exp, wc.record),
+        batch=lambda wc: batch_file("forecast", wc),
     output:
         curve="results/{exp}/forecast/{record}/curve.csv",
         run="results/{exp}/forecast/{record}/run.json",
@@ -148,8 +135,6 @@ use rule simulate as forecast with:
             category="{exp}",
             caption="../report/fracture_overview.rst",
         ),
-    log:
-        "results/{exp}/forecast/{record}/simulate.log",
     params:
         parameters={"key": "params"},
         snapshots=4,

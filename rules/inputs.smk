@@ -56,14 +56,184 @@ def raw_record(exp, record):
     return {**records(exp), **held}[record]
 
 
-# rules/ensemble.smk
-def member_inputs(wc):
+# rules/simulate.smk
+#: The rules that declare one simulation each (no job of their own: rules/simulate.smk); a batch's stage.
+SIMULATION_STAGES = (
+    "member",
+    "replicate",
+    "refine_member",
+    "forecast",
+    "truth",
+    "approximation_run",
+    "sensitivity_member",
+    "diagnosis_member",
+    "diagnosis_check_member",
+)
+
+
+def stage_key(stage, wc):
+    """The folder of one instance of a stage: the ensemble iteration, or `all`."""
+    return f"iter_{wc.it}" if stage in ("member", "replicate") else "all"
+
+
+def stage_runs(exp, stage, key):
+    """The runs of one stage instance, each as its wildcards without `exp`, run by run (member, design
+    point, ...) and record by record within a run: the order the batches cut."""
+    recs = list(records(exp))
+    if stage in ("member", "replicate"):
+        it = key.removeprefix("iter_")
+        ids = (
+            member_ids(EXPERIMENTS[exp]["ensemble_size"])
+            if stage == "member"
+            else replicate_ids(exp)
+        )
+        return [{"it": it, "member": m, "record": r} for m in ids for r in recs]
+    if stage == "refine_member":
+        ids = member_ids(refine_runs(exp))
+        return [{"member": m, "record": r} for m in ids for r in recs]
+    if stage in ("forecast", "truth"):
+        return [{"record": r} for r in recs]
+    if stage == "approximation_run":
+        ids = approximation_run_ids(EXPERIMENTS[exp])
+        return [{"run": a, "record": r} for a in ids for r in recs]
+    if stage == "sensitivity_member":
+        s = sensitivity_spec(exp)
+        return [{"sample": m, "record": s.record} for m in member_ids(s.n_simulations)]
+    if stage == "diagnosis_member":
+        ids = member_ids(diagnosis_cfg(exp)["design_points"])
+        return [{"point": p, "record": r} for p in ids for r in design_records(exp)]
+    if stage == "diagnosis_check_member":
+        return [{"row": str(i)} for i in range(len(check_rows_of(exp)))]
+    raise ValueError(f"not a simulation stage: {stage!r}")
+
+
+def stage_batches(exp, stage, key):
+    """The runs of a stage instance cut into max(1, ceil(n / k)) contiguous batches of nearly equal
+    size, k the config's `simulations_per_job` for the experiment's preset. The cut depends on the
+    config alone (not on --cores), so a re-run with other resources finds the same batches.
+    """
+    runs = stage_runs(exp, stage, key)
+    n = len(runs)
+    k = int(config["simulations_per_job"][EXPERIMENTS[exp]["preset"]])
+    nb = max(1, -(-n // k))
+    return [runs[b * n // nb : (b + 1) * n // nb] for b in range(nb)]
+
+
+def batch_file(stage, wc):
+    """The batch job's file of the run with wildcards `wc` (rule simulate)."""
+    key = stage_key(stage, wc)
+    run = {k: v for k, v in wc.items() if k != "exp"}
+    for b, runs in enumerate(stage_batches(wc.exp, stage, key)):
+        if run in runs:
+            return f"results/{wc.exp}/simulate/{stage}/{key}/batch_{b}.json"
+    raise ValueError(f"{stage} {run} of {wc.exp} is in no batch")
+
+
+def batch_inputs(wc):
+    """What the runs of a batch read: the stage's parameter file and the reduced records."""
+    exp, key = wc.exp, wc.key
+    runs = stage_batches(exp, wc.stage, key)[int(wc.batch)]
+    recs = sorted({r["record"] for r in runs if "record" in r})
+    base = f"results/{exp}"
+    if wc.stage in ("member", "replicate"):
+        return {
+            "params": f"{base}/{key}/params.csv",
+            "record": records_input(exp, recs),
+        }
+    if wc.stage == "refine_member":
+        return {
+            "params": f"{base}/refine/params.csv",
+            "record": records_input(exp, recs),
+        }
+    if wc.stage == "forecast":
+        return {
+            "params": f"{base}/forecast/params.json",
+            "record": records_input(exp, recs),
+        }
+    if wc.stage == "truth":
+        return {"record": [p for p in records(exp).values() if p]}
+    if wc.stage == "approximation_run":
+        return {"record": records_input(exp, recs)}
+    if wc.stage == "sensitivity_member":
+        return {
+            "params": f"{base}/sensitivity/design.csv",
+            "record": records_input(exp, recs),
+        }
+    if wc.stage == "diagnosis_member":
+        return {
+            "params": f"{base}/diagnosis/design/params.csv",
+            "record": [design_records(exp)[r] for r in recs],
+        }
+    rows = check_rows_of(exp)
     return {
-        "params": f"results/{wc.exp}/iter_{wc.it}/params.csv",
-        "record": record_input(wc.exp, wc.record),
+        "rows": f"{base}/diagnosis/check_runs.json",
+        "record": sorted(
+            {design_records(exp)[rows[int(r["row"])]["record"]] for r in runs}
+        ),
     }
 
 
+def records_input(exp, names):
+    return [p for r in names for p in record_input(exp, r)]
+
+
+def batch_runs(wc):
+    """Every run of a batch as scripts/simulate.py takes it: its outputs, its stage rule's params
+    evaluated for its wildcards over the defaults below (rules/simulate.smk says what each means), its
+    time limit."""
+    from snakemake.io import apply_wildcards
+    from snakemake.iocontainers import Wildcards
+
+    declared = getattr(rules, wc.stage)
+    out = []
+    for run in stage_batches(wc.exp, wc.stage, wc.key)[int(wc.batch)]:
+        values = {"exp": wc.exp, **run}
+        w = Wildcards(fromdict=values)
+        params = {
+            "sim": sim_settings(wc.exp),
+            "parameters": {"values": {}},
+            "record_file": (
+                stored_record(wc.exp, run["record"]) if "record" in run else None
+            ),
+            "mesh_seed": None,
+            "snapshots": None,
+            "run": {},
+            "must_succeed": False,
+        }
+        params.update(
+            {k: (v(w) if callable(v) else v) for k, v in declared.params.items()}
+        )
+        files = {k: apply_wildcards(str(p), values) for k, p in declared.output.items()}
+        preset = simulation_preset(wc.stage, w)
+        out.append(
+            {
+                **params,
+                "outputs": files,
+                "log": os.path.join(os.path.dirname(files["curve"]), "simulate.log"),
+                "preset": preset,
+                "time_limit_s": time_limit_s(wc.exp, preset),
+            }
+        )
+    return out
+
+
+def batch_group(wc):
+    """Group id of one batch job (docs/cluster.md): the n runs of one stage instance, numbered in
+    stage_runs' order, cut into max(1, n // k) contiguous groups, k the config's
+    `simulations_per_cluster_job` for the experiment's preset; a batch goes with its first run, so a
+    group holds whole batches, never mixing stages, iterations or experiments. A cluster run with
+    `--group-components simulations=1000` (profiles/slurm) submits each group as one job; local runs
+    ignore groups."""
+    batches = stage_batches(wc.exp, wc.stage, wc.key)
+    n = sum(len(b) for b in batches)
+    i = sum(len(b) for b in batches[: int(wc.batch)])
+    k = int(config["simulations_per_cluster_job"][EXPERIMENTS[wc.exp]["preset"]])
+    gid = f"sim-{wc.exp}-{wc.stage}-{wc.key}-{i * max(1, n // k) // n}"
+    workflow.parent_groupids[gid] = SIMULATION_GROUPS
+    return gid
+
+
+# rules/ensemble.smk
 # rules/assimilate.smk
 def member_files(wc, name, folder="members"):
     ids = (

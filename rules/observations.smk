@@ -3,14 +3,12 @@
 
 
 # Twin experiments: the reference simulation (truth parameters, possibly a finer preset); it must succeed.
-use rule simulate as truth with:
+rule truth:
     input:
-        lambda wc: [p for p in records(wc.exp).values() if p],
+        batch=lambda wc: batch_file("truth", wc),
     output:
         curve="results/{exp}/truth/{record}/curve.csv",
         run="results/{exp}/truth/{record}/run.json",
-    log:
-        "results/{exp}/truth/{record}/simulate.log",
     params:
         sim=lambda wc: sim_settings(wc.exp, simulation_preset("truth", wc)),
         parameters=lambda wc: {"values": EXPERIMENTS[wc.exp]["observations"]["truth"]},
@@ -21,25 +19,14 @@ use rule simulate as truth with:
 # One run of the approximation error's pairs (calibration.approximation): a design point of the prior at
 # the finer preset (fine_<i>) or at the experiment's own (coarse_<i>_<r>), on its own mesh realization.
 # A failed run leaves its pair out.
-use rule simulate as approximation_run with:
+rule approximation_run:
     input:
-        lambda wc: record_input(wc.exp, wc.record),
+        batch=lambda wc: batch_file("approximation_run", wc),
     output:
         curve="results/{exp}/approximation/{run}/{record}/curve.csv",
         run="results/{exp}/approximation/{run}/{record}/run.json",
-    log:
-        "results/{exp}/approximation/{run}/{record}/simulate.log",
     wildcard_constraints:
         run="fine_[0-9]+|coarse_[0-9]+_[0-9]+",
-    group:
-        lambda wc: simulation_group(
-            wc.exp,
-            "approximation",
-            approximation_run_ids(EXPERIMENTS[wc.exp]).index(wc.run),
-            len(approximation_run_ids(EXPERIMENTS[wc.exp])),
-            wc.record,
-            records(wc.exp),
-        )
     params:
         sim=lambda wc: sim_settings(wc.exp, simulation_preset("approximation_run", wc)),
         parameters=lambda wc: {"values": approximation_point(wc.exp, wc.run)},

@@ -36,26 +36,14 @@ rule sensitivity_design:
 
 # One FDEM simulation of a design row, the experiment's other estimated parameters held at their
 # prior-box centres; the failure policy of `rule member`.
-use rule simulate as sensitivity_member with:
+rule sensitivity_member:
     input:
-        params="results/{exp}/sensitivity/design.csv",
-        record=lambda wc: record_input(wc.exp, wc.record),
+        batch=lambda wc: batch_file("sensitivity_member", wc),
     output:
         curve="results/{exp}/sensitivity/members/{sample}/{record}/curve.csv",
         run="results/{exp}/sensitivity/members/{sample}/{record}/run.json",
-    log:
-        "results/{exp}/sensitivity/members/{sample}/{record}/simulate.log",
     wildcard_constraints:
         sample="[0-9]+",
-    group:
-        lambda wc: simulation_group(
-            wc.exp,
-            "sensitivity",
-            wc.sample,
-            sensitivity_spec(wc.exp).n_simulations,
-            wc.record,
-            [wc.record],
-        )
     params:
         parameters=lambda wc: {
             "row": wc.sample,

@@ -1,46 +1,48 @@
-# The simulation rules' common part: every FDEM simulation job (rules truth, approximation_run, member,
-# replicate, refine_member, forecast, diagnosis_member, diagnosis_check_member, sensitivity_member) is
-# `use rule simulate as <name> with:`, giving its own input, output, log, group and the params that
-# differ (scripts/simulate.py says which). `rule simulate` itself is the template: no other rule asks for
-# its outputs.
+# The simulations. Every FDEM run of the workflow is declared by a rule of its stage (truth,
+# approximation_run, member, replicate, refine_member, forecast, diagnosis_member,
+# diagnosis_check_member, sensitivity_member: SIMULATION_STAGES) that runs nothing itself: it names the
+# run's outputs, its batch and the params that differ from the defaults (rules/inputs.smk, batch_runs,
+# which states them once: `sim` the experiment's simulation settings, `parameters` where the parameters
+# come from (calibration.ensemble_files.simulation_params), `record_file` the reduced record's
+# record.json (None: a twin's synthetic record), `mesh_seed` the mesh realization (None: unperturbed),
+# `snapshots` a count of fracture snapshots, `run` the entries added to run.json, `must_succeed` a failed
+# run fails its batch). The runs of one stage (an ensemble iteration, a design, the check, ...) are cut
+# into batches (simulations_per_job per preset; stage_runs, stage_batches), and one job of `rule
+# simulate`, the one rule that simulates, runs a batch in one Python process (calibration.batch.run_batch: the engine loaded once, each run in a forked child that
+# writes its own curve.csv, run.json and manifest.json). Why: a Snakemake job costs about a second and
+# a fresh interpreter another second of imports and engine loading, as much as a `fast` simulation
+# (benchmarks/results/bench_member_overhead.json).
 
 
 rule simulate:
-    """One FDEM simulation. A numerical failure (exit code 3) or the time limit leave a failed run.json
-    and an empty curve (the analysis drops the member with that reason); rejected arguments or a missing
-    input (exit code 2) fail the job with the simulator's message and leave nothing, so a re-run after
-    the fix simulates the run; a crash is retried (`member_retries`) and recorded as failed on the last
-    attempt.
-
-    params: `parameters` where the parameters come from (calibration.ensemble_files.simulation_params),
-    `record_file` the reduced record's record.json (rule reduced_record; None: the twin's synthetic one), `mesh_seed` the mesh realization (None:
-    the unperturbed mesh), `snapshots` a count of fracture snapshots, `run` the entries added to
-    run.json, `must_succeed` a failed run fails the job."""
+    """One batch of simulations of one stage, in one process (calibration.batch.run_batch). A numerical
+    failure (exit code 3) or the time limit leave a failed run.json and an empty curve (the analysis drops
+    the member with that reason); rejected arguments or a missing input (exit code 2) fail the batch with
+    the simulator's message; a crash is retried (`member_retries`: the job again, the runs that finished
+    kept) and recorded as a failed run on the last attempt."""
+    input:
+        unpack(batch_inputs),
     output:
-        curve="results/{exp}/simulate/{run}/{record}/curve.csv",
-        run="results/{exp}/simulate/{run}/{record}/run.json",
+        batch="results/{exp}/simulate/{stage}/{key}/batch_{batch}.json",
     log:
-        "results/{exp}/simulate/{run}/{record}/simulate.log",
+        "results/{exp}/simulate/{stage}/{key}/batch_{batch}.log",
+    wildcard_constraints:
+        stage="|".join(SIMULATION_STAGES),
+        key="iter_[0-9]+|all",
+        batch="[0-9]+",
     retries: config["member_retries"]
+    group:
+        lambda wc: batch_group(wc)
     conda:
         CONDA_ENV
     threads: 1
     resources:
         attempt=lambda wc, attempt: attempt,
-        time_limit_s=lambda wc, rulename: time_limit_s(
-            wc.exp, simulation_preset(rulename, wc)
-        ),
-        runtime=lambda wc, rulename: runtime_min(
-            wc.exp, simulation_preset(rulename, wc)
-        ),
+        # the scheduler's wall time: the runs' own limits in series plus 5 minutes, so that a run stops
+        # itself (and is dropped as failed) before Slurm would kill the batch
+        runtime=lambda wc: sum(r["time_limit_s"] for r in batch_runs(wc)) // 60 + 5,
     params:
-        sim=lambda wc: sim_settings(wc.exp),
-        parameters={"values": {}},
-        record_file=lambda wc: stored_record(wc.exp, wc.record),
-        mesh_seed=None,
-        snapshots=None,
-        run={},
-        must_succeed=False,
+        runs=lambda wc: batch_runs(wc),
         max_attempts=config["member_retries"] + 1,
     script:
         "../scripts/simulate.py"

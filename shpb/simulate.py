@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from fdem import ContactParams, JointParams, Material, TractionBC, build_model, run
-from fdem.model import DEFAULT_SAFETY
+from fdem.model import DEFAULT_SAFETY, stable_time_step
 
 from . import contract
 from . import geometry as geo
@@ -268,6 +268,22 @@ def build(geometry: str, preset: str, params: dict | None = None, record=None,
             "params": p, "arrival_s": float(arrival), "window_s": float(window),
             # run.json's record: the raw file it stands for, also when the stored reduction was read
             "measured": measured, "record": source}
+
+
+def warm_up(steps: int = 20) -> float:
+    """Load the compiled engine into this process: a few time steps of the `fast` disc, with the
+    probes, tractions and peak tracking of a real run, so that each kernel's cached machine code is
+    loaded (about 0.65 s, bench_member_overhead.json's ``numba_first_call``). A process that forks its
+    simulations (calibration.batch) pays this once instead of in every child. Returns the wall time [s]."""
+    t0 = time.perf_counter()
+    setup = build("brazilian_disc", "fast")
+    g = setup["geometry"]
+    model = setup["model"]
+    dt = stable_time_step(model)
+    run(model, steps * dt, dt=dt, sample_dt=dt, traction_bcs=setup["traction_bcs"],
+        stress_probes=setup["stress_probes"], snapshot_times=[], track_peak=(g.transmission_bar, 0, 1),
+        peak_drop=PEAK_DROP[g.kind], peak_floor=PEAK_FLOOR_PA / _stress_factor(g))
+    return time.perf_counter() - t0
 
 
 def snapshot_times(snapshots, window_s: float) -> list[float]:

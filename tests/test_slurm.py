@@ -26,11 +26,10 @@ from _rules_text import rule_texts
 REPO = Path(__file__).resolve().parents[1]
 CLUSTER = REPO / "tools" / "slurm" / "slurm_local_cluster.sh"
 PROFILES = REPO / "profiles"
-#: Rules that run one FDEM simulation each: the only ones a cluster run submits as Slurm jobs.
-#: ``replicate``: the runs at an iteration's ensemble mean that measure the simulator's own variability;
-#: ``simulate``: the template the others are (``use rule simulate as <name>``, rules/simulate.smk).
-SIMULATION_RULES = {"simulate", "member", "replicate", "refine_member", "truth", "forecast", "diagnosis_member", "diagnosis_check_member",
-                    "sensitivity_member", "approximation_run"}
+#: The rule that runs FDEM simulations (a batch of one stage per job, rules/simulate.smk): the only one a
+#: cluster run submits as Slurm jobs. The rules that declare each simulation (member, replicate, truth,
+#: ...) run no job of their own.
+SIMULATION_RULES = {"simulate"}
 
 sys.path.insert(0, str(REPO / "tools" / "slurm"))
 import slurm_compare  # noqa: E402

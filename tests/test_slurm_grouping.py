@@ -1,9 +1,10 @@
 """Cluster jobs worth scheduling (issue 33, item 4): on Slurm, the simulations of one ensemble iteration
 run in jobs of `simulations_per_cluster_job` simulations instead of one job of a few seconds each.
 
-How (docs/cluster.md): the simulation rules carry a `group:` id per experiment, stage (ensemble
-iteration, sensitivity or diagnosis design, diagnosis check) and block of simulations
-(rules/common.smk, simulation_group); profiles/slurm lets a group span those disconnected jobs
+How (docs/cluster.md): the simulations of a stage run in batches of `simulations_per_job` (one job of
+rule simulate each, rules/inputs.smk, stage_batches); the batch jobs carry a `group:` id per experiment,
+stage (ensemble iteration, sensitivity or diagnosis design, diagnosis check) and block of simulations
+(batch_group); profiles/slurm lets a group span those disconnected jobs
 (`group-components: [simulations=1000]`) and gives every Slurm job one simulation slot, so that a group
 job is sized for its simulations in series.
 
@@ -86,65 +87,84 @@ def group_jobs(plan: str) -> list[tuple[str, list[tuple[str, dict]]]]:
     return groups
 
 
+def batch_sizes(n: int, k: int = 4) -> list[int]:
+    """The runs per batch of a stage of n runs (rules/inputs.smk, stage_batches; fast: 4 per job)."""
+    nb = max(1, -(-n // k))
+    return [(b + 1) * n // nb - b * n // nb for b in range(nb)]
+
+
 def job_count(plan: str, rule: str) -> int:
     m = re.search(rf"^{rule}\s+(\d+)$", plan, re.M)
     return int(m.group(1)) if m else 0
 
 
+def runs_of(w: dict) -> int:
+    """The runs of one batch job of the plan (its stage: the experiment's members or replicates)."""
+    n = {"big": 25, "small": 8}[w["exp"]] if w["stage"] == "member" else 6
+    return batch_sizes(n)[int(w["batch"])]
+
+
 def sizes_per_iteration(groups) -> dict[tuple[str, str], list[int]]:
+    """Runs per group job, per experiment and iteration."""
     out = defaultdict(list)
     for _, jobs in groups:
-        out[(jobs[0][1]["exp"], jobs[0][1]["it"])].append(len(jobs))
+        out[(jobs[0][1]["exp"], jobs[0][1]["key"])].append(sum(runs_of(w) for _, w in jobs))
     return {k: sorted(v, reverse=True) for k, v in out.items()}
 
 
 # Targets: big's iteration 1 (which brings its iteration 0 along: propose <- analysis <- iteration 0)
-# and small's iteration 0, so the plan holds member jobs of two iterations and two experiments.
+# and small's iteration 0, so the plan holds member batches of two iterations and two experiments.
 TARGETS = ["results/big/iter_1/responses.csv", "results/small/iter_0/responses.csv"]
 N_MEMBERS = 25 + 25 + 8
 #: observations.model_error.simulator_replicates (default 6) at the mean of each of those three iterations
 N_REPLICATES = 3 * 6
+#: batch jobs of 4 fast runs (simulations_per_job): 25 -> 7, 8 -> 2, 6 replicates -> 2
+N_BATCHES = 7 + 7 + 2 + 3 * 2
 
 
 @pytest.mark.parametrize("size, expected", [
-    # the default (fast: 12): a stage of n simulations -> n // 12 jobs of nearly equal size
-    (None, {("big", "0"): [13, 12], ("big", "1"): [13, 12], ("small", "0"): [8]}),
-    (5, {("big", "0"): [5] * 5, ("big", "1"): [5] * 5, ("small", "0"): [8]}),
+    # the default (fast: 12): a stage of n simulations -> n // 12 groups of whole batches (3,4,3,4 | 3,4,4)
+    (None, {("big", "iter_0"): [14, 11], ("big", "iter_1"): [14, 11], ("small", "iter_0"): [8]}),
+    (5, {("big", "iter_0"): [7, 7, 4, 4, 3], ("big", "iter_1"): [7, 7, 4, 4, 3], ("small", "iter_0"): [8]}),
 ])
-def test_the_slurm_dry_run_groups_the_members_of_each_iteration_into_jobs_of_the_configured_size(
+def test_the_slurm_dry_run_groups_the_batches_of_each_iteration_into_jobs_of_the_configured_size(
         tmp_path, size, expected):
     write_config(tmp_path, **({"simulations_per_cluster_job": {"fast": size}} if size else {}))
     out = snakemake(tmp_path, "-n", *TARGETS)
     plan = out.stdout + out.stderr
     assert out.returncode == 0, plan[-3000:]
-    assert job_count(plan, "member") == N_MEMBERS
-    groups = group_jobs(plan)
-    members = [(w["exp"], w["it"], w["member"]) for _, jobs in groups for rule, w in jobs if rule == "member"]
-    assert sorted(members) == sorted(set(members)) and len(members) == N_MEMBERS, \
-        "every member job in exactly one group job"
+    # every simulation is declared by its own rule (no job of its own), run by a batch job
+    assert job_count(plan, "member") == N_MEMBERS and job_count(plan, "replicate") == N_REPLICATES
+    # the member and replicate batches, and each twin's truth run (a batch of its own)
+    assert job_count(plan, "simulate") == N_BATCHES + 2
+    groups = [g for g in group_jobs(plan) if g[1][0][1]["stage"] != "truth"]
+    batches = [(w["exp"], w["stage"], w["key"], w["batch"]) for _, jobs in groups for _, w in jobs]
+    assert sorted(batches) == sorted(set(batches)) and len(batches) == N_BATCHES, \
+        "every batch job in exactly one group job"
+    assert {rule for _, jobs in groups for rule, _ in jobs} == {"simulate"}
+    assert sum(runs_of(w) for _, jobs in groups for _, w in jobs if w["stage"] == "member") == N_MEMBERS
     # the replicates at an iteration's mean form group jobs of their own (one per iteration, 6 < 12)
-    replicate_groups = [(gid, jobs) for gid, jobs in groups if {rule for rule, _ in jobs} == {"replicate"}]
-    assert sum(len(jobs) for _, jobs in replicate_groups) == job_count(plan, "replicate") == N_REPLICATES
+    replicate_groups = [(gid, jobs) for gid, jobs in groups if {w["stage"] for _, w in jobs} == {"replicate"}]
     groups = [g for g in groups if g not in replicate_groups]
     for gid, jobs in groups + replicate_groups:
-        assert len({rule for rule, _ in jobs}) == 1, f"{gid} mixes members and replicates"
-        assert len({(w["exp"], w["it"]) for _, w in jobs}) == 1, f"{gid} mixes iterations or experiments"
-        numbers = sorted(int(w["member"]) for _, w in jobs)
-        assert numbers == list(range(numbers[0], numbers[-1] + 1)), f"{gid}: not a block of members"
-    assert {rule for _, jobs in groups for rule, _ in jobs} == {"member"}
+        assert len({(w["exp"], w["stage"], w["key"]) for _, w in jobs}) == 1, \
+            f"{gid} mixes stages, iterations or experiments"
+        numbers = sorted(int(w["batch"]) for _, w in jobs)
+        assert numbers == list(range(numbers[0], numbers[-1] + 1)), f"{gid}: not a block of batches"
     assert sizes_per_iteration(groups) == expected
-    assert sizes_per_iteration(replicate_groups) == {("big", "0"): [6], ("big", "1"): [6], ("small", "0"): [6]}
+    assert sizes_per_iteration(replicate_groups) == {("big", "iter_0"): [6], ("big", "iter_1"): [6],
+                                                     ("small", "iter_0"): [6]}
 
 
-def test_without_the_profiles_group_components_every_simulation_is_its_own_job(tmp_path):
-    # The profile's `group-components` is what makes a group span its disconnected member jobs: given
-    # as 1 (the command line replaces the profile's list), the plan is one job per member again.
+def test_without_the_profiles_group_components_every_batch_is_its_own_job(tmp_path):
+    # The profile's `group-components` is what makes a group span its disconnected batch jobs: given
+    # as 1 (the command line replaces the profile's list), the plan is one cluster job per batch.
     write_config(tmp_path)
     out = snakemake(tmp_path, "-n", *TARGETS, "--group-components", "simulations=1")
     plan = out.stdout + out.stderr
     assert out.returncode == 0, plan[-3000:]
     groups = group_jobs(plan)
-    assert len(groups) == N_MEMBERS + N_REPLICATES and {len(jobs) for _, jobs in groups} == {1}
+    assert len(groups) == N_BATCHES + 2 and {len(jobs) for _, jobs in groups} == {1}
 
 
 FAKE_SLURM = """#!/bin/sh
@@ -170,17 +190,19 @@ def test_a_group_job_asks_slurm_for_one_cpu_the_memory_of_one_simulation_and_the
                     "--slurm-no-account", env={"PATH": f"{bin_dir}{os.pathsep}{os.environ['PATH']}",
                                                 "FAKE_SLURM_LOG": str(log)})
     calls = log.read_text().splitlines() if log.exists() else []
-    submissions = [c for c in calls if c.startswith("sbatch ") and "'member:exp=big,it=0," in c]
+    submissions = [c for c in calls if c.startswith("sbatch ") and "'simulate:exp=big,stage=member,key=iter_0," in c]
     assert submissions, (out.stdout + out.stderr)[-3000:]
     asked = set()
     for call in submissions:
-        n = len(re.findall(r"'member:exp=big,it=0,member=\d+,record=synthetic'", call))
+        found = re.findall(r"'simulate:exp=big,stage=member,key=iter_0,batch=(\d+)'", call)
+        n = sum(batch_sizes(25)[int(b)] for b in found)
         runtime = int(re.search(r" -t (\d+) ", call).group(1))
         mem = int(re.search(r" --mem (\d+) ", call).group(1))
         cpus = int(re.search(r" --cpus-per-task=(\d+) ", call).group(1))
         asked.add((n, cpus, mem, runtime))
-    # fast members: runtime 15 min each (member_time_limit_s 600 s + 5 min), mem_mb 1000 (profile)
-    assert asked == {(13, 1, 1000, 13 * 15), (12, 1, 1000, 12 * 15)}
+    # a batch of r fast runs asks for r x 10 min (member_time_limit_s 600 s) + 5 min, a group job for the
+    # sum over its batches (3, 4, 3, 4 runs | 3, 4, 4); mem_mb 1000 (profile)
+    assert asked == {(14, 1, 1000, 35 + 45 + 35 + 45), (11, 1, 1000, 35 + 45 + 45)}
 
 
 def test_a_local_run_does_not_group_and_the_default_profile_has_no_cluster_settings(tmp_path):
@@ -195,11 +217,16 @@ def test_a_local_run_does_not_group_and_the_default_profile_has_no_cluster_setti
     assert out.returncode == 0, log[-3000:]
     assert all((tmp_path / t).exists() for t in targets)
     assert "Group job" not in log
-    assert len(re.findall(r"Finished jobid: \d+ \(Rule: member\)", log)) == 2  # two jobs, one member each
+    # one batch job ran the two members (and the other two of its batch of four)
+    assert len(re.findall(r"Finished jobid: \d+ \(Rule: simulate\)", log)) == 1
+    assert len(re.findall(r"Finished jobid: \d+ \(Rule: member\)", log)) == 2
 
 
 def test_the_group_size_is_a_validated_config_key_with_per_preset_defaults():
     cfg = {"experiments": {"big": twin(3, 25)}}
+    assert validate_config(cfg, SCHEMA)["simulations_per_job"] == {"fast": 4, "standard": 2, "paper": 1}
+    with pytest.raises(ConfigError, match="simulations_per_job"):
+        validate_config({**cfg, "simulations_per_job": {"fast": 0}}, SCHEMA)
     assert validate_config(cfg, SCHEMA)["simulations_per_cluster_job"] == {"fast": 12, "standard": 6, "paper": 2}
     with pytest.raises(ConfigError, match="simulations_per_cluster_job"):
         validate_config({**cfg, "simulations_per_cluster_job": {"fast": 0}}, SCHEMA)

@@ -260,8 +260,9 @@ def scenario_compare(out: Path, cfg: Path, timeout: float) -> dict:
     local = run(prepare(out / "local"), snakemake_argv("default", cfg, ["--cores", "2"]), "snakemake.log", timeout)
     slurm = run(prepare(out / "slurm"), snakemake_argv("slurm", cfg), "snakemake.log", timeout)
     res = compare_results(out / "local", out / "slurm")
-    n_jobs = len(jobs_in_log(Path(slurm["log"]), "member"))
-    return {"local_wall_s": local["wall_s"], "slurm_wall_s": slurm["wall_s"], "slurm_member_jobs": n_jobs, **res}
+    # the member simulations' batch jobs (rule simulate, stage member)
+    n_jobs = len([w for w in jobs_in_log(Path(slurm["log"]), "simulate") if w.get("stage") == "member"])
+    return {"local_wall_s": local["wall_s"], "slurm_wall_s": slurm["wall_s"], "slurm_member_batches": n_jobs, **res}
 
 
 FAIL_TIME_LIMIT_S = 40  # the fail scenario's member_time_limit_s (fast members take a few seconds)
@@ -272,8 +273,10 @@ def fault_config(cfg: Path, workdir: Path, crash: int, hang: int) -> Path:
     conf = yaml.safe_load(cfg.read_text())
     conf["simulator"] = fault_wrapper(workdir, crash=crash, hang=hang)
     conf["member_time_limit_s"] = {"fast": FAIL_TIME_LIMIT_S}
-    # one member per Slurm job, as the checks below count them: in a group job a crash re-runs the
-    # whole group (docs/cluster.md), which is tested by tests/test_slurm_grouping.py
+    # one member per batch and per Slurm job, as the checks below count them (batch k = member k of the
+    # twin's one record): in a batch or group job a crash re-runs the job, whose finished runs are kept
+    # (calibration.batch), tested by tests/test_batch.py and tests/test_slurm_grouping.py
+    conf["simulations_per_job"] = {"fast": 1}
     conf["simulations_per_cluster_job"] = {"fast": 1}
     path = workdir / "fault_config.yaml"
     path.write_text(json.dumps(conf, indent=2) + "\n")  # JSON is YAML (and keeps 4e6 a number)
@@ -289,8 +292,9 @@ def scenario_fail(out: Path, cfg: Path, timeout: float, crash: int = 1, hang: in
     failed = failed_slurm_jobs(slurm_log)
     if any(state == "TIMEOUT" for _, state in failed):
         raise CheckFailed(f"a Slurm job ended in TIMEOUT although the simulator stops itself first: {failed}")
-    submissions = {m: [j for j in jobs_in_log(slurm_log, "member")
-                       if j.get("it") == "0" and j.get("member") == member_folder(m)] for m in (crash, hang)}
+    submissions = {m: [j for j in jobs_in_log(slurm_log, "simulate")
+                       if j.get("stage") == "member" and j.get("key") == "iter_0" and j.get("batch") == str(m)]
+                   for m in (crash, hang)}
     if len(submissions[hang]) != 1:
         raise CheckFailed(f"the hanging member {hang} was submitted {len(submissions[hang])} times, not once")
     runs = member_runs(slu)
