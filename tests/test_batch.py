@@ -1,0 +1,128 @@
+"""A batch of simulations in one job (calibration.batch.run_batch, rule simulate): each run keeps the
+member contract, a crash is retried without re-running what finished, a configuration error stops the
+batch, a run made by the same request is not simulated again, and the shipped simulator's runs fork
+from a process that loaded the engine once (their results equal the subprocess's to the byte)."""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from calibration.batch import request_key, run_batch, token_path
+from calibration.heal import MANIFEST, check_manifest
+from calibration.runner import DEFAULT_SIMULATOR, SimulatorCrash, SimulatorRejected
+from test_workflow import write_stand_in
+
+
+def spec(tmp: Path, name: str, sigma_t: float, command: str, **over) -> dict:
+    folder = tmp / "runs" / name
+    sim = {"geometry": "brazilian_disc", "preset": "fast", "fixed": {}, "t_end": 5e-5, "sample_dt": 1e-6,
+           "command": command}
+    return {"sim": sim, "parameters": {"values": {"sigma_t": sigma_t, "E_t": 500.0}}, "record_file": None,
+            "mesh_seed": None, "snapshots": None, "run": {"member": name}, "must_succeed": False,
+            "outputs": {"curve": str(folder / "curve.csv"), "run": str(folder / "run.json")},
+            "log": str(folder / "simulate.log"), "preset": "fast", "time_limit_s": 60, **over}
+
+
+@pytest.fixture
+def stand_in(tmp_path, monkeypatch):
+    monkeypatch.setenv("STAND_IN_MARKERS", str(tmp_path))
+    return write_stand_in(tmp_path)
+
+
+def test_a_crash_is_retried_by_the_next_attempt_which_runs_only_what_did_not_finish(tmp_path, stand_in, monkeypatch):
+    monkeypatch.setenv("STAND_IN_CRASH_ONCE_BELOW", "1.5e7")  # the second run crashes on its first call
+    specs = [spec(tmp_path, "a", 3e7, stand_in), spec(tmp_path, "b", 1e7, stand_in), spec(tmp_path, "c", 4e7, stand_in)]
+    batch = tmp_path / "batch_0.json"
+    with pytest.raises(SimulatorCrash, match=r"1 of 3 simulations of the batch crashed \(attempt 1 of 2"):
+        run_batch(specs, batch_path=batch, attempt=1, max_attempts=2, log_path=tmp_path / "batch_0.log")
+    assert not batch.exists() and token_path(batch).read_text().splitlines() == [
+        str(tmp_path / "runs/a"), str(tmp_path / "runs/c")]
+    assert not (tmp_path / "runs/b/run.json").exists()
+    kept = (tmp_path / "runs/a/run.json").read_text()
+    report = run_batch(specs, batch_path=batch, attempt=2, max_attempts=2, log_path=tmp_path / "batch_0.log")
+    assert [(r["folder"][-1], r["status"]) for r in report["runs"]] == [("a", "ok"), ("b", "ok"), ("c", "ok")]
+    assert json.loads(batch.read_text()) == report and not token_path(batch).exists()
+    log = (tmp_path / "batch_0.log").read_text().splitlines()
+    assert log[0] == "batch of 3 simulations, attempt 2 of 2; 2 made before by the same request"
+    assert [ln.split(":")[0] for ln in log[1:]] == [str(tmp_path / "runs/b")]  # only the crashed one ran
+    assert (tmp_path / "runs/a/run.json").read_text() == kept
+    b = json.loads((tmp_path / "runs/b/run.json").read_text())
+    assert b["status"] == "ok" and b["attempt"] == 2 and b["member"] == "b"
+    for name in "abc":
+        assert check_manifest(tmp_path / "runs" / name / MANIFEST)[1] is None
+
+
+def test_a_crash_on_the_last_attempt_is_a_failed_run_and_the_batch_ends(tmp_path, stand_in, monkeypatch):
+    monkeypatch.setenv("STAND_IN_CRASH_ONCE_BELOW", "1.5e7")
+    specs = [spec(tmp_path, "a", 3e7, stand_in), spec(tmp_path, "b", 1e7, stand_in)]
+    report = run_batch(specs, batch_path=tmp_path / "batch_0.json", attempt=2, max_attempts=2)
+    assert [r["status"] for r in report["runs"]] == ["ok", "failed"]
+    assert "crashed on every attempt" in report["runs"][1]["reason"]
+
+
+def test_rejected_arguments_stop_the_batch_with_the_simulators_message(tmp_path, stand_in, monkeypatch):
+    monkeypatch.setenv("STAND_IN_REJECT", "measured record data/missing.txt not found")
+    specs = [spec(tmp_path, "a", 3e7, stand_in), spec(tmp_path, "b", 2e7, stand_in)]
+    with pytest.raises(SimulatorRejected, match="data/missing.txt not found"):
+        run_batch(specs, batch_path=tmp_path / "batch_0.json")
+    assert not (tmp_path / "batch_0.json").exists() and not list((tmp_path / "runs").rglob("run.json"))
+
+
+def test_a_numerical_failure_is_a_failed_run_unless_the_run_must_succeed(tmp_path, stand_in, monkeypatch):
+    monkeypatch.setenv("STAND_IN_FAIL_BELOW", "5e6")
+    report = run_batch([spec(tmp_path, "a", 4e6, stand_in), spec(tmp_path, "b", 3e7, stand_in)],
+                       batch_path=tmp_path / "a.json")
+    assert [r["status"] for r in report["runs"]] == ["failed", "ok"]
+    assert report["runs"][0]["reason"].startswith("numerical failure")
+    assert pd.read_csv(tmp_path / "runs/a/curve.csv").empty
+    with pytest.raises(RuntimeError, match="the truth simulation .* failed: numerical failure"):
+        run_batch([spec(tmp_path, "t", 4e6, stand_in, must_succeed=True)], batch_path=tmp_path / "b.json",
+                  label="truth")
+    assert not (tmp_path / "b.json").exists()
+
+
+def test_a_run_is_simulated_again_when_its_request_or_its_files_change_and_only_then(tmp_path, stand_in):
+    specs = [spec(tmp_path, "a", 3e7, stand_in), spec(tmp_path, "b", 2e7, stand_in)]
+    batch = tmp_path / "batch_0.json"
+    run_batch(specs, batch_path=batch, log_path=tmp_path / "log")
+    assert open(tmp_path / "log").read().startswith("batch of 2 simulations, attempt 1 of 1; 0 made before")
+    run_batch(specs, batch_path=batch, log_path=tmp_path / "log")  # a re-run of the same batch: nothing to do
+    assert open(tmp_path / "log").read().splitlines() == [
+        "batch of 2 simulations, attempt 1 of 1; 2 made before by the same request"]
+    changed = [specs[0], spec(tmp_path, "b", 2.5e7, stand_in)]  # b's parameter changed
+    (tmp_path / "runs/a/curve.csv").write_text("time_s,stress_Pa\n")  # a's curve altered
+    run_batch(changed, batch_path=batch, log_path=tmp_path / "log")
+    ran = [ln.split(":")[0] for ln in open(tmp_path / "log").read().splitlines()[1:]]
+    assert ran == [str(tmp_path / "runs/a"), str(tmp_path / "runs/b")]
+    assert json.loads((tmp_path / "runs/b/run.json").read_text())["params"]["sigma_t"] == 2.5e7
+    # the key holds every input of a run: the mesh seed, the record, the run's entries, the command
+    base = request_key(specs[0], {"sigma_t": 3e7, "E_t": 500.0})
+    for over in ({"mesh_seed": 3}, {"record_file": "r.json"}, {"run": {"member": "z"}}, {"snapshots": 4}):
+        assert request_key({**specs[0], **over}, {"sigma_t": 3e7, "E_t": 500.0}) != base
+    other = {**specs[0], "sim": {**specs[0]["sim"], "command": "my_simulator"}}
+    assert request_key(other, {"sigma_t": 3e7, "E_t": 500.0}) != base
+
+
+def test_the_shipped_simulators_runs_fork_from_one_loaded_process_and_equal_the_subprocesss(tmp_path, monkeypatch):
+    from calibration import runner
+
+    # two fast disc runs (a short window) in one batch: forked from this process after its warm-up
+    specs = [spec(tmp_path, name, s, DEFAULT_SIMULATOR, sim={"geometry": "brazilian_disc", "preset": "fast",
+                                                              "fixed": {}, "t_end": 2e-5, "sample_dt": 1e-6,
+                                                              "command": DEFAULT_SIMULATOR})
+             for name, s in (("a", 3e7), ("b", 4.5e7))]
+    report = run_batch(specs, batch_path=tmp_path / "batch_0.json", log_path=tmp_path / "log")
+    assert [r["status"] for r in report["runs"]] == ["ok", "ok"]
+    assert "engine loaded in" in open(tmp_path / "log").read().splitlines()[1]
+    # the same runs through the old path, a second interpreter each: the same curves to the byte
+    monkeypatch.setattr(runner, "_forkable", lambda command: False)
+    again = [{**s, "outputs": {k: v.replace("/runs/", "/sub/") for k, v in s["outputs"].items()},
+              "log": s["log"].replace("/runs/", "/sub/")} for s in specs]
+    run_batch(again, batch_path=tmp_path / "batch_1.json")
+    for name in "ab":
+        assert (tmp_path / "runs" / name / "curve.csv").read_bytes() == (tmp_path / "sub" / name / "curve.csv").read_bytes()
+    assert os.path.getsize(tmp_path / "runs/a/curve.csv") > 100
