@@ -52,7 +52,8 @@ def snakemake(clone: Path, work: Path, *args: str) -> float:
     t0 = time.perf_counter()
     subprocess.run([sys.executable, "-m", "snakemake", "--snakefile", str(clone / "Snakefile"), "--directory",
                     str(work), "--configfile", str(work / "config.yaml"), "--workflow-profile", "none",
-                    "--quiet", "all", *args], check=True, capture_output=True, cwd=clone)
+                    "--quiet", "all", *args], check=True, capture_output=True, cwd=clone,
+                   env={**os.environ, "PYTHONPATH": str(clone)})  # the clone's packages, not the installed ones
     return time.perf_counter() - t0
 
 

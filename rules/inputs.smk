@@ -108,14 +108,15 @@ def stage_runs(exp, stage, key):
 
 
 def stage_batches(exp, stage, key):
-    """The runs of a stage instance cut into max(1, ceil(n / k)) contiguous batches of nearly equal
-    size, k the config's `simulations_per_job` for the experiment's preset. The cut depends on the
-    config alone (not on --cores), so a re-run with other resources finds the same batches.
+    """The runs of a stage instance cut into min(n, 2 ceil(n / 2k)) contiguous batches of nearly equal
+    size (at most k each), k the config's `simulations_per_job` for the experiment's preset: an even
+    count, so that two cores finish a stage together. The cut depends on the config alone (not on
+    --cores), so a re-run with other resources finds the same batches.
     """
     runs = stage_runs(exp, stage, key)
     n = len(runs)
     k = int(config["simulations_per_job"][EXPERIMENTS[exp]["preset"]])
-    nb = max(1, -(-n // k))
+    nb = max(1, min(n, 2 * -(-n // (2 * k))))
     return [runs[b * n // nb : (b + 1) * n // nb] for b in range(nb)]
 
 

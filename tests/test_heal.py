@@ -65,10 +65,11 @@ def test_a_truncated_or_altered_member_file_is_resimulated_and_the_posterior_is_
     assert "members/002/synthetic: the sha256 of curve.csv does not match its manifest (altered)" in lines[2]
     assert len(lines) == 3 and not any(p.exists() for p in stale)
     assert json.loads(analysis.read_text()) == uninterrupted
-    # 1 and 2 simulated again; 0 and 3, in the same batch (4 fast runs), kept: made by the same request
-    log = (tmp_path / "results/twin/simulate/member/iter_0/batch_0.log").read_text().splitlines()
-    assert log[0] == "batch of 4 simulations, attempt 1 of 2; 2 made before by the same request"
-    assert [ln.split(":")[0] for ln in log[1:]] == [str(c.parent.relative_to(tmp_path)) for c in (curves[1], curves[2])]
+    # 1 and 2 simulated again; 0 and 3, in their batches (0 and 1, 2 and 3), kept: made by the same request
+    for b, m in ((0, 1), (1, 2)):
+        log = (tmp_path / f"results/twin/simulate/member/iter_0/batch_{b}.log").read_text().splitlines()
+        assert log[0] == "batch of 2 simulations, attempt 1 of 2; 1 made before by the same request"
+        assert [ln.split(":")[0] for ln in log[1:]] == [str(curves[m].parent.relative_to(tmp_path))]
     for m, c in curves.items():
         assert m not in (0, 3) or (c.parent / "run.json").read_text() == written[m], m
         assert check_manifest(c.parent / MANIFEST)[1] is None and os.path.getmtime(c) > 1.0  # not left in 1970

@@ -216,9 +216,9 @@ def test_dry_run_lists_one_ordinary_job_per_design_row(tmp_path):
             break
         job, n = line.split()
         counts[job] = int(n)
-    # one declared simulation per design row, run in batches of 4 (fast: simulations_per_job) by rule simulate
-    assert counts == {"sensitivity_design": 1, "simulate": 114, "sensitivity_member": 455,
-                      "sensitivity_analysis": 1, "total": 571}
+    # one declared simulation per design row, run by rule simulate in 58 batches of at most 8 (fast)
+    assert counts == {"sensitivity_design": 1, "simulate": 58, "sensitivity_member": 455,
+                      "sensitivity_analysis": 1, "total": 515}
     # the default target is unchanged while sensitivity.run is false, and includes the stage with true
     default = snakemake(tmp_path, "-n", "--cores", "2")
     assert default.returncode == 0 and "sensitivity_" not in default.stdout + default.stderr

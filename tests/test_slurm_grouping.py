@@ -87,9 +87,10 @@ def group_jobs(plan: str) -> list[tuple[str, list[tuple[str, dict]]]]:
     return groups
 
 
-def batch_sizes(n: int, k: int = 4) -> list[int]:
-    """The runs per batch of a stage of n runs (rules/inputs.smk, stage_batches; fast: 4 per job)."""
-    nb = max(1, -(-n // k))
+def batch_sizes(n: int, k: int = 8) -> list[int]:
+    """The runs per batch of a stage of n runs (rules/inputs.smk, stage_batches; fast: at most 8 per
+    job, an even count of batches)."""
+    nb = max(1, min(n, 2 * -(-n // (2 * k))))
     return [(b + 1) * n // nb - b * n // nb for b in range(nb)]
 
 
@@ -118,14 +119,14 @@ TARGETS = ["results/big/iter_1/responses.csv", "results/small/iter_0/responses.c
 N_MEMBERS = 25 + 25 + 8
 #: observations.model_error.simulator_replicates (default 6) at the mean of each of those three iterations
 N_REPLICATES = 3 * 6
-#: batch jobs of 4 fast runs (simulations_per_job): 25 -> 7, 8 -> 2, 6 replicates -> 2
-N_BATCHES = 7 + 7 + 2 + 3 * 2
+#: batch jobs of at most 8 fast runs (simulations_per_job), an even count: 25 -> 4, 8 -> 2, 6 replicates -> 2
+N_BATCHES = 4 + 4 + 2 + 3 * 2
 
 
 @pytest.mark.parametrize("size, expected", [
-    # the default (fast: 12): a stage of n simulations -> n // 12 groups of whole batches (3,4,3,4 | 3,4,4)
-    (None, {("big", "iter_0"): [14, 11], ("big", "iter_1"): [14, 11], ("small", "iter_0"): [8]}),
-    (5, {("big", "iter_0"): [7, 7, 4, 4, 3], ("big", "iter_1"): [7, 7, 4, 4, 3], ("small", "iter_0"): [8]}),
+    # the default (fast: 12): a stage of n simulations -> n // 12 groups of whole batches (6, 6, 6 | 7)
+    (None, {("big", "iter_0"): [18, 7], ("big", "iter_1"): [18, 7], ("small", "iter_0"): [8]}),
+    (5, {("big", "iter_0"): [7, 6, 6, 6], ("big", "iter_1"): [7, 6, 6, 6], ("small", "iter_0"): [8]}),
 ])
 def test_the_slurm_dry_run_groups_the_batches_of_each_iteration_into_jobs_of_the_configured_size(
         tmp_path, size, expected):
@@ -201,8 +202,8 @@ def test_a_group_job_asks_slurm_for_one_cpu_the_memory_of_one_simulation_and_the
         cpus = int(re.search(r" --cpus-per-task=(\d+) ", call).group(1))
         asked.add((n, cpus, mem, runtime))
     # a batch of r fast runs asks for r x 10 min (member_time_limit_s 600 s) + 5 min, a group job for the
-    # sum over its batches (3, 4, 3, 4 runs | 3, 4, 4); mem_mb 1000 (profile)
-    assert asked == {(14, 1, 1000, 35 + 45 + 35 + 45), (11, 1, 1000, 35 + 45 + 45)}
+    # sum over its batches (6, 6, 6 runs | 7); mem_mb 1000 (profile)
+    assert asked == {(18, 1, 1000, 3 * 65), (7, 1, 1000, 75)}
 
 
 def test_a_local_run_does_not_group_and_the_default_profile_has_no_cluster_settings(tmp_path):
@@ -217,7 +218,7 @@ def test_a_local_run_does_not_group_and_the_default_profile_has_no_cluster_setti
     assert out.returncode == 0, log[-3000:]
     assert all((tmp_path / t).exists() for t in targets)
     assert "Group job" not in log
-    # one batch job ran the two members (and the other two of its batch of four)
+    # one batch job ran the two members (and the other two of its batch of four: 8 runs, two batches)
     assert len(re.findall(r"Finished jobid: \d+ \(Rule: simulate\)", log)) == 1
     assert len(re.findall(r"Finished jobid: \d+ \(Rule: member\)", log)) == 2
 
