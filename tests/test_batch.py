@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import json
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pandas as pd
@@ -13,8 +15,11 @@ import pytest
 
 from calibration.batch import request_key, run_batch, token_path
 from calibration.heal import MANIFEST, check_manifest
+from calibration.job_log import THREAD_VARIABLES
 from calibration.runner import DEFAULT_SIMULATOR, SimulatorCrash, SimulatorRejected
 from test_workflow import write_stand_in
+
+REPO = Path(__file__).resolve().parents[1]
 
 
 def spec(tmp: Path, name: str, sigma_t: float, command: str, **over) -> dict:
@@ -107,22 +112,34 @@ def test_a_run_is_simulated_again_when_its_request_or_its_files_change_and_only_
     assert request_key(other, {"sigma_t": 3e7, "E_t": 500.0}) != base
 
 
-def test_the_shipped_simulators_runs_fork_from_one_loaded_process_and_equal_the_subprocesss(tmp_path, monkeypatch):
-    from calibration import runner
+#: A batch job as Snakemake starts it: a fresh, single-threaded process (the pytest workers hold threads,
+#: so the shipped simulator would not fork in them); argv: specs JSON, batch file, log, "subprocess" to
+#: turn the fork off (the old path, a second interpreter per run).
+JOB = """
+import json, sys
+from calibration import runner
+from calibration.batch import run_batch
+if sys.argv[4] == "subprocess":
+    runner._forkable = lambda command: False
+run_batch(json.loads(open(sys.argv[1]).read()), batch_path=sys.argv[2], log_path=sys.argv[3])
+"""
 
-    # two fast disc runs (a short window) in one batch: forked from this process after its warm-up
-    specs = [spec(tmp_path, name, s, DEFAULT_SIMULATOR, sim={"geometry": "brazilian_disc", "preset": "fast",
-                                                              "fixed": {}, "t_end": 2e-5, "sample_dt": 1e-6,
-                                                              "command": DEFAULT_SIMULATOR})
-             for name, s in (("a", 3e7), ("b", 4.5e7))]
-    report = run_batch(specs, batch_path=tmp_path / "batch_0.json", log_path=tmp_path / "log")
-    assert [r["status"] for r in report["runs"]] == ["ok", "ok"]
-    assert "engine loaded in" in open(tmp_path / "log").read().splitlines()[1]
-    # the same runs through the old path, a second interpreter each: the same curves to the byte
-    monkeypatch.setattr(runner, "_forkable", lambda command: False)
-    again = [{**s, "outputs": {k: v.replace("/runs/", "/sub/") for k, v in s["outputs"].items()},
-              "log": s["log"].replace("/runs/", "/sub/")} for s in specs]
-    run_batch(again, batch_path=tmp_path / "batch_1.json")
-    for name in "ab":
-        assert (tmp_path / "runs" / name / "curve.csv").read_bytes() == (tmp_path / "sub" / name / "curve.csv").read_bytes()
-    assert os.path.getsize(tmp_path / "runs/a/curve.csv") > 100
+
+def test_the_shipped_simulators_runs_fork_from_one_loaded_process_and_equal_the_subprocesss(tmp_path):
+    sim = {"geometry": "brazilian_disc", "preset": "fast", "fixed": {}, "t_end": 2e-5, "sample_dt": 1e-6,
+           "command": DEFAULT_SIMULATOR}
+    logs = {}
+    for mode, folder in (("fork", "runs"), ("subprocess", "sub")):
+        specs = [spec(tmp_path / folder, name, s, DEFAULT_SIMULATOR, sim=sim) for name, s in (("a", 3e7), ("b", 4.5e7))]
+        (tmp_path / f"{mode}.json").write_text(json.dumps(specs))
+        subprocess.run([sys.executable, "-c", JOB, str(tmp_path / f"{mode}.json"), str(tmp_path / f"{mode}_batch.json"),
+                        str(tmp_path / f"{mode}.log"), mode], check=True, cwd=REPO,
+                       env={**os.environ, "PYTHONPATH": str(REPO), **dict.fromkeys(THREAD_VARIABLES, "1")})
+        logs[mode] = (tmp_path / f"{mode}.log").read_text().splitlines()
+        assert [r["status"] for r in json.loads((tmp_path / f"{mode}_batch.json").read_text())["runs"]] == ["ok", "ok"]
+    # the forking batch loaded the engine once, before its first run; the subprocess path has nothing to load
+    assert logs["fork"][1].startswith("engine loaded in") and len(logs["fork"]) == 4
+    assert not any("engine loaded" in ln for ln in logs["subprocess"])
+    for name in "ab":  # the same curves to the byte
+        fork, sub = (tmp_path / d / "runs" / name / "curve.csv" for d in ("runs", "sub"))
+        assert fork.read_bytes() == sub.read_bytes() and os.path.getsize(fork) > 100

@@ -225,7 +225,7 @@ def test_a_local_run_does_not_group_and_the_default_profile_has_no_cluster_setti
 
 def test_the_group_size_is_a_validated_config_key_with_per_preset_defaults():
     cfg = {"experiments": {"big": twin(3, 25)}}
-    assert validate_config(cfg, SCHEMA)["simulations_per_job"] == {"fast": 4, "standard": 2, "paper": 1}
+    assert validate_config(cfg, SCHEMA)["simulations_per_job"] == {"fast": 8, "standard": 4, "paper": 1}
     with pytest.raises(ConfigError, match="simulations_per_job"):
         validate_config({**cfg, "simulations_per_job": {"fast": 0}}, SCHEMA)
     assert validate_config(cfg, SCHEMA)["simulations_per_cluster_job"] == {"fast": 12, "standard": 6, "paper": 2}

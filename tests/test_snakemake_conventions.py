@@ -29,6 +29,16 @@ def rule_blocks() -> dict[str, str]:
     return rule_texts(sorted((REPO / "rules").glob("*.smk")))[0]
 
 
+#: The rules that declare one simulation each and run no job (rules/simulate.smk: rule simulate runs
+#: them in batches and writes their logs): no log and no script of their own.
+DECLARATIONS = {"member", "replicate", "refine_member", "forecast", "truth", "approximation_run",
+                "sensitivity_member", "diagnosis_member", "diagnosis_check_member"}
+
+
+def job_blocks() -> dict[str, str]:
+    return {n: b for n, b in rule_blocks().items() if n not in DECLARATIONS}
+
+
 def section(block: str, name: str) -> str:
     m = re.search(rf"^    {name}:\n((?:        .*\n|\s*\n)+)", block, re.M)
     return m.group(1) if m else ""
@@ -37,9 +47,17 @@ def section(block: str, name: str) -> str:
 # --------------------------------------------------------------------------------------------------
 # logs
 # --------------------------------------------------------------------------------------------------
-def test_every_rule_logs_to_a_file_of_its_own_wildcards_and_its_script_writes_it():
+def test_the_simulation_declarations_run_nothing_and_every_other_rule_a_script():
     blocks = rule_blocks()
-    assert len(blocks) >= 28, sorted(blocks)  # every rule but the Snakefile's `all`
+    assert DECLARATIONS <= set(blocks)
+    for name, block in blocks.items():
+        actions = [a for a in ("script", "shell", "run") if re.search(rf"^    {a}:", block, re.M)]
+        assert actions == ([] if name in DECLARATIONS else ["script"]), (name, actions)
+
+
+def test_every_rule_logs_to_a_file_of_its_own_wildcards_and_its_script_writes_it():
+    blocks = job_blocks()
+    assert len(blocks) >= 20, sorted(blocks)  # every job rule but the Snakefile's `all`
     for name, block in blocks.items():
         log = section(block, "log")
         paths = re.findall(r'"([^"]+)"', log)
@@ -53,7 +71,7 @@ def test_every_rule_logs_to_a_file_of_its_own_wildcards_and_its_script_writes_it
 
 
 def test_log_paths_of_two_rules_never_coincide():
-    logs = [re.findall(r'"([^"]+)"', section(b, "log"))[0] for b in rule_blocks().values()]
+    logs = [re.findall(r'"([^"]+)"', section(b, "log"))[0] for b in job_blocks().values()]
     assert len(logs) == len(set(logs))
 
 

@@ -1,0 +1,78 @@
+"""The default run, old and new code, from fresh clones in one sitting: wall time and whether the result
+files are the same (issue 54: the default run's time; the same answers where the arithmetic is unchanged).
+
+    python benchmarks/bench_default_run.py [--old REV] [--new REV] [--out benchmarks/results/bench_default_run.json]
+
+Each commit is cloned into an empty temporary folder and runs ``snakemake --cores 2`` there as a user
+starts it (the clone's packages first on the path, its own Numba cache compiled by the run, as in a
+fresh clone); old first, then new, on an otherwise idle machine. ``tools/compare_runs.py`` then compares
+every file under the two ``results/`` folders (identical, identical but for wall times, differing), and
+the differing files are listed. Writes JSON with the cores, the load average, both walls and job counts.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(REPO)]
+
+from shpb.atomic import emit_json  # noqa: E402
+
+
+def clone_at(rev: str, where: Path) -> Path:
+    subprocess.run(["git", "clone", "--quiet", str(REPO), str(where)], check=True)
+    subprocess.run(["git", "checkout", "--quiet", rev], cwd=where, check=True)
+    return where
+
+
+def default_run(clone: Path) -> dict:
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-m", "snakemake", "--cores", "2"], cwd=clone, capture_output=True,
+                          text=True, env={**os.environ, "PYTHONPATH": str(clone)})
+    wall = time.perf_counter() - t0
+    log = proc.stdout + proc.stderr
+    done = re.findall(r"Finished jobid: \d+ \(Rule: (\w+)\)", log)
+    return {"wall_s": round(wall, 1), "exit_code": proc.returncode, "jobs": len(done),
+            "jobs_per_rule": {r: done.count(r) for r in sorted(set(done))},
+            "fdem_runs": len(list((clone / "results").rglob("run.json"))),
+            "log_tail": log[-1500:] if proc.returncode else ""}
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--old", default="7b72408", help="the commit before batches")
+    ap.add_argument("--new", default="HEAD")
+    ap.add_argument("--out", default=str(REPO / "benchmarks/results/bench_default_run.json"))
+    a = ap.parse_args(argv)
+    new = subprocess.run(["git", "rev-parse", "--short", a.new], cwd=REPO, check=True, capture_output=True,
+                         text=True).stdout.strip()
+    load0, t0 = list(os.getloadavg()), time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        old_clone, new_clone = clone_at(a.old, tmp / "old"), clone_at(new, tmp / "new")
+        runs = {"old": default_run(old_clone), "new": default_run(new_clone)}
+        cmp = subprocess.run([sys.executable, str(REPO / "tools" / "compare_runs.py"), str(old_clone / "results"),
+                              str(new_clone / "results"), "--out", str(tmp / "compare.json")],
+                             capture_output=True, text=True)
+        compare = json.loads((tmp / "compare.json").read_text()) if (tmp / "compare.json").is_file() else {
+            "error": cmp.stderr[-2000:]}
+    result = {"benchmark": "bench_default_run", "cores": os.cpu_count(), "python": platform.python_version(),
+              "old": a.old, "new": new, "command": "snakemake --cores 2 (fresh clone)",
+              "load_average_before": load0, "load_average_after": list(os.getloadavg()),
+              "bench_wall_s": round(time.perf_counter() - t0, 1), "runs": runs,
+              "wall_ratio_old_over_new": round(runs["old"]["wall_s"] / runs["new"]["wall_s"], 2),
+              "compare": compare}
+    return emit_json(result, a.out)
+
+
+if __name__ == "__main__":
+    main()
