@@ -20,8 +20,8 @@ Failure stays per run. A numerical failure or a run past its time limit is a fai
 drops it), the batch goes on. A crash (the simulator ended outside the contract) is retried: the other
 runs finish, then the batch raises :class:`~calibration.runner.SimulatorCrash` while attempts remain,
 Snakemake runs the job again (``retries``), and that attempt re-runs only what did not finish (the runs
-finished in this job's earlier attempts are listed in a token file beside the batch file, their files
-checked against their manifests); on the last attempt ``run_member`` records the crash as a failed run.
+that finished carry their request in their manifests, below); on the last attempt ``run_member`` records
+the crash as a failed run.
 Rejected arguments or a missing input (exit code 2) stop the batch at once: a configuration error.
 
 Nothing here imports Snakemake.
@@ -38,25 +38,11 @@ from .ensemble_files import simulation_params
 from .heal import MANIFEST, check_manifest
 from .runner import SimulatorCrash, failure_card, run_member, simulator_command
 
-__all__ = ["run_batch", "token_path"]
+__all__ = ["run_batch", "request_key"]
 
 #: What run_batch needs of each run (scripts/simulate.py's params, rules/inputs.smk batch_runs).
 RUN_KEYS = ("sim", "parameters", "record_file", "mesh_seed", "snapshots", "run", "must_succeed", "outputs",
             "log", "preset", "time_limit_s")
-
-
-def token_path(batch_path: str | Path) -> Path:
-    """The file listing the runs finished by the current job's attempts (removed when the batch ends)."""
-    batch_path = Path(batch_path)
-    return batch_path.with_name(f".{batch_path.name}.finished")
-
-
-def _finished_before(token: Path, attempt: int) -> set[str]:
-    """The runs' folders an earlier attempt of this job finished (attempt 1 starts a new list)."""
-    if attempt <= 1 or not token.is_file():
-        atomic_write_text(token, "")
-        return set()
-    return {line for line in token.read_text().splitlines() if line}
 
 
 _CODE: list[str] = []
@@ -113,11 +99,6 @@ def _folder(spec: Mapping) -> str:
     return str(Path(spec["outputs"]["curve"]).parent)
 
 
-def _intact(folder: Path) -> bool:
-    manifest = folder / MANIFEST
-    return manifest.is_file() and check_manifest(manifest)[1] is None
-
-
 def _warm_engine(specs: Sequence[Mapping]) -> float | None:
     """Load the engine here once when the runs fork from this process (the shipped simulator)."""
     from .runner import _forkable
@@ -135,13 +116,9 @@ def run_batch(specs: Sequence[Mapping], *, batch_path: str | Path, attempt: int 
     """Run the simulations ``specs`` (each with :data:`RUN_KEYS`), then write ``batch_path``: the runs'
     folders, statuses and reasons. Returns that dict. ``params_file`` is the stage's parameter file
     (the batch's ``params`` input), ``experiments`` the config's, for ``parameters`` that name them."""
-    batch_path = Path(batch_path)
-    token = token_path(batch_path)
-    done = _finished_before(token, attempt)
     params = [simulation_params(s["parameters"], s["sim"]["fixed"], params_file, experiments) for s in specs]
     keys = [request_key(s, p) for s, p in zip(specs, params)]
-    kept = {_folder(s) for s, k in zip(specs, keys)
-            if (_folder(s) in done and _intact(Path(_folder(s)))) or _made_by(Path(_folder(s)), k)}
+    kept = {_folder(s) for s, k in zip(specs, keys) if _made_by(Path(_folder(s)), k)}
     todo = [s for s in specs if _folder(s) not in kept]
     log = _Log(log_path, f"batch of {len(specs)} simulations, attempt {attempt} of {max_attempts}; "
                          f"{len(kept)} made before by the same request")
@@ -162,10 +139,8 @@ def run_batch(specs: Sequence[Mapping], *, batch_path: str | Path, attempt: int 
             crashed.append(f"{folder}: {exc}")
             log.line(f"{folder}: crashed: {exc}")
             continue
-        log.line(f"{folder}: {run.get('status')} {run.get('reason', '')} ({run.get('wall_s', float('nan')):.1f} s)")
+        log.line(f"{folder}: {run.get('status')} {run.get('reason', '')} ({float(run.get('wall_s') or 'nan'):.1f} s)")
         _stamp(Path(folder), key)
-        with token.open("a") as fh:
-            fh.write(folder + "\n")
         if spec.get("must_succeed") and run["status"] != "ok":
             raise RuntimeError(f"the {label or 'batch'} simulation {folder} failed: {run.get('reason')}")
         runs.append({"folder": folder, "status": run.get("status"), "reason": run.get("reason", "")})
@@ -176,7 +151,6 @@ def run_batch(specs: Sequence[Mapping], *, batch_path: str | Path, attempt: int 
     # no wall times: a re-run writes the same file
     report = {"runs": runs}
     atomic_write_json(batch_path, report)
-    token.unlink(missing_ok=True)
     return report
 
 

@@ -178,9 +178,10 @@ def heal_results(root: str | Path = "results", argv: Sequence[str] | None = None
     files no longer match their manifest out of date; returns (and prints to ``out``, default stderr) one
     line each.
 
-    A bad member's files are dated back to the epoch, older than any input of the job that wrote them:
-    Snakemake's default rerun trigger (``mtime``) then runs that job again, deleting the files first,
-    and reruns what depends on it. Deleting them here would not do: Snakemake does not rebuild a
+    A bad member's files are dated back to the epoch, with the batch file of the job that wrote them
+    (rule simulate; the member's own rule runs no job), older than any input of that job: Snakemake's
+    default rerun trigger (``mtime``) then runs the batch again, which re-simulates what is altered
+    (calibration.batch keeps its runs made by the same request), and reruns what depends on it. Deleting them here would not do: Snakemake does not rebuild a
     missing file whose consumers are up to date. Until a run asks for the member, the files stay bad and
     each start says so again.
 
