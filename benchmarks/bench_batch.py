@@ -63,6 +63,20 @@ def clone_at(rev: str, where: Path) -> Path:
     return where
 
 
+def old_and_new(argv, out: str, **extra) -> tuple[argparse.Namespace, str]:
+    """The command line of an old-against-new benchmark (--old, --new, --out and ``extra`` options) and
+    the new commit's short hash, fixed before anything runs."""
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--old", default="7b72408", help="the commit before batches")
+    ap.add_argument("--new", default="HEAD")
+    ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / out))
+    for name, default in extra.items():
+        ap.add_argument(f"--{name}", type=int, default=default)
+    a = ap.parse_args(argv)
+    return a, subprocess.run(["git", "rev-parse", "--short", a.new], cwd=REPO, check=True, capture_output=True,
+                             text=True).stdout.strip()
+
+
 def measure(clone: Path, work: Path, members: int, repeats: int) -> dict:
     work.mkdir(parents=True)
     (work / "config.yaml").write_text(yaml.safe_dump(config(members), sort_keys=False))
@@ -83,15 +97,7 @@ def measure(clone: Path, work: Path, members: int, repeats: int) -> dict:
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--old", default="7b72408", help="the commit before batches")
-    ap.add_argument("--new", default="HEAD")
-    ap.add_argument("--members", type=int, default=16)
-    ap.add_argument("--repeats", type=int, default=2)
-    ap.add_argument("--out", default=str(REPO / "benchmarks/results/bench_batch.json"))
-    a = ap.parse_args(argv)
-    new = subprocess.run(["git", "rev-parse", "--short", a.new], cwd=REPO, check=True, capture_output=True,
-                         text=True).stdout.strip()
+    a, new = old_and_new(argv, "bench_batch.json", members=16, repeats=2)
     load0, t0 = list(os.getloadavg()), time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)

@@ -11,7 +11,6 @@ the differing files are listed. Writes JSON with the cores, the load average, bo
 """
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
@@ -25,13 +24,8 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(REPO)]
 
+from benchmarks.bench_batch import clone_at, old_and_new  # noqa: E402
 from shpb.atomic import emit_json  # noqa: E402
-
-
-def clone_at(rev: str, where: Path) -> Path:
-    subprocess.run(["git", "clone", "--quiet", str(REPO), str(where)], check=True)
-    subprocess.run(["git", "checkout", "--quiet", rev], cwd=where, check=True)
-    return where
 
 
 def default_run(clone: Path) -> dict:
@@ -48,13 +42,7 @@ def default_run(clone: Path) -> dict:
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--old", default="7b72408", help="the commit before batches")
-    ap.add_argument("--new", default="HEAD")
-    ap.add_argument("--out", default=str(REPO / "benchmarks/results/bench_default_run.json"))
-    a = ap.parse_args(argv)
-    new = subprocess.run(["git", "rev-parse", "--short", a.new], cwd=REPO, check=True, capture_output=True,
-                         text=True).stdout.strip()
+    a, new = old_and_new(argv, "bench_default_run.json")
     load0, t0 = list(os.getloadavg()), time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
