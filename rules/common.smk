@@ -14,9 +14,9 @@ from calibration.job_log import THREAD_VARIABLES  # the variables each job's log
 
 os.environ.update(dict.fromkeys(THREAD_VARIABLES, "1"))
 
-# A simulation's files are written by its batch's job (rule simulate) before the rule that declares them
-# (rule simulation, no job of its own) is reached, which Snakemake reports as a warning per simulation,
-# hundreds per run: expected here, so left out of the log.
+# A simulation's files are written by its batch's job (rule simulate) before the stage rule that
+# declares them (member, replicate, ...: no job of their own) is reached, which Snakemake reports as a
+# warning per simulation, hundreds per run: expected here, so left out of the log.
 import logging as _logging
 from snakemake.logging import logger as _snakemake_logger
 

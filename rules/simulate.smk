@@ -8,10 +8,10 @@
 # `snapshots` a count of fracture snapshots, `run` the entries added to run.json, `must_succeed` a failed
 # run fails its batch). The runs of one stage (an ensemble iteration, a design, the check, ...) are cut
 # into batches (simulations_per_job per preset; stage_runs, stage_batches), and one job of `rule
-# simulate`, the one rule that simulates, runs a batch in one Python process (calibration.batch.run_batch: the engine loaded once, each run in a forked child that
-# writes its own curve.csv, run.json and manifest.json). Why: a Snakemake job costs about a second and
-# a fresh interpreter another second of imports and engine loading, as much as a `fast` simulation
-# (benchmarks/results/bench_member_overhead.json).
+# simulate`, the one rule that simulates, runs a batch in one Python process
+# (calibration.batch.run_batch: the engine loaded once, each run in a forked child that writes its own
+# curve.csv, run.json and manifest.json). Why: a job's start-up and the engine's load cost about as much
+# as a `fast` simulation's time loop (benchmarks/results/bench_batch.json).
 
 
 rule simulate:
