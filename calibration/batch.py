@@ -11,8 +11,8 @@ Snakemake's job start, an interpreter, the imports and the engine's load every t
 A run whose files are intact (their manifest checks out) and were made by the same request (the
 run's settings with the simulator command, parameters, record, mesh seed, run.json entries, and the
 source of the shipped simulator's packages, ``fdem`` and ``shpb``: a SHA-256 kept in its
-``manifest.json``) is not run again:
-the simulation is deterministic, so it would write the same files. A batch re-run because one of its
+``manifest.json``, written only where the outcome was the simulator's own: a success or a numerical
+failure) is not run again: the simulation is deterministic, so it would write the same files. A batch re-run because one of its
 runs was altered (:func:`calibration.heal.heal_results`), or after a kill, re-simulates only what is
 missing, altered or asked differently.
 
@@ -33,17 +33,12 @@ import json
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-from .contracts import atomic_write_json, atomic_write_text, read_json
+from .contracts import atomic_write_json, read_json
 from .ensemble_files import simulation_params
 from .heal import MANIFEST, check_manifest
 from .runner import SimulatorCrash, failure_card, run_member, simulator_command
 
 __all__ = ["run_batch", "request_key"]
-
-#: What run_batch needs of each run (scripts/simulate.py's params, rules/inputs.smk batch_runs).
-RUN_KEYS = ("sim", "parameters", "record_file", "mesh_seed", "snapshots", "run", "must_succeed", "outputs",
-            "log", "preset", "time_limit_s")
-
 
 _CODE: list[str] = []
 
@@ -85,16 +80,6 @@ def _made_by(folder: Path, key: str) -> bool:
         return False
 
 
-def _stamp(folder: Path, key: str) -> None:
-    """Add the request to the manifest run_member wrote (atomically, as the manifest itself)."""
-    manifest = folder / MANIFEST
-    if not manifest.is_file():
-        return
-    data = json.loads(manifest.read_text())
-    data["request"] = key
-    atomic_write_text(manifest, json.dumps(data, indent=1))
-
-
 def _folder(spec: Mapping) -> str:
     return str(Path(spec["outputs"]["curve"]).parent)
 
@@ -113,8 +98,10 @@ def _warm_engine(specs: Sequence[Mapping]) -> float | None:
 def run_batch(specs: Sequence[Mapping], *, batch_path: str | Path, attempt: int = 1, max_attempts: int = 1,
               params_file: str | None = None, experiments: Mapping | None = None, label: str = "",
               log_path: str | Path | None = None) -> dict:
-    """Run the simulations ``specs`` (each with :data:`RUN_KEYS`), then write ``batch_path``: the runs'
-    folders, statuses and reasons. Returns that dict. ``params_file`` is the stage's parameter file
+    """Run the simulations ``specs``, then write ``batch_path``: the runs' folders, statuses and reasons.
+    Each spec (rules/inputs.smk, batch_runs) holds ``sim`` (the experiment's simulation settings),
+    ``parameters``, ``record_file``, ``mesh_seed``, ``snapshots``, ``run`` (entries added to run.json),
+    ``must_succeed``, ``outputs`` (curve, run and any snapshot pictures), ``log`` and ``time_limit_s``. Returns that dict. ``params_file`` is the stage's parameter file
     (the batch's ``params`` input), ``experiments`` the config's, for ``parameters`` that name them."""
     params = [simulation_params(s["parameters"], s["sim"]["fixed"], params_file, experiments) for s in specs]
     keys = [request_key(s, p) for s, p in zip(specs, params)]
@@ -134,13 +121,12 @@ def run_batch(specs: Sequence[Mapping], *, batch_path: str | Path, attempt: int 
             runs.append({"folder": folder, "status": run.get("status"), "reason": run.get("reason", "")})
             continue
         try:
-            run = _run_one(spec, values, attempt, max_attempts)
+            run = _run_one(spec, values, key, attempt, max_attempts)
         except SimulatorCrash as exc:
             crashed.append(f"{folder}: {exc}")
             log.line(f"{folder}: crashed: {exc}")
             continue
         log.line(f"{folder}: {run.get('status')} {run.get('reason', '')} ({float(run.get('wall_s') or 'nan'):.1f} s)")
-        _stamp(Path(folder), key)
         if spec.get("must_succeed") and run["status"] != "ok":
             raise RuntimeError(f"the {label or 'batch'} simulation {folder} failed: {run.get('reason')}")
         runs.append({"folder": folder, "status": run.get("status"), "reason": run.get("reason", "")})
@@ -169,7 +155,7 @@ class _Log:
                 fh.write(text + "\n")
 
 
-def _run_one(spec: Mapping, params: Mapping, attempt: int, max_attempts: int) -> dict:
+def _run_one(spec: Mapping, params: Mapping, key: str, attempt: int, max_attempts: int) -> dict:
     sim, out = spec["sim"], spec["outputs"]
     run = run_member(command=simulator_command(sim["command"]), geometry=sim["geometry"], preset=sim["preset"],
                      params=params,
@@ -177,7 +163,7 @@ def _run_one(spec: Mapping, params: Mapping, attempt: int, max_attempts: int) ->
                      curve_path=out["curve"], run_path=out["run"], log_path=spec["log"], attempt=attempt,
                      time_limit_s=spec["time_limit_s"], max_attempts=max_attempts,
                      mesh_seed=spec.get("mesh_seed"), extra_run=spec.get("run") or None,
-                     snapshots=spec.get("snapshots"))
+                     snapshots=spec.get("snapshots"), request=key)
     # the outputs besides the curve and run.json are the snapshots' pictures: a failed run, or a
     # simulator that writes none, gets a picture saying so
     for name, png in out.items():

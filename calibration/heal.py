@@ -115,15 +115,16 @@ def file_sha256(path: str | Path) -> str:
     return digest.hexdigest()
 
 
-def write_manifest(folder: str | Path, files: Iterable[str | Path]) -> Path:
+def write_manifest(folder: str | Path, files: Iterable[str | Path], request: str | None = None) -> Path:
     """``folder/manifest.json``: ``{"files": {name: {"sha256", "bytes"}}}`` of ``files`` (paths as opened;
-    names relative to the folder), written atomically. Written last, so a manifest vouches for files
-    already in place."""
+    names relative to the folder), with ``request`` (what made the files, calibration.batch.request_key)
+    when given, written atomically. Written last, so a manifest vouches for files already in place."""
     folder = Path(folder)
     entries = {}
     for path in map(Path, files):
         entries[os.path.relpath(path, folder)] = {"sha256": file_sha256(path), "bytes": path.stat().st_size}
-    return atomic_write_text(folder / MANIFEST, json.dumps({"files": entries}, indent=1))
+    data = {"files": entries, **({"request": request} if request is not None else {})}
+    return atomic_write_text(folder / MANIFEST, json.dumps(data, indent=1))
 
 
 def check_manifest(manifest: str | Path) -> tuple[list[Path], str | None]:
@@ -181,8 +182,8 @@ def heal_results(root: str | Path = "results", argv: Sequence[str] | None = None
     A bad member's files are dated back to the epoch, with the batch file of the job that wrote them
     (rule simulate; the member's own rule runs no job), older than any input of that job: Snakemake's
     default rerun trigger (``mtime``) then runs the batch again, which re-simulates what is altered
-    (calibration.batch keeps its runs made by the same request), and reruns what depends on it. Deleting them here would not do: Snakemake does not rebuild a
-    missing file whose consumers are up to date. Until a run asks for the member, the files stay bad and
+    (calibration.batch keeps its runs made by the same request), and reruns what depends on it.
+    Deleting them here would not do: Snakemake does not rebuild a missing file whose consumers are up to date. Until a run asks for the member, the files stay bad and
     each start says so again.
 
     Nothing is changed in an invocation that runs no job (:func:`is_dry_invocation`; the lines then say

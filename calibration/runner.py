@@ -114,7 +114,7 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
                t_end: float | None = None, sample_dt: float | None = None, attempt: int = 1,
                max_attempts: int = 1, log_path: str | Path | None = None, extra_run: Mapping | None = None,
                time_limit_s: float | None = None, snapshots: int | None = None,
-               mesh_seed: int | None = None) -> dict:
+               mesh_seed: int | None = None, request: str | None = None) -> dict:
     """Run one simulation and leave ``curve_path`` and ``run_path`` behind, atomically.
 
     Exit code 0: the simulator's ``curve.csv``/``run.json`` are moved into place. Exit code 3 (numerical
@@ -138,7 +138,10 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
     The simulator dies with the process calling this (:func:`calibration.heal.child_dies_with_parent`),
     and nothing is moved into place once that process has lost its parent (a killed Snakemake), so a
     killed run leaves no file written after the kill. ``manifest.json`` (the sha256 of ``curve.csv``
-    and ``run.json``, :func:`calibration.heal.write_manifest`) is written last, whatever the outcome.
+    and ``run.json``, :func:`calibration.heal.write_manifest`) is written last, whatever the outcome;
+    ``request`` (what made the files, :func:`calibration.batch.request_key`) goes into it where the
+    outcome is the simulator's own (exit 0 or 3), not after a crash or the time limit, which a new
+    attempt may not repeat.
 
     Returns the ``run.json`` dict written.
     """
@@ -173,7 +176,7 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
                 shutil.rmtree(out / "snapshots", ignore_errors=True)
                 os.replace(tmp / "snapshots", out / "snapshots")
             os.replace(curve_csv, curve_path)
-            _write_run(run_path, run, curve_path)
+            _write_run(run_path, run, curve_path, request)
             return run
         if proc.returncode == EXIT_BAD_INPUT:
             raise SimulatorRejected(f"the simulator rejected its arguments or input (exit code 2): "
@@ -185,7 +188,7 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
                         "preset": preset, "params": dict(params)}, **extra)
             run.setdefault("wall_s", wall)
             atomic_write_text(curve_path, failed_curve_text())
-            _write_run(run_path, run, curve_path)
+            _write_run(run_path, run, curve_path, request)
             return run
         what = (f"simulator exited with code {proc.returncode}" if proc.returncode >= 0
                 else f"simulator killed by signal {-proc.returncode}")
@@ -197,7 +200,7 @@ def run_member(*, command: Sequence[str], geometry: str, preset: str, params: Ma
         run = {"status": "failed", "reason": f"crashed on every attempt: {message}", "geometry": geometry,
                "preset": preset, "params": dict(params), "wall_s": wall, **extra}
         atomic_write_text(curve_path, failed_curve_text())
-        _write_run(run_path, run, curve_path)
+        _write_run(run_path, run, curve_path)  # no request: a crash need not recur
         return run
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -366,7 +369,7 @@ def _timed_out(exc: subprocess.TimeoutExpired, *, argv, wall, geometry, preset, 
            "reason": f"time limit: the simulation ran longer than {exc.timeout:g} s (member_time_limit_s) "
                      f"and was stopped", **extra}
     atomic_write_text(curve_path, failed_curve_text())
-    _write_run(run_path, run, curve_path)
+    _write_run(run_path, run, curve_path)  # no request: the time a run takes depends on the machine
     return run
 
 
@@ -377,10 +380,10 @@ def _still_wanted(parent: int) -> None:
         raise SimulatorCrash(f"the job's parent process {parent} died (a killed run): no output written")
 
 
-def _write_run(run_path: Path, run: dict, curve_path: Path) -> None:
+def _write_run(run_path: Path, run: dict, curve_path: Path, request: str | None = None) -> None:
     """run.json, then the member folder's manifest.json of both files (written last)."""
     atomic_write_json(run_path, _jsonable(run))
-    write_manifest(run_path.parent, [curve_path, run_path])
+    write_manifest(run_path.parent, [curve_path, run_path], request)
 
 
 def _jsonable(obj):

@@ -175,16 +175,17 @@ def time_limit_s(exp, preset=None):
     return int(config["member_time_limit_s"][preset or EXPERIMENTS[exp]["preset"]])
 
 
-def runtime_min(exp, preset=None):
-    """Scheduler wall time [min] of a simulation job: the simulator's own limit plus 5 minutes, so
-    that the member stops itself (and is dropped as failed) before Slurm would kill the job.
+def runtime_min(limit_s):
+    """Scheduler wall time [min] of a job whose simulations may run `limit_s` seconds in all (their
+    own limits in series) plus 5 minutes, so that a simulation stops itself (and is dropped as failed)
+    before Slurm would kill the job.
     """
-    return -(-time_limit_s(exp, preset) // 60) + 5
+    return -(-int(limit_s) // 60) + 5
 
 
 #: Parent name of every simulation group id (batch_group in rules/inputs.smk): the Slurm profile's
-#: `group-components: [simulations=...]` lets a group span the disconnected batches that share one id (Snakemake's default is one
-#: connected component per group job). Snakemake looks a group id up under its parent name
+#: `group-components: [simulations=...]` lets a group span the disconnected batches that share one id
+#: (Snakemake's default is one connected component per group job). Snakemake looks a group id up under its parent name
 #: (`workflow.parent_groupids`, filled the same way for a group name with wildcards).
 SIMULATION_GROUPS = "simulations"
 

@@ -130,52 +130,53 @@ def batch_file(stage, wc):
     raise ValueError(f"{stage} {run} of {wc.exp} is in no batch")
 
 
+#: The file a stage's simulations take their parameters from (batch_inputs; `{key}` the stage's
+#: folder); the truth and the approximation runs are given theirs, the check reads its rows.
+STAGE_PARAMETERS = {
+    "member": "results/{exp}/{key}/params.csv",
+    "replicate": "results/{exp}/{key}/params.csv",
+    "refine_member": "results/{exp}/refine/params.csv",
+    "forecast": "results/{exp}/forecast/params.json",
+    "sensitivity_member": "results/{exp}/sensitivity/design.csv",
+    "diagnosis_member": "results/{exp}/diagnosis/design/params.csv",
+}
+
+
 def batch_inputs(wc):
-    """What the runs of a batch read: the stage's parameter file and the reduced records."""
-    exp, key = wc.exp, wc.key
-    runs = stage_batches(exp, wc.stage, key)[int(wc.batch)]
-    recs = sorted({r["record"] for r in runs if "record" in r})
-    base = f"results/{exp}"
-    if wc.stage in ("member", "replicate"):
-        return {
-            "params": f"{base}/{key}/params.csv",
-            "record": records_input(exp, recs),
-        }
-    if wc.stage == "refine_member":
-        return {
-            "params": f"{base}/refine/params.csv",
-            "record": records_input(exp, recs),
-        }
-    if wc.stage == "forecast":
-        return {
-            "params": f"{base}/forecast/params.json",
-            "record": records_input(exp, recs),
-        }
+    """What the runs of a batch read: the stage's parameter file (the check's rows) and the reduced
+    records (the truth: the raw records its twin is driven by)."""
+    exp = wc.exp
     if wc.stage == "truth":
         return {"record": [p for p in records(exp).values() if p]}
-    if wc.stage == "approximation_run":
-        return {"record": records_input(exp, recs)}
-    if wc.stage == "sensitivity_member":
-        return {
-            "params": f"{base}/sensitivity/design.csv",
-            "record": records_input(exp, recs),
-        }
-    if wc.stage == "diagnosis_member":
-        return {
-            "params": f"{base}/diagnosis/design/params.csv",
-            "record": [design_records(exp)[r] for r in recs],
-        }
-    rows = check_rows_of(exp)
-    return {
-        "rows": f"{base}/diagnosis/check_runs.json",
-        "record": sorted(
-            {design_records(exp)[rows[int(r["row"])]["record"]] for r in runs}
-        ),
-    }
+    runs = stage_batches(exp, wc.stage, wc.key)[int(wc.batch)]
+    if wc.stage == "diagnosis_check_member":
+        rows = check_rows_of(exp)
+        names = {rows[int(r["row"])]["record"] for r in runs}
+        files = {"rows": f"results/{exp}/diagnosis/check_runs.json"}
+    else:
+        names = {r["record"] for r in runs}
+        pattern = STAGE_PARAMETERS.get(wc.stage)
+        files = {"params": pattern.format(exp=exp, key=wc.key)} if pattern else {}
+    return {**files, "record": [p for r in sorted(names) for p in record_input(exp, r)]}
 
 
-def records_input(exp, names):
-    return [p for r in names for p in record_input(exp, r)]
+def stage_run_wildcards(exp, run):
+    from snakemake.iocontainers import Wildcards
+
+    return Wildcards(fromdict={"exp": exp, **run})
+
+
+def batch_runtime_min(wc):
+    """Scheduler wall time [min] of a batch job: its runs' time limits in series (runtime_min)."""
+    runs = stage_batches(wc.exp, wc.stage, wc.key)[int(wc.batch)]
+    return runtime_min(
+        sum(
+            time_limit_s(
+                wc.exp, simulation_preset(wc.stage, stage_run_wildcards(wc.exp, r))
+            )
+            for r in runs
+        )
+    )
 
 
 def batch_runs(wc):
@@ -183,13 +184,12 @@ def batch_runs(wc):
     evaluated for its wildcards over the defaults below (rules/simulate.smk says what each means), its
     time limit."""
     from snakemake.io import apply_wildcards
-    from snakemake.iocontainers import Wildcards
 
     declared = getattr(rules, wc.stage)
     out = []
     for run in stage_batches(wc.exp, wc.stage, wc.key)[int(wc.batch)]:
         values = {"exp": wc.exp, **run}
-        w = Wildcards(fromdict=values)
+        w = stage_run_wildcards(wc.exp, run)
         params = {
             "sim": sim_settings(wc.exp),
             "parameters": {"values": {}},
@@ -205,14 +205,12 @@ def batch_runs(wc):
             {k: (v(w) if callable(v) else v) for k, v in declared.params.items()}
         )
         files = {k: apply_wildcards(str(p), values) for k, p in declared.output.items()}
-        preset = simulation_preset(wc.stage, w)
         out.append(
             {
                 **params,
                 "outputs": files,
                 "log": os.path.join(os.path.dirname(files["curve"]), "simulate.log"),
-                "preset": preset,
-                "time_limit_s": time_limit_s(wc.exp, preset),
+                "time_limit_s": time_limit_s(wc.exp, simulation_preset(wc.stage, w)),
             }
         )
     return out

@@ -38,9 +38,7 @@ rule simulate:
     threads: 1
     resources:
         attempt=lambda wc, attempt: attempt,
-        # the scheduler's wall time: the runs' own limits in series plus 5 minutes, so that a run stops
-        # itself (and is dropped as failed) before Slurm would kill the batch
-        runtime=lambda wc: sum(r["time_limit_s"] for r in batch_runs(wc)) // 60 + 5,
+        runtime=lambda wc: batch_runtime_min(wc),
     params:
         runs=lambda wc: batch_runs(wc),
         max_attempts=config["member_retries"] + 1,

@@ -142,3 +142,22 @@ def test_the_shipped_simulators_runs_fork_from_one_loaded_process_and_equal_the_
     for name in "ab":  # the same curves to the byte
         fork, sub = (tmp_path / d / "runs" / name / "curve.csv" for d in ("runs", "sub"))
         assert fork.read_bytes() == sub.read_bytes() and os.path.getsize(fork) > 100
+
+
+def test_a_run_stopped_at_its_time_limit_or_crashed_on_every_attempt_is_tried_again_by_a_rerun(tmp_path, stand_in,
+                                                                                               monkeypatch):
+    # their outcome is not the simulator's own (the machine's speed, a crash that need not recur): their
+    # manifests carry no request, so a batch that runs again simulates them again; a success it keeps
+    monkeypatch.setenv("STAND_IN_HANG_RANGE", "1.5e7,2.5e7")
+    monkeypatch.setenv("STAND_IN_CRASH_ONCE_BELOW", "5e6")
+    specs = [spec(tmp_path, "ok", 3e7, stand_in), spec(tmp_path, "hang", 2e7, stand_in, time_limit_s=1),
+             spec(tmp_path, "crash", 4e6, stand_in)]
+    report = run_batch(specs, batch_path=tmp_path / "b.json", attempt=1, max_attempts=1)
+    assert [r["status"] for r in report["runs"]] == ["ok", "failed", "failed"]
+    assert report["runs"][1]["reason"].startswith("time limit") and "crashed" in report["runs"][2]["reason"]
+    requests = {n: "request" in json.loads((tmp_path / "runs" / n / MANIFEST).read_text()) for n in ("ok", "hang", "crash")}
+    assert requests == {"ok": True, "hang": False, "crash": False}
+    monkeypatch.delenv("STAND_IN_HANG_RANGE")
+    report = run_batch(specs, batch_path=tmp_path / "b.json", log_path=tmp_path / "log")
+    assert [r["status"] for r in report["runs"]] == ["ok", "ok", "ok"]  # the crash marker is spent: it runs now
+    assert open(tmp_path / "log").read().splitlines()[0].endswith("1 made before by the same request")
