@@ -235,3 +235,16 @@ def test_the_group_size_is_a_validated_config_key_with_per_preset_defaults():
         validate_config({**cfg, "simulations_per_cluster_job": {"fast": 0}}, SCHEMA)
     with pytest.raises(ConfigError, match="simulations_per_cluster_job"):
         validate_config({**cfg, "simulations_per_cluster_job": {"fastest": 3}}, SCHEMA)
+
+
+def test_docs_cluster_prints_what_the_default_configs_dry_run_groups():
+    # docs/cluster.md's example: group jobs of the default config's first iteration, batches per group
+    # -F: the plan of a fresh run whatever this checkout holds under results/
+    out = subprocess.run([sys.executable, "-m", "snakemake", "-n", "-F", "--profile", str(SLURM_PROFILE)], cwd=REPO,
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-3000:]
+    printed = {f"{gid} {len(jobs)}" for gid, jobs in group_jobs(out.stdout + out.stderr)}
+    doc = (REPO / "docs" / "cluster.md").read_text()
+    block = doc[doc.index("prints, for the default config"):]
+    block = block[block.index("```\n") + 4:]
+    assert set(block[:block.index("```")].splitlines()) == printed
