@@ -8,9 +8,11 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
 from .softening import z
+from .state import JointWork
 
 
 @njit(cache=True, inline="always")
@@ -21,6 +23,139 @@ def _psi_branch(u, k, fmax):
     if au <= up:
         return 0.5 * k * au * au
     return 0.5 * fmax * up + fmax * (au - up)
+
+
+@njit(cache=True, inline="always")
+def _joint_gather(x, jn, jj):
+    """Joint jj's midline (unnormalised, from the a1/b1 end's midpoint to the a2/b2 end's) and the gaps
+    x_B - x_A at its two ends: (tx, ty, g1x, g1y, g2x, g2y)."""
+    a1 = jn[jj, 0]
+    a2 = jn[jj, 1]
+    b1 = jn[jj, 2]
+    b2 = jn[jj, 3]
+    m1x = 0.5 * (x[a1, 0] + x[b1, 0])
+    m1y = 0.5 * (x[a1, 1] + x[b1, 1])
+    return (0.5 * (x[a2, 0] + x[b2, 0]) - m1x, 0.5 * (x[a2, 1] + x[b2, 1]) - m1y, x[b1, 0] - x[a1, 0],
+            x[b1, 1] - x[a1, 1], x[b2, 0] - x[a2, 0], x[b2, 1] - x[a2, 1])
+
+
+@njit(cache=True, inline="always")
+def _joint_frame(tx, ty, g1x, g1y, g2x, g2y):
+    """Unit normal and tangent (normal from A to B) and the gap split into its mean (opening o, slip s)
+    and the half-difference of the end gaps (lo, ls, the linear part): (nx, ny, tx, ty, o, s, lo, ls)."""
+    L = math.sqrt(tx * tx + ty * ty)
+    tx /= L
+    ty /= L
+    nx = ty
+    ny = -tx
+    o = 0.5 * ((g1x + g2x) * nx + (g1y + g2y) * ny)
+    s = 0.5 * ((g1x + g2x) * tx + (g1y + g2y) * ty)
+    lo = 0.5 * ((g2x - g1x) * nx + (g2y - g1y) * ny)
+    ls = 0.5 * ((g2x - g1x) * tx + (g2y - g1y) * ty)
+    return nx, ny, tx, ty, o, s, lo, ls
+
+
+@njit(cache=True, inline="always")
+def _joint_dif(v, jn, jj, jrate, Dmax, jdif):
+    """Dynamic increase factor of a rate-dependent joint: from the current rate until the joint
+    damages, frozen (jdif) from then on."""
+    if Dmax[jj] > 0.0:
+        return jdif[jj]
+    a1 = jn[jj, 0]
+    a2 = jn[jj, 1]
+    b1 = jn[jj, 2]
+    b2 = jn[jj, 3]
+    vgx = 0.5 * (v[b1, 0] - v[a1, 0] + v[b2, 0] - v[a2, 0])
+    vgy = 0.5 * (v[b1, 1] - v[a1, 1] + v[b2, 1] - v[a2, 1])
+    rate = math.sqrt(vgx * vgx + vgy * vgy) / jrate[jj, 0]
+    dif = 1.0
+    if rate > jrate[jj, 2]:
+        dif = 1.0 + jrate[jj, 1] * math.log10(rate / jrate[jj, 2])
+    jdif[jj] = dif
+    return dif
+
+
+@njit(cache=True, inline="always")
+def _joint_forces_of(W, k_n, k_t, zeta, sig, tau, nx, ny, tx, ty, lo, ls):
+    """Forces on side A: the mean part (Mx, My) acts equally on both ends, the linear part (+-lo, +-ls
+    at the ends) with weight 1/3 of the joint (two-point rule) as (Bx, By)."""
+    return (0.5 * W * (sig * nx + tau * tx), 0.5 * W * (sig * ny + tau * ty),
+            W * zeta * (k_n * lo * nx + k_t * ls * tx) / 6.0, W * zeta * (k_n * lo * ny + k_t * ls * ty) / 6.0)
+
+
+@njit(cache=True, inline="always")
+def _joint_law(tx, ty, o, s, lo, ls, dif, W, k_n, k_t, ft, fs, tanphi, delta_n, delta_t, abc, dm, slip, kap, zeta,
+               energy, Psi, dissipated):
+    """joint_forces' law for one joint, on scalars only: its geometry (unit tangent (tx, ty), the
+    normal (ty, -tx), the gap parts o, s, lo, ls), its DIF, its constants (area W, penalties,
+    strengths, critical displacements, the softening curve's abc = (a, b, c)) and its history (Dmax dm,
+    plastic slip, kappa, zeta), with the running energy sums Psi and dissipated. The caller reads and
+    writes the arrays: an inlined function that takes arrays costs reference counting per array per
+    joint, which made the joint loop 3x slower.
+    Returns (Mx, My, Bx, By, Psi, dissipated, slip, kappa, Dmax, zeta, grew, broke): the forces on side
+    A, the sums, the history after the update, whether the damage grew and whether the joint broke
+    (then it takes no force)."""
+    f_t = ft * dif
+    sig_c = k_n * o if o < 0.0 else 0.0
+    f_s = fs * dif - tanphi * sig_c
+    # shear: elastic trial, then return to the capacity zeta f_s (plastic slip)
+    tau = k_t * (s - slip)
+    cap = zeta * f_s
+    if abs(tau) > cap:
+        dslip = (abs(tau) - cap) / k_t
+        sgn = 1.0 if tau > 0.0 else -1.0
+        slip += sgn * dslip
+        kap += dslip
+        dissipated += W * cap * dslip
+        tau = sgn * cap
+    o_pos = o if o > 0.0 else 0.0
+    ex_o = 0.0  # opening beyond the elastic branch (a closed joint has none: no division)
+    if o_pos > 0.0:
+        ex_o = o_pos - f_t / k_n
+        ex_o = ex_o if ex_o > 0.0 else 0.0
+    D = 0.0
+    if ex_o > 0.0 or kap > 0.0:
+        D = math.sqrt((ex_o * dif / delta_n) ** 2 + (kap * dif / delta_t) ** 2)
+    grew = False
+    # The stored energy is needed where the damage grows (the release it books) and, for the
+    # bookkeeping, when asked (the integrator asks at its output samples only).
+    if energy or D > dm:
+        psi_n = _psi_branch(o_pos, k_n, f_t)
+        # The linear part, integrated by the two-point rule: the Gauss points sit at -+1/sqrt(3)
+        # of the half-length, so its energy per unit area is (k lo^2 + k_t ls^2) / 6.
+        psi_b = (k_n * lo * lo + k_t * ls * ls) / 6.0
+        if D > dm:
+            zeta_new = z(D, abc[0], abc[1], abc[2])
+            dissipated += W * (zeta - zeta_new) * (psi_n + psi_b)
+            dm = D
+            zeta = zeta_new
+            grew = True
+        psi = W * (zeta * (psi_n + psi_b) + 0.5 * sig_c * o + 0.5 * tau * tau / k_t)
+        if dm >= 1.0:
+            # Breaking releases what the joint still stores (its compressive and elastic shear
+            # parts, if any); from now on its faces interact through contact only.
+            dissipated += psi
+            return 0.0, 0.0, 0.0, 0.0, Psi, dissipated, slip, kap, dm, zeta, grew, True
+        Psi += psi
+    sig = sig_c + zeta * min(k_n * o_pos, f_t)
+    Mx, My, Bx, By = _joint_forces_of(W, k_n, k_t, zeta, sig, tau, ty, -tx, tx, ty, lo, ls)
+    return Mx, My, Bx, By, Psi, dissipated, slip, kap, dm, zeta, grew, False
+
+
+@njit(cache=True, inline="always")
+def _joint_scatter(f, jn, jj, Mx, My, Bx, By):
+    a1 = jn[jj, 0]
+    a2 = jn[jj, 1]
+    b1 = jn[jj, 2]
+    b2 = jn[jj, 3]
+    f[a1, 0] += Mx - Bx
+    f[a1, 1] += My - By
+    f[a2, 0] += Mx + Bx
+    f[a2, 1] += My + By
+    f[b1, 0] -= Mx - Bx
+    f[b1, 1] -= My - By
+    f[b2, 0] -= Mx + Bx
+    f[b2, 1] -= My + By
 
 
 @njit(cache=True)
@@ -70,8 +205,8 @@ def joint_forces(x, v, joints, state, f, energy=True):
     same factor, keeping the fracture energies E_n, E_t.
 
     Joints whose damage first becomes positive are listed in newly_damaged, so that the integrator
-    can expose their triangles to contact before the faces separate. History arrays have two columns
-    (one per Gauss point, kept for the layout); both hold the joint's value. zeta_j caches z(Dmax) per
+    can expose their triangles to contact before the faces separate. The history holds one value per
+    joint (the law acts on the mean gap, so its two Gauss points share it). zeta_j caches z(Dmax) per
     joint (1 while undamaged): the softening curve's exponential and power are then evaluated only
     when the damage grows, not for every damaged joint at every step.
 
@@ -84,11 +219,11 @@ def joint_forces(x, v, joints, state, f, energy=True):
     Returns (stored joint energy [J], dissipated energy this call [J], number newly broken,
     number newly damaged).
     """
-    jn, jarea, kn, kt, ft, fs = joints.nodes, joints.area, joints.kn, joints.kt, joints.ft, joints.fs
-    dn, dt_, tanphi, jrate = joints.delta_n, joints.delta_t, joints.tanphi, joints.rate
-    a, b, c = joints.a, joints.b, joints.c
-    Dmax, broken, jdif, slip_p, kappa = state.Dmax, state.broken, state.dif, state.slip_p, state.kappa
-    zeta_j, newly_broken, newly_damaged = state.zeta, state.newly_broken, state.newly_damaged
+    jn, jrate = joints.nodes, joints.rate
+    area, kn, kt, ft, fs, tanphi = joints.area, joints.kn, joints.kt, joints.ft, joints.fs, joints.tanphi
+    delta_n, delta_t, abc = joints.delta_n, joints.delta_t, (joints.a, joints.b, joints.c)
+    Dmax, jdif, slip_p, kappa, zeta_j = state.Dmax, state.dif, state.slip_p, state.kappa, state.zeta
+    broken, newly_damaged, newly_broken = state.broken, state.newly_damaged, state.newly_broken
     Psi = 0.0
     dissipated = 0.0
     nnew = 0
@@ -96,110 +231,129 @@ def joint_forces(x, v, joints, state, f, energy=True):
     for jj in range(jn.shape[0]):
         if broken[jj]:
             continue
-        a1 = jn[jj, 0]
-        a2 = jn[jj, 1]
-        b1 = jn[jj, 2]
-        b2 = jn[jj, 3]
-        m1x = 0.5 * (x[a1, 0] + x[b1, 0])
-        m1y = 0.5 * (x[a1, 1] + x[b1, 1])
-        tx = 0.5 * (x[a2, 0] + x[b2, 0]) - m1x
-        ty = 0.5 * (x[a2, 1] + x[b2, 1]) - m1y
-        L = math.sqrt(tx * tx + ty * ty)
-        tx /= L
-        ty /= L
-        nx = ty
-        ny = -tx
-        g1x = x[b1, 0] - x[a1, 0]
-        g1y = x[b1, 1] - x[a1, 1]
-        g2x = x[b2, 0] - x[a2, 0]
-        g2y = x[b2, 1] - x[a2, 1]
-        W = jarea[jj]
-        k_n = kn[jj]
-        k_t = kt[jj]
-        # mean gap and the half-difference of the end gaps (the linear part)
-        o = 0.5 * ((g1x + g2x) * nx + (g1y + g2y) * ny)
-        s = 0.5 * ((g1x + g2x) * tx + (g1y + g2y) * ty)
-        lo = 0.5 * ((g2x - g1x) * nx + (g2y - g1y) * ny)
-        ls = 0.5 * ((g2x - g1x) * tx + (g2y - g1y) * ty)
+        tx, ty, g1x, g1y, g2x, g2y = _joint_gather(x, jn, jj)
+        _, _, tx, ty, o, s, lo, ls = _joint_frame(tx, ty, g1x, g1y, g2x, g2y)
         dif = 1.0
         if jrate[jj, 1] > 0.0:
-            if Dmax[jj, 0] > 0.0:
-                dif = jdif[jj, 0]
-            else:
-                vgx = 0.5 * (v[b1, 0] - v[a1, 0] + v[b2, 0] - v[a2, 0])
-                vgy = 0.5 * (v[b1, 1] - v[a1, 1] + v[b2, 1] - v[a2, 1])
-                rate = math.sqrt(vgx * vgx + vgy * vgy) / jrate[jj, 0]
-                if rate > jrate[jj, 2]:
-                    dif = 1.0 + jrate[jj, 1] * math.log10(rate / jrate[jj, 2])
-                jdif[jj, 0] = dif
-                jdif[jj, 1] = dif
+            dif = _joint_dif(v, jn, jj, jrate, Dmax, jdif)
+        dm = Dmax[jj]
+        Mx, My, Bx, By, Psi, dissipated, slip_p[jj], kappa[jj], Dmax[jj], zeta_j[jj], grew, broke = _joint_law(
+            tx, ty, o, s, lo, ls, dif, area[jj], kn[jj], kt[jj], ft[jj], fs[jj], tanphi[jj], delta_n[jj], delta_t[jj],
+            abc, dm, slip_p[jj], kappa[jj], zeta_j[jj], energy, Psi, dissipated)
+        if grew and dm <= 0.0:
+            newly_damaged[ndam] = jj
+            ndam += 1
+        if broke:
+            broken[jj] = True
+            newly_broken[nnew] = jj
+            nnew += 1
+            continue
+        _joint_scatter(f, jn, jj, Mx, My, Bx, By)
+    return Psi, dissipated, nnew, ndam
+
+
+# Row of JointWork.G after the six gathered ones (_joint_gather): the DIF.
+_G_DIF = 6
+
+
+@njit(cache=True)
+def joint_work(joints):
+    """Buffers of joint_forces_into for these joints (fdem.state.Joints). The DIF row is 1 and is only
+    written when some joint's strength depends on the rate."""
+    n = max(joints.nodes.shape[0], 1)
+    G = np.empty((7, n))
+    G[_G_DIF, :] = 1.0
+    rate = joints.rate
+    any_rate = False
+    for jj in range(rate.shape[0]):
+        if rate[jj, 1] > 0.0:
+            any_rate = True
+    return JointWork(G, np.empty((4, n)), np.zeros(n, np.bool_), any_rate)
+
+
+@njit(cache=True)
+def _joints_gather(x, v, joints, state, G, any_rate):
+    """Pass 1: the gathered rows of every joint, and the DIF of rate-dependent ones (their frozen or
+    current factor, as joint_forces takes it)."""
+    jn, jrate = joints.nodes, joints.rate
+    Dmax, jdif, broken = state.Dmax, state.dif, state.broken
+    for jj in range(jn.shape[0]):
+        G[0, jj], G[1, jj], G[2, jj], G[3, jj], G[4, jj], G[5, jj] = _joint_gather(x, jn, jj)
+        if any_rate:
+            dif = 1.0
+            if jrate[jj, 1] > 0.0 and not broken[jj]:
+                dif = _joint_dif(v, jn, jj, jrate, Dmax, jdif)
+            G[_G_DIF, jj] = dif
+
+
+@njit(cache=True, error_model="numpy")
+def _joints_trial(G, kn, kt, ft, fs, tanphi, delta_n, delta_t, area, zeta_j, slip_p, kappa, Dmax, H, slow):
+    """Pass 2, without branches or gathers so that LLVM vectorises it: every joint's forces on the
+    assumption that it neither slips plastically nor damages further (_joint_update's arithmetic for
+    that case, to the bit), and slow[j] where the assumption fails (those joint_forces_into redoes
+    with _joint_update). Broken joints get numbers that nothing reads."""
+    for jj in range(G.shape[1]):
+        nx, ny, tx, ty, o, s, lo, ls = _joint_frame(G[0, jj], G[1, jj], G[2, jj], G[3, jj], G[4, jj], G[5, jj])
+        dif = G[_G_DIF, jj]
+        k_n = kn[jj]
+        k_t = kt[jj]
         f_t = ft[jj] * dif
         sig_c = k_n * o if o < 0.0 else 0.0
         f_s = fs[jj] * dif - tanphi[jj] * sig_c
-        dm = Dmax[jj, 0]
         zeta = zeta_j[jj]
-        # shear: elastic trial, then return to the capacity zeta f_s (plastic slip)
-        tau = k_t * (s - slip_p[jj, 0])
+        tau = k_t * (s - slip_p[jj])
         cap = zeta * f_s
-        if abs(tau) > cap:
-            dslip = (abs(tau) - cap) / k_t
-            sgn = 1.0 if tau > 0.0 else -1.0
-            slip_p[jj, 0] += sgn * dslip
-            slip_p[jj, 1] = slip_p[jj, 0]
-            kappa[jj, 0] += dslip
-            kappa[jj, 1] = kappa[jj, 0]
-            dissipated += W * cap * dslip
-            tau = sgn * cap
         o_pos = o if o > 0.0 else 0.0
-        ex_o = 0.0  # opening beyond the elastic branch (a closed joint has none: no division)
-        if o_pos > 0.0:
-            ex_o = o_pos - f_t / k_n
-            ex_o = ex_o if ex_o > 0.0 else 0.0
-        D = 0.0
-        if ex_o > 0.0 or kappa[jj, 0] > 0.0:
-            D = math.sqrt((ex_o * dif / dn[jj]) ** 2 + (kappa[jj, 0] * dif / dt_[jj]) ** 2)
-        # The stored energy is needed where the damage grows (the release it books) and, for the
-        # bookkeeping, when asked (the integrator asks at its output samples only).
-        if energy or D > dm:
-            psi_n = _psi_branch(o_pos, k_n, f_t)
-            # The linear part, integrated by the two-point rule: the Gauss points sit at -+1/sqrt(3)
-            # of the half-length, so its energy per unit area is (k lo^2 + k_t ls^2) / 6.
-            psi_b = (k_n * lo * lo + k_t * ls * ls) / 6.0
-            if D > dm:
-                if dm <= 0.0:
-                    newly_damaged[ndam] = jj
-                    ndam += 1
-                zeta_new = z(D, a, b, c)
-                dissipated += W * (zeta - zeta_new) * (psi_n + psi_b)
-                Dmax[jj, 0] = D
-                Dmax[jj, 1] = D
-                zeta_j[jj] = zeta_new
-                zeta = zeta_new
-            psi = W * (zeta * (psi_n + psi_b) + 0.5 * sig_c * o + 0.5 * tau * tau / k_t)
-            if Dmax[jj, 0] >= 1.0:
-                # Breaking releases what the joint still stores (its compressive and elastic shear
-                # parts, if any); from now on its faces interact through contact only.
-                dissipated += psi
-                broken[jj] = True
-                newly_broken[nnew] = jj
-                nnew += 1
-                continue
-            Psi += psi
-        sig = sig_c + zeta * min(k_n * o_pos, f_t)
-        # forces on side A (a1, a2) = -dPsi/dx_A: the mean part acts equally on both ends, the linear
-        # part (+-lo, +-ls at the ends) with weight 1/3 of the joint (two-point rule)
-        Mx = 0.5 * W * (sig * nx + tau * tx)
-        My = 0.5 * W * (sig * ny + tau * ty)
-        Bx = W * zeta * (k_n * lo * nx + k_t * ls * tx) / 6.0
-        By = W * zeta * (k_n * lo * ny + k_t * ls * ty) / 6.0
-        f[a1, 0] += Mx - Bx
-        f[a1, 1] += My - By
-        f[a2, 0] += Mx + Bx
-        f[a2, 1] += My + By
-        f[b1, 0] -= Mx - Bx
-        f[b1, 1] -= My - By
-        f[b2, 0] -= Mx + Bx
-        f[b2, 1] -= My + By
+        # _joint_update's ex_o and D: where it skips them (o_pos = 0, or no excess and no slip) these
+        # expressions give its 0 exactly
+        ex_o = o_pos - f_t / k_n
+        ex_o = ex_o if ex_o > 0.0 else 0.0
+        D = math.sqrt((ex_o * dif / delta_n[jj]) ** 2 + (kappa[jj] * dif / delta_t[jj]) ** 2)
+        slow[jj] = (abs(tau) > cap) | (D > Dmax[jj])
+        knop = k_n * o_pos
+        sig = sig_c + zeta * (knop if knop < f_t else f_t)
+        H[0, jj], H[1, jj], H[2, jj], H[3, jj] = _joint_forces_of(area[jj], k_n, k_t, zeta, sig, tau, nx, ny,
+                                                                  tx, ty, lo, ls)
+
+
+@njit(cache=True)
+def joint_forces_into(x, v, joints, state, f, energy, work):
+    """joint_forces in passes on the buffers of work (joint_work): gather, the vectorised trial of every
+    joint (_joints_trial), the full update of the joints that slip or damage (of all of them when the
+    energy is asked), and the scatter in joint order; f, the history and the energy sums are
+    joint_forces' to the bit. Returns what joint_forces returns."""
+    G, H, slow = work.G, work.H, work.slow
+    jn = joints.nodes
+    _joints_gather(x, v, joints, state, G, work.any_rate)
+    _joints_trial(G, joints.kn, joints.kt, joints.ft, joints.fs, joints.tanphi, joints.delta_n, joints.delta_t,
+                  joints.area, state.zeta, state.slip_p, state.kappa, state.Dmax, H, slow)
+    area, kn, kt, ft, fs, tanphi = joints.area, joints.kn, joints.kt, joints.ft, joints.fs, joints.tanphi
+    delta_n, delta_t, abc = joints.delta_n, joints.delta_t, (joints.a, joints.b, joints.c)
+    Dmax, slip_p, kappa, zeta_j = state.Dmax, state.slip_p, state.kappa, state.zeta
+    broken, newly_damaged, newly_broken = state.broken, state.newly_damaged, state.newly_broken
+    Psi = 0.0
+    dissipated = 0.0
+    nnew = 0
+    ndam = 0
+    for jj in range(jn.shape[0]):
+        if broken[jj] or not (energy or slow[jj]):
+            continue
+        _, _, tx, ty, o, s, lo, ls = _joint_frame(G[0, jj], G[1, jj], G[2, jj], G[3, jj], G[4, jj], G[5, jj])
+        dm = Dmax[jj]
+        (H[0, jj], H[1, jj], H[2, jj], H[3, jj], Psi, dissipated, slip_p[jj], kappa[jj], Dmax[jj], zeta_j[jj], grew,
+         broke) = _joint_law(tx, ty, o, s, lo, ls, G[_G_DIF, jj], area[jj], kn[jj], kt[jj], ft[jj], fs[jj], tanphi[jj],
+                             delta_n[jj], delta_t[jj], abc, dm, slip_p[jj], kappa[jj], zeta_j[jj], energy, Psi,
+                             dissipated)
+        if grew and dm <= 0.0:
+            newly_damaged[ndam] = jj
+            ndam += 1
+        if broke:
+            broken[jj] = True
+            newly_broken[nnew] = jj
+            nnew += 1
+    for jj in range(jn.shape[0]):
+        if not broken[jj]:
+            _joint_scatter(f, jn, jj, H[0, jj], H[1, jj], H[2, jj], H[3, jj])
     return Psi, dissipated, nnew, ndam
 
 
@@ -285,7 +439,7 @@ def contact_forces(x, v, pair_node, pair_edge, node_normal, nodes, tri, surf, jo
             ed = pair_edge[ip]
             ip += 1
             je = edge_joint[ed]
-            if je >= 0 and Dmax[je, 0] <= 0.0 and not broken[je]:
+            if je >= 0 and Dmax[je] <= 0.0 and not broken[je]:
                 continue
             p = edges[ed, 0]
             q = edges[ed, 1]

@@ -13,7 +13,8 @@ from collections import namedtuple
 
 import numpy as np
 
-# x, v [m, m/s] change every step; the rest is the mesh: mass [kg], reference coordinates x0 [m],
+# x, v [m, m/s] change every step; the rest is the mesh: mass [kg], its inverse per coordinate
+# (n, 2: the kick runs over x, v and f as flat arrays), reference coordinates x0 [m],
 # each node's body, vertex of the unsplit mesh, triangle (fracturable bodies) and thickness [m].
 Nodes = namedtuple("Nodes", "x v mass inv_mass x0 body vertex tri thick")
 # Constant-strain triangles: node indices, inverse reference edge matrix, volume [m^3], Lame
@@ -23,9 +24,13 @@ Triangles = namedtuple("Triangles", "tri dminv vol0 lam mu eta edges")
 # [Pa], critical opening and sliding delta_n, delta_t [m] (paper eqs. A8-A9), tan(friction angle),
 # the two edges, rate columns (h, k, rate0), softening shape a, b, c (eq. A3).
 Joints = namedtuple("Joints", "nodes area kn kt ft fs delta_n delta_t tanphi edges rate a b c")
-# History of each joint (two columns: one per Gauss point, both hold the joint's value) and the
-# buffers joint_forces lists newly broken / newly damaged joints in.
+# History of each joint (one value per joint: the law acts on the mean gap) and the buffers
+# joint_forces lists newly broken / newly damaged joints in.
 JointState = namedtuple("JointState", "Dmax broken dif slip_p kappa zeta newly_broken newly_damaged")
+# Work buffers of fdem.kernels.joint_forces_into (made by fdem.kernels.joint_work): G the gathered
+# rows (midline, end gaps, DIF) x joints, H the force terms (Mx, My, Bx, By) x joints, slow the joints
+# its vectorised trial cannot finish, any_rate whether a joint's strength depends on the rate.
+JointWork = namedtuple("JointWork", "G H slow any_rate")
 # Contact surfaces: edges (node pairs, counter-clockwise), owning triangle, penetration limit [m],
 # thickness [m], joint (-1: body boundary), active flag (changes as joints damage), per-body
 # fracturable flag, per-body-pair penalty [Pa] and Coulomb coefficient.
@@ -49,7 +54,8 @@ Settings = namedtuple("Settings", "dt n_steps sample_every alpha_mass energy_gua
 
 
 def nodes_of(model, x, v) -> Nodes:
-    return Nodes(x, v, model.mass, 1.0 / model.mass, model.x0, model.node_body, model.node_vertex,
+    inv_mass = np.repeat((1.0 / model.mass)[:, None], 2, axis=1)
+    return Nodes(x, v, model.mass, inv_mass, model.x0, model.node_body, model.node_vertex,
                  model.node_tri, model.node_thick)
 
 
@@ -69,8 +75,8 @@ def joint_state(n_joints: int, **given) -> JointState:
     """Undamaged history for n_joints joints; given replaces fields with the caller's arrays (kept
     by reference, so the caller sees what joint_forces writes)."""
     n = int(n_joints)
-    s = JointState(Dmax=np.zeros((n, 2)), broken=np.zeros(n, np.bool_), dif=np.ones((n, 2)),
-                   slip_p=np.zeros((n, 2)), kappa=np.zeros((n, 2)), zeta=np.ones(n),
+    s = JointState(Dmax=np.zeros(n), broken=np.zeros(n, np.bool_), dif=np.ones(n),
+                   slip_p=np.zeros(n), kappa=np.zeros(n), zeta=np.ones(n),
                    newly_broken=np.empty(max(n, 1), np.int64), newly_damaged=np.empty(max(n, 1), np.int64))
     unknown = set(given) - set(JointState._fields)
     if unknown:

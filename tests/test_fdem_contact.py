@@ -123,7 +123,7 @@ def test_the_filtered_contact_list_equals_a_fresh_search_of_a_fragmented_disc():
     out = simulate("brazilian_disc", "fast", params=dict(zip(("sigma_t", "E_t"), CHECK_POINTS["weak_brittle"])))
     m, res = out.extra["setup"]["model"], out.extra["result"]
     active = m.edge_active0.copy()
-    for j in np.flatnonzero(res.Dmax[:, 0] > 0):
+    for j in np.flatnonzero(res.Dmax > 0):
         for side in range(2):
             active[m.tri_edges[m.edge_tri[m.jedges[j, side]]]] = True
     buffer = 0.3 * float(np.min(m.edge_dlim[m.edge_active0]) * 2.0)

@@ -24,7 +24,7 @@ def _forces(model, x):
     v = np.zeros_like(x)
     U, _ = triangle_forces(x, v, model.tri, model.dminv, model.vol0, model.lam, model.mu,
                            model.eta, f)
-    Dmax = np.zeros((model.n_joints, 2))
+    Dmax = np.zeros(model.n_joints)
     broken = np.zeros(model.n_joints, np.bool_)
     Psi, dis, _, _ = joint_forces(x, np.zeros_like(x), joints_of(model),
                                   joint_state(model.n_joints, Dmax=Dmax, broken=broken), f)

@@ -77,12 +77,12 @@ class _Joint:
     def __init__(self, jp):
         self.model = _two_triangles(jp)
         self.m = self.model
-        self.Dmax = np.zeros((1, 2))
+        self.Dmax = np.zeros(1)
         self.broken = np.zeros(1, np.bool_)
         self.nB = self.model.jn[0, 2:]
         self.nA = self.model.jn[0, :2]
-        self.slip_p = np.zeros((1, 2))
-        self.kappa = np.zeros((1, 2))
+        self.slip_p = np.zeros(1)
+        self.kappa = np.zeros(1)
         self.zeta = np.ones(1)
         self.dissipated = 0.0
         self.stored = 0.0
@@ -112,7 +112,7 @@ def test_opening_past_peak_reduces_shear_capacity_by_coupling_rule():
     sig, _ = j.traction(o1, 0.0)
     zeta = z(D1, jp.a, jp.b, jp.c)
     assert sig == pytest.approx(jp.sigma_n * zeta, rel=1e-9)
-    assert j.Dmax[0] == pytest.approx([D1, D1], rel=1e-9)
+    assert j.Dmax[0] == pytest.approx(D1, rel=1e-9)
     # Hold the opening and slide: the shear stress saturates at sigma_t z(D1), not sigma_t.
     s_p = jp.sigma_t / j.m.kt[0]
     taus = [j.traction(o1, s)[1] for s in np.linspace(0.0, 1.0 * s_p, 50)]
@@ -123,8 +123,8 @@ def test_opening_past_peak_reduces_shear_capacity_by_coupling_rule():
     ds = 0.2 * jp.delta_t_max
     _, tau = j.traction(o1, s_p + ds)
     kappa = s_p + ds - tau / j.m.kt[0]
-    assert j.kappa[0] == pytest.approx([kappa, kappa], rel=1e-9)
-    assert j.Dmax[0, 0] == pytest.approx(np.hypot(D1, kappa / jp.delta_t_max), rel=1e-9)
+    assert j.kappa[0] == pytest.approx(kappa, rel=1e-9)
+    assert j.Dmax[0] == pytest.approx(np.hypot(D1, kappa / jp.delta_t_max), rel=1e-9)
     # kappa exceeds ds by the elastic slip given up, (1 - zeta) sigma_t / k_t: 0.3 % of ds here
     assert kappa / jp.delta_t_max == pytest.approx(0.2, rel=5e-3)
 
@@ -176,7 +176,7 @@ def test_unloading_and_reloading_does_not_restore_strength():
     assert max(reload) == pytest.approx(jp.sigma_n * zeta, rel=1e-9)
     assert max(reload) < 0.8 * jp.sigma_n
     # Damage never decreases.
-    assert j.Dmax[0, 0] == pytest.approx(0.25, rel=1e-9)
+    assert j.Dmax[0] == pytest.approx(0.25, rel=1e-9)
     # Compression is carried undamaged by the penalty.
     sig_c, _ = j.traction(-o_p, 0.0)
     assert sig_c == pytest.approx(-jp.sigma_n, rel=1e-9)
@@ -217,13 +217,13 @@ def test_rate_dependent_strength_raises_the_peak_by_the_DIF_and_keeps_the_fractu
                                                        slip_p=j.slip_p, kappa=j.kappa, zeta=j.zeta), f)
         return float((-f[j.nB].sum(axis=0) / m.jarea[0]) @ n)
 
-    j.jdif = np.ones((1, 2))
+    j.jdif = np.ones(1)
     # still elastic just below the raised strength; the static strength would have capped it
     assert traction(0.999 * dif * o_p) == pytest.approx(0.999 * dif * jp.sigma_n, rel=1e-9)
-    assert j.Dmax[0, 0] == 0.0
+    assert j.Dmax[0] == 0.0
     # just past it: damage starts, the DIF is frozen, the traction is the dynamic strength
     assert traction(1.0001 * dif * o_p) == pytest.approx(dif * jp.sigma_n, rel=1e-3)
-    assert j.jdif[0] == pytest.approx([dif, dif], rel=1e-12)
+    assert j.jdif[0] == pytest.approx(dif, rel=1e-12)
     # the same joint pulled apart still dissipates E_n (softening displacement shrinks by the DIF)
     model, res = _pull(jp, 0, speed=V)
     dissipated = res.energy["joint_dissipated"][-1] / (L * THICK)
