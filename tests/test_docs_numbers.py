@@ -25,6 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 RUN = "benchmarks/results/default_run"
 SHPB = "benchmarks/results/bench_shpb.json"
 ENGINE = "benchmarks/results/bench_engine.json"
+ENGINE_JOINTS = "benchmarks/results/bench_engine_joints.json"
 VAR = "benchmarks/results/bench_sim_variability.json"
 
 
@@ -231,6 +232,15 @@ QUOTES: list[Quote] = [
           "reference parameters, at {t_fast}, {t_standard} and {t_paper} us", lambda J: {
               **{k: _mpa(v["reference"]["peak_stress_Pa"]) for k, v in J(SHPB)["presets"].items()},
               **{f"t_{k}": f"{v['reference']['peak_t_s'] * 1e6:.0f}" for k, v in J(SHPB)["presets"].items()}}),
+    Quote("docs/engine.md", "the `fast` discs {lo:.2f}-{hi:.2f}x faster, the `fast` marble cylinder {m:.2f}x, the paper "
+          "disc {p:.2f}x ({old:.1f} s to {new:.1f} s that day), every curve bit-identical", lambda J: {
+              "lo": min(c["speedup_solver"] for k, c in J(ENGINE_JOINTS)["cases"].items() if k.startswith("disc_fast")),
+              "hi": max(c["speedup_solver"] for k, c in J(ENGINE_JOINTS)["cases"].items() if k.startswith("disc_fast")),
+              "m": J(ENGINE_JOINTS)["cases"]["marble_fast"]["speedup_solver"],
+              "p": J(ENGINE_JOINTS)["cases"]["disc_paper_reference"]["speedup_solver"],
+              "old": J(ENGINE_JOINTS)["cases"]["disc_paper_reference"]["baseline"]["solver_wall_s"],
+              "new": J(ENGINE_JOINTS)["cases"]["disc_paper_reference"]["new"]["solver_wall_s"]}
+          if all(c["agreement"]["bit_identical"] for c in J(ENGINE_JOINTS)["cases"].values()) else {}),
     Quote("docs/workflow.md", "(a `fast` cylinder member about {wall:.0f} s there)", lambda J: {
         "wall": J(ENGINE)["cases"]["marble_fast"]["new"]["wall_s"]}),
     Quote("docs/workflow.md", "predicted with {rb} MPa RMSE and a peak {pb:.0f} % high by the base model, {ra} MPa "
