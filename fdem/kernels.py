@@ -219,37 +219,7 @@ def joint_forces(x, v, joints, state, f, energy=True):
     Returns (stored joint energy [J], dissipated energy this call [J], number newly broken,
     number newly damaged).
     """
-    jn, jrate = joints.nodes, joints.rate
-    area, kn, kt, ft, fs, tanphi = joints.area, joints.kn, joints.kt, joints.ft, joints.fs, joints.tanphi
-    delta_n, delta_t, abc = joints.delta_n, joints.delta_t, (joints.a, joints.b, joints.c)
-    Dmax, jdif, slip_p, kappa, zeta_j = state.Dmax, state.dif, state.slip_p, state.kappa, state.zeta
-    broken, newly_damaged, newly_broken = state.broken, state.newly_damaged, state.newly_broken
-    Psi = 0.0
-    dissipated = 0.0
-    nnew = 0
-    ndam = 0
-    for jj in range(jn.shape[0]):
-        if broken[jj]:
-            continue
-        tx, ty, g1x, g1y, g2x, g2y = _joint_gather(x, jn, jj)
-        _, _, tx, ty, o, s, lo, ls = _joint_frame(tx, ty, g1x, g1y, g2x, g2y)
-        dif = 1.0
-        if jrate[jj, 1] > 0.0:
-            dif = _joint_dif(v, jn, jj, jrate, Dmax, jdif)
-        dm = Dmax[jj]
-        Mx, My, Bx, By, Psi, dissipated, slip_p[jj], kappa[jj], Dmax[jj], zeta_j[jj], grew, broke = _joint_law(
-            tx, ty, o, s, lo, ls, dif, area[jj], kn[jj], kt[jj], ft[jj], fs[jj], tanphi[jj], delta_n[jj], delta_t[jj],
-            abc, dm, slip_p[jj], kappa[jj], zeta_j[jj], energy, Psi, dissipated)
-        if grew and dm <= 0.0:
-            newly_damaged[ndam] = jj
-            ndam += 1
-        if broke:
-            broken[jj] = True
-            newly_broken[nnew] = jj
-            nnew += 1
-            continue
-        _joint_scatter(f, jn, jj, Mx, My, Bx, By)
-    return Psi, dissipated, nnew, ndam
+    return _joints_apply(x, v, joints, state, f, energy, joint_work(joints), False)
 
 
 # Row of JointWork.G after the six gathered ones (_joint_gather): the DIF.
@@ -319,14 +289,22 @@ def _joints_trial(G, kn, kt, ft, fs, tanphi, delta_n, delta_t, area, zeta_j, sli
 @njit(cache=True)
 def joint_forces_into(x, v, joints, state, f, energy, work):
     """joint_forces in passes on the buffers of work (joint_work): gather, the vectorised trial of every
-    joint (_joints_trial), the full update of the joints that slip or damage (of all of them when the
-    energy is asked), and the scatter in joint order; f, the history and the energy sums are
-    joint_forces' to the bit. Returns what joint_forces returns."""
+    joint (_joints_trial), the full law for the joints that slip or damage (for all of them when the
+    energy is asked), and the scatter in joint order; f, the history and the energy sums are those of
+    the full law on every joint (joint_forces) to the bit. Returns what joint_forces returns."""
+    return _joints_apply(x, v, joints, state, f, energy, work, True)
+
+
+@njit(cache=True)
+def _joints_apply(x, v, joints, state, f, energy, work, trial):
+    """Gather, the trial pass when trial (else the full law for every joint), the full law where the
+    trial cannot finish, the scatter."""
     G, H, slow = work.G, work.H, work.slow
     jn = joints.nodes
     _joints_gather(x, v, joints, state, G, work.any_rate)
-    _joints_trial(G, joints.kn, joints.kt, joints.ft, joints.fs, joints.tanphi, joints.delta_n, joints.delta_t,
-                  joints.area, state.zeta, state.slip_p, state.kappa, state.Dmax, H, slow)
+    if trial:
+        _joints_trial(G, joints.kn, joints.kt, joints.ft, joints.fs, joints.tanphi, joints.delta_n, joints.delta_t,
+                      joints.area, state.zeta, state.slip_p, state.kappa, state.Dmax, H, slow)
     area, kn, kt, ft, fs, tanphi = joints.area, joints.kn, joints.kt, joints.ft, joints.fs, joints.tanphi
     delta_n, delta_t, abc = joints.delta_n, joints.delta_t, (joints.a, joints.b, joints.c)
     Dmax, slip_p, kappa, zeta_j = state.Dmax, state.slip_p, state.kappa, state.zeta
@@ -336,7 +314,7 @@ def joint_forces_into(x, v, joints, state, f, energy, work):
     nnew = 0
     ndam = 0
     for jj in range(jn.shape[0]):
-        if broken[jj] or not (energy or slow[jj]):
+        if broken[jj] or (trial and not (energy or slow[jj])):
             continue
         _, _, tx, ty, o, s, lo, ls = _joint_frame(G[0, jj], G[1, jj], G[2, jj], G[3, jj], G[4, jj], G[5, jj])
         dm = Dmax[jj]

@@ -167,7 +167,8 @@ def test_joint_state_keeps_the_callers_arrays():
 @pytest.mark.parametrize("rate_k", [0.0, 0.1])
 def test_joint_pass_in_passes_is_the_scalar_pass_bit_for_bit(rate_k):
     """joint_forces_into (gather, vectorised trial, the slipping or damaging joints redone, scatter)
-    against joint_forces over steps that damage, slip and break joints, with and without the rate law
+    against joint_forces (the full law on every joint; the same law recorded the fingerprints above)
+    over steps that damage, slip and break joints, with and without the rate law
     and with the energy asked or not: the forces, every history array and the returned sums identical."""
     from fdem.kernels import joint_forces, joint_forces_into, joint_work
 
