@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from tools import docs_numbers
+from tools import coverage_table, docs_numbers
 
 ROOT = Path(__file__).resolve().parents[1]
 RUN = "benchmarks/results/default_run"
@@ -241,6 +241,8 @@ QUOTES: list[Quote] = [
               "old": J(ENGINE_JOINTS)["cases"]["disc_paper_reference"]["baseline"]["solver_wall_s"],
               "new": J(ENGINE_JOINTS)["cases"]["disc_paper_reference"]["new"]["solver_wall_s"]}
           if all(c["agreement"]["bit_identical"] for c in J(ENGINE_JOINTS)["cases"].values()) else {}),
+    Quote("docs/inference.md", "its observed maximum lies in the window's last {us:.0f} us", lambda J: {
+        "us": coverage_table.CENSOR_S * 1e6}),
     Quote("docs/workflow.md", "(a `fast` cylinder member about {wall:.0f} s there)", lambda J: {
         "wall": J(ENGINE)["cases"]["marble_fast"]["new"]["wall_s"]}),
     Quote("docs/workflow.md", "predicted with {rb} MPa RMSE and a peak {pb:.0f} % high by the base model, {ra} MPa "

@@ -29,6 +29,25 @@ def test_the_readme_results_table_is_generated_from_the_newest_committed_default
     assert _block(text, results_table) == results_table.block(*sources)
 
 
+def test_the_censored_twins_table_is_generated_from_the_readme_table_s_json():
+    """docs/inference.md scores apart the twins whose window holds no post-peak, from the JSON the README's
+    coverage table names, by the harness's own scoring (tools/coverage_table.censored_table)."""
+    sources = coverage_table.readme_block_sources((ROOT / "README.md").read_text())
+    text = (ROOT / "docs" / "inference.md").read_text()
+    start, end = text.index(coverage_table.CENSORED_START), text.index(coverage_table.CENSORED_END)
+    assert text[start:end + len(coverage_table.CENSORED_END)] == coverage_table.censored_block(*sources)
+    # every twin of every set lands in one of the two rows of its set
+    rows = [r for r in text[start:end].splitlines() if r.startswith("| well-specified") or r.startswith("| misspecified")]
+    total = sum(len(json.loads((ROOT / s).read_text())[k]["twins"]) for s in sources
+                for k in ("well_specified", "misspecified") if (json.loads((ROOT / s).read_text()).get(k) or {}).get("twins"))
+    assert sum(int(r.split("|")[4]) for r in rows) == total
+    # the sentence after the table: no twin without its post-peak got an uninformative E_t interval
+    assert "Every `uninformative` `E_t` interval is among the twins whose window holds the post-peak" in " ".join(
+        text.split())
+    censored = [r.split("|") for r in rows if "| no (" in r and r.split("|")[4].strip() != "0"]
+    assert censored and all(c[7].strip().split(" / ")[1] == "0 %" for c in censored)
+
+
 def test_the_readme_quotes_the_default_runs_time_from_its_run_json():
     # the newer code's run of the committed old-against-new benchmark (benchmarks/bench_default_run.py)
     bench = json.loads((ROOT / "benchmarks" / "results" / "bench_default_run.json").read_text())
