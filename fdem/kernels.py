@@ -259,9 +259,9 @@ def _joints_gather(x, v, joints, state, G, any_rate):
 @njit(cache=True, error_model="numpy")
 def _joints_trial(G, kn, kt, ft, fs, tanphi, delta_n, delta_t, area, zeta_j, slip_p, kappa, Dmax, H, slow):
     """Pass 2, without branches or gathers so that LLVM vectorises it: every joint's forces on the
-    assumption that it neither slips plastically nor damages further (_joint_update's arithmetic for
+    assumption that it neither slips plastically nor damages further (_joint_law's arithmetic for
     that case, to the bit), and slow[j] where the assumption fails (those joint_forces_into redoes
-    with _joint_update). Broken joints get numbers that nothing reads."""
+    with _joint_law). Broken joints get numbers that nothing reads."""
     for jj in range(G.shape[1]):
         nx, ny, tx, ty, o, s, lo, ls = _joint_frame(G[0, jj], G[1, jj], G[2, jj], G[3, jj], G[4, jj], G[5, jj])
         dif = G[_G_DIF, jj]
@@ -274,7 +274,7 @@ def _joints_trial(G, kn, kt, ft, fs, tanphi, delta_n, delta_t, area, zeta_j, sli
         tau = k_t * (s - slip_p[jj])
         cap = zeta * f_s
         o_pos = o if o > 0.0 else 0.0
-        # _joint_update's ex_o and D: where it skips them (o_pos = 0, or no excess and no slip) these
+        # _joint_law's ex_o and D: where it skips them (o_pos = 0, or no excess and no slip) these
         # expressions give its 0 exactly
         ex_o = o_pos - f_t / k_n
         ex_o = ex_o if ex_o > 0.0 else 0.0
