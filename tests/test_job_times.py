@@ -14,11 +14,12 @@ localrule truth:
 Shell command: None
 
 [Fri Nov 27 20:47:53 2026]
-localrule member:
+localrule simulate:
     jobid: 42
+    wildcards: exp=twin_ref, stage=member, key=iter_0, batch=1
 Select jobs to execute...
 [Fri Nov 27 20:47:57 2026]
-Finished jobid: 42 (Rule: member)
+Finished jobid: 42 (Rule: simulate)
 1 of 4 steps (25%) done
 
 [Fri Nov 27 20:47:57 2026]
@@ -38,10 +39,11 @@ def test_durations_per_rule_and_occupancy():
     out = job_times(LOG.splitlines())
     assert out["jobs"] == 3  # job 43 never finished: left out
     assert out["rules"]["truth"] == {"jobs": 1, "sum_s": 10.0, "mean_s": 10.0, "max_s": 10.0}
-    assert out["rules"]["member"]["sum_s"] == 4.0 and out["rules"]["analysis"]["sum_s"] == 2.0
+    assert out["rules"]["simulate[member]"]["sum_s"] == 4.0 and out["rules"]["analysis"]["sum_s"] == 2.0
     assert out["span_s"] == 10.0
     assert out["mean_occupancy"] == pytest.approx(1.6)
-    assert list(out["rules"]) == ["truth", "member", "analysis"]
+    assert list(out["rules"]) == ["truth", "simulate[member]", "analysis"]
+    assert out["experiments"] == {"twin_ref": 4.0}  # the only job whose wildcards name an experiment
 
 
 def test_not_a_log():
