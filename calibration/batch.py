@@ -9,7 +9,7 @@ in memory: what a run costs beyond its solver is the fork and its files, where a
 Snakemake's job start, an interpreter, the imports and the engine's load every time.
 
 A run whose files are intact (their manifest checks out) and were made by the same request (the
-run's settings with the simulator command, parameters, record, mesh seed, run.json entries, and the
+run's settings with the simulator command, parameters, the record's content, mesh seed, run.json entries, and the
 source of the shipped simulator's packages, ``fdem`` and ``shpb``: a SHA-256 kept in its
 ``manifest.json``, written only where the outcome was the simulator's own: a success or a numerical
 failure) is not run again: the simulation is deterministic, so it would write the same files. A batch re-run because one of its
@@ -36,6 +36,7 @@ from pathlib import Path
 from .contracts import atomic_write_json, read_json
 from .ensemble_files import simulation_params
 from .heal import MANIFEST, check_manifest
+from .run_store import copy_made, remember
 from .runner import SimulatorCrash, failure_card, run_member, simulator_command
 
 __all__ = ["run_batch", "request_key"]
@@ -60,13 +61,26 @@ def _code_hash() -> str:
 
 def request_key(spec: Mapping, params: Mapping) -> str:
     """What makes a run's files: its settings (the simulator command among them), resolved parameters,
-    record, mesh seed, snapshots and run.json entries, with the shipped simulator's source. A user's own
+    the record's content (:func:`_record_digest`), mesh seed, snapshots and run.json entries, with the shipped simulator's source. A user's own
     simulator is taken as unchanged while its command is (Snakemake does not track it either)."""
     what = {"sim": spec["sim"], "params": {k: float(v) for k, v in params.items()},
-            "record": spec.get("record_file"), "mesh_seed": spec.get("mesh_seed"),
+            "record": _record_digest(spec.get("record_file")), "mesh_seed": spec.get("mesh_seed"),
             "snapshots": spec.get("snapshots"), "run": spec.get("run") or {},
             "outputs": sorted(spec["outputs"]), "code": _code_hash()}
     return hashlib.sha256(json.dumps(what, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def _record_digest(record_file: str | None) -> str | None:
+    """What a run reads of its record, by content: the reduced record's record.json and the incident wave
+    beside it (rules/common.smk, record_input), so that one record reduced in two experiments' folders
+    is one input. A path that is not a file stands for itself (the simulator will say it is missing)."""
+    if not record_file or not Path(record_file).is_file():
+        return record_file
+    h = hashlib.sha256(Path(record_file).read_bytes())
+    incident = Path(record_file).with_name("incident.csv")
+    if incident.is_file():
+        h.update(b"\0" + incident.read_bytes())
+    return h.hexdigest()
 
 
 def _made_by(folder: Path, key: str) -> bool:
@@ -97,18 +111,25 @@ def _warm_engine(specs: Sequence[Mapping]) -> float | None:
 
 def run_batch(specs: Sequence[Mapping], *, batch_path: str | Path, attempt: int = 1, max_attempts: int = 1,
               params_file: str | None = None, experiments: Mapping | None = None, label: str = "",
-              log_path: str | Path | None = None) -> dict:
+              log_path: str | Path | None = None, store: str | Path | None = None) -> dict:
     """Run the simulations ``specs``, then write ``batch_path``: the runs' folders, statuses and reasons.
     Each spec (rules/inputs.smk, batch_runs) holds ``sim`` (the experiment's simulation settings),
     ``parameters``, ``record_file``, ``mesh_seed``, ``snapshots``, ``run`` (entries added to run.json),
     ``must_succeed``, ``outputs`` (curve, run and any snapshot pictures), ``log`` and ``time_limit_s``. Returns that dict. ``params_file`` is the stage's parameter file
-    (the batch's ``params`` input), ``experiments`` the config's, for ``parameters`` that name them."""
+    (the batch's ``params`` input), ``experiments`` the config's, for ``parameters`` that name them.
+    ``store``: the index of runs made by other experiments' batches (:mod:`calibration.run_store`; None:
+    every run is made here)."""
     params = [simulation_params(s["parameters"], s["sim"]["fixed"], params_file, experiments) for s in specs]
     keys = [request_key(s, p) for s, p in zip(specs, params)]
     kept = {_folder(s) for s, k in zip(specs, keys) if _made_by(Path(_folder(s)), k)}
+    copied = _copy_shared(specs, keys, kept, store)
+    kept |= set(copied)
     todo = [s for s in specs if _folder(s) not in kept]
     log = _Log(log_path, f"batch of {len(specs)} simulations, attempt {attempt} of {max_attempts}; "
-                         f"{len(kept)} made before by the same request")
+                         f"{len(kept)} made before by the same request"
+                         + (f" ({len(copied)} of them copied from other experiments' runs)" if copied else ""))
+    for folder, source in copied.items():
+        log.line(f"{folder}: copied from {source}")
     if todo:
         warm = _warm_engine(todo)
         if warm is not None:
@@ -127,6 +148,8 @@ def run_batch(specs: Sequence[Mapping], *, batch_path: str | Path, attempt: int 
             log.line(f"{folder}: crashed: {exc}")
             continue
         log.line(f"{folder}: {run.get('status')} {run.get('reason', '')} ({float(run.get('wall_s') or 'nan'):.1f} s)")
+        if store is not None and _made_by(Path(folder), key):
+            remember(store, key, folder)
         if spec.get("must_succeed") and run["status"] != "ok":
             raise RuntimeError(f"the {label or 'batch'} simulation {folder} failed: {run.get('reason')}")
         runs.append({"folder": folder, "status": run.get("status"), "reason": run.get("reason", "")})
@@ -138,6 +161,20 @@ def run_batch(specs: Sequence[Mapping], *, batch_path: str | Path, attempt: int 
     report = {"runs": runs}
     atomic_write_json(batch_path, report)
     return report
+
+
+def _copy_shared(specs: Sequence[Mapping], keys: Sequence[str], kept: set, store) -> dict[str, str]:
+    """``{folder: source}`` of the runs copied from the store (runs with snapshots are always made)."""
+    if store is None:
+        return {}
+    copied = {}
+    for spec, key in zip(specs, keys):
+        folder = _folder(spec)
+        if folder not in kept and not spec.get("snapshots"):
+            source = copy_made(store, key, folder, _made_by)
+            if source is not None:
+                copied[folder] = source
+    return copied
 
 
 class _Log:

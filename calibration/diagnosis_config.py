@@ -1,6 +1,7 @@
 """An experiment's ``diagnosis`` block read without the inference: whether the experiment runs the
 diagnosis (:func:`diagnosis_settings`), the effects it offers (:func:`candidate_effects`) and its
-leave-one-record-out folds (:func:`loro_folds`).
+leave-one-record-out folds (:func:`loro_folds`) and a record's position in its series
+(:func:`series_position`).
 
 The ``Snakefile`` and ``rules/*.smk`` call these while Snakemake parses the workflow, before any job
 runs, so this module imports no NumPy-heavy inference: :mod:`calibration.closing` and
@@ -13,9 +14,9 @@ from collections.abc import Mapping
 
 from shpb import effects as fx
 
-from .contracts import record_name
+from .contracts import experiment_records, record_name
 
-__all__ = ["FOLD_SEPARATOR", "candidate_effects", "diagnosis_settings", "loro_folds"]
+__all__ = ["FOLD_SEPARATOR", "candidate_effects", "diagnosis_settings", "loro_folds", "series_position"]
 
 #: Between an experiment's name and a held-out record's in a leave-one-record-out fold's name.
 FOLD_SEPARATOR = "__"
@@ -50,3 +51,15 @@ def loro_folds(name: str, exp: Mapping) -> dict[str, dict]:
                 "description": f"leave-one-record-out fold of {name}: {rec} held out", "loro_of": name}
         folds[f"{name}{FOLD_SEPARATOR}{rec}"] = fold
     return folds
+
+
+def series_position(experiments: Mapping, name: str, record: str) -> int:
+    """The position of ``record`` (a record name) among the records of experiment ``name``'s series:
+    for a leave-one-record-out fold the series' own list (``loro_of``), so that a record's runs (their
+    mesh realizations) do not depend on which other record the fold holds out and the runs that no
+    held-out record enters (the prior ensemble and its replicates) are the same requests in every fold,
+    made once (:mod:`calibration.run_store`); otherwise the experiment's list. 0 for a record not in it
+    (a twin's synthetic record)."""
+    exp = experiments[name]
+    names = list(experiment_records(experiments.get(exp.get("loro_of"), exp)))
+    return names.index(record) if record in names else 0

@@ -42,6 +42,7 @@ from calibration.approximation import (
     approximation_run_ids,
     approximation_settings,
 )
+from calibration.diagnosis_config import series_position
 from calibration.model_error import replicate_count, run_mesh_seed
 from calibration.workflow_io import experiment_records, member_ids, read_json
 
@@ -115,14 +116,14 @@ def iteration_files(exp, name):
 
 
 def mesh_seed_of(exp, stage, k=0, index=0, record=None):
-    """The mesh realization of one simulation (calibration.experiment.run_mesh_seed; None: unperturbed)."""
-    names = list(records(exp))
+    """The mesh realization of one simulation (calibration.experiment.run_mesh_seed; None: unperturbed);
+    a fold's record keeps its position in the series (calibration.diagnosis_config.series_position)."""
     return run_mesh_seed(
         EXPERIMENTS[exp],
         stage,
         int(k),
         int(index),
-        names.index(record) if record in names else 0,
+        series_position(EXPERIMENTS, exp, record),
     )
 
 

@@ -111,6 +111,44 @@ def test_a_run_is_simulated_again_when_its_request_or_its_files_change_and_only_
     assert request_key(other, {"sigma_t": 3e7, "E_t": 500.0}) != base
 
 
+def test_a_run_another_experiment_made_with_the_same_request_is_copied_and_nothing_else(tmp_path, stand_in):
+    store, runs = tmp_path / "store", tmp_path / "runs"
+    run_batch([spec(tmp_path, "fold_a", 3e7, stand_in, run={"member": 0})], batch_path=tmp_path / "a.json",
+              store=store)
+    same = spec(tmp_path, "fold_b", 3e7, stand_in, run={"member": 0})
+    other_mesh = spec(tmp_path, "fold_c", 3e7, stand_in, run={"member": 0}, mesh_seed=7)
+    run_batch([same, other_mesh], batch_path=tmp_path / "b.json", log_path=tmp_path / "log", store=store)
+    log = (tmp_path / "log").read_text().splitlines()
+    assert log[0].endswith("1 made before by the same request (1 of them copied from other experiments' runs)")
+    assert log[1] == f"{runs / 'fold_b'}: copied from {runs / 'fold_a'}"
+    assert log[2].startswith(f"{runs / 'fold_c'}: ok") and len(log) == 3  # a new mesh: simulated
+    for name in ("curve.csv", "run.json", MANIFEST):
+        assert (runs / "fold_b" / name).read_bytes() == (runs / "fold_a" / name).read_bytes()
+    assert check_manifest(runs / "fold_b" / MANIFEST)[1] is None
+    # a source altered after it was indexed is a miss: the run is made, not copied
+    for folder in ("fold_a", "fold_b"):
+        (runs / folder / "curve.csv").write_text("time_s,stress_Pa\n")
+    run_batch([spec(tmp_path, "fold_d", 3e7, stand_in, run={"member": 0})], batch_path=tmp_path / "d.json",
+              log_path=tmp_path / "log", store=store)
+    log = (tmp_path / "log").read_text().splitlines()
+    assert log[0].endswith("0 made before by the same request") and log[1].startswith(f"{runs / 'fold_d'}: ok")
+
+
+def test_a_record_is_keyed_by_its_content_not_its_folder(tmp_path, stand_in):
+    """The same record reduced into two experiments' folders is one input; a changed incident wave is not."""
+    paths = []
+    for exp in ("x", "y"):
+        folder = tmp_path / exp / "observations" / "R1"
+        folder.mkdir(parents=True)
+        (folder / "record.json").write_text('{"source": "R1.txt"}')
+        (folder / "incident.csv").write_text("time_s,strain\n0,0\n")
+        paths.append(str(folder / "record.json"))
+    key = [request_key({**spec(tmp_path, "a", 3e7, stand_in), "record_file": p}, {"sigma_t": 3e7}) for p in paths]
+    assert key[0] == key[1]
+    (Path(paths[1]).parent / "incident.csv").write_text("time_s,strain\n0,1e-6\n")
+    assert request_key({**spec(tmp_path, "a", 3e7, stand_in), "record_file": paths[1]}, {"sigma_t": 3e7}) != key[0]
+
+
 #: A batch job as Snakemake starts it: a fresh, single-threaded process (the pytest workers hold threads,
 #: so the shipped simulator would not fork in them); argv: specs JSON, batch file, log, "subprocess" to
 #: turn the fork off (the old path, a second interpreter per run).

@@ -51,6 +51,24 @@ def test_leave_one_record_out_folds_hold_each_record_out_once_and_change_nothing
     assert sorted(held) == sorted(records)
 
 
+def test_a_record_keeps_its_series_position_in_every_fold_so_its_prior_runs_are_the_same_requests():
+    from calibration.diagnosis_config import series_position
+    from calibration.model_error import run_mesh_seed
+
+    cfg = validate_config(_series(), SCHEMA, base_dir=REPO)
+    experiments = {**cfg["experiments"], **loro_folds("marble_loro", cfg["experiments"]["marble_loro"])}
+    names = [Path(r).name.split("_Ti")[0] for r in cfg["experiments"]["marble_loro"]["observations"]["records"]]
+    for position, record in enumerate(names):
+        folds = [f for f, e in experiments.items() if e.get("loro_of") and record in f"{e['observations']['records']}"]
+        assert len(folds) == 3  # calibrated in every fold but its own
+        seeds = {run_mesh_seed(experiments[f], "member", 0, 5, series_position(experiments, f, record)) for f in folds}
+        assert len(seeds) == 1 and series_position(experiments, "marble_loro", record) == position
+    # the fold's own list would have moved the records after the held-out one (the old key)
+    fold = next(iter(f for f in experiments if f.endswith(names[0])))
+    assert series_position(experiments, fold, names[1]) == 1 != experiments[fold]["observations"]["records"].index(
+        cfg["experiments"]["marble_loro"]["observations"]["records"][1])
+
+
 def test_a_series_that_also_lists_held_out_records_or_has_two_records_is_refused():
     with pytest.raises(ConfigError, match="validation loro every record"):
         validate_config(_series(held=["data/freiburg-rae-rock-shpb/Rae2021/SHPBdata/CaMa/"
