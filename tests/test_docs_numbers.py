@@ -126,6 +126,39 @@ def _gaps_003():
             if "face_gap.gap_m@SeeSst_SHPB_003" in r["estimates"]]
 
 
+RERUN = "benchmarks/results/loro_rerun_sandstone"
+
+
+def _rerun_bands() -> list[dict]:
+    """Each re-run fold's held-out record's band, before and after (its check.json)."""
+    rows = J(f"{RERUN}/sandstone_unseen.json")["rows"]
+    return [J(f"{RERUN}/{r['heldout']}_check.json")["predictive_band"]["records"][r["heldout"]][w]
+            for r in rows for w in ("before", "after")]
+
+
+def _rerun_peaks() -> list[float]:
+    """The held-out records' observed peaks [MPa]: the peak error over the relative peak error."""
+    rows = J(f"{RERUN}/sandstone_unseen.json")["rows"]
+    return [r["peak_error_before"] / r["peak_rel_error_before"] / 1e6 for r in rows]
+
+
+def _emulator_ratios(over: str) -> list[float]:
+    folds = J("benchmarks/results/bench_loro.json")["runs"]["new"]["emulator_against_noise"]
+    return [x["emulator_rms_Pa"] / x[over] for f in folds.values() for x in f.values()]
+
+
+def _loro_costs() -> dict:
+    run = J("benchmarks/results/bench_loro.json")["runs"]["new"]
+    rules, total = run["job_times"]["rules"], run["job_times"]["job_time_sum_s"]
+
+    def share(*names):
+        return 100 * sum(rules[f"simulate[{n}]"]["sum_s"] for n in names) / total
+
+    return {"m": run["wall_s"] / 60, "d": share("diagnosis_member"), "c": share("member", "replicate"),
+            "k": share("diagnosis_check_member"), "cp": sum(v["copied"] for v in run["fdem_runs"].values()),
+            "n": sum(v["runs"] for v in run["fdem_runs"].values())}
+
+
 def _pop():
     return J("studies/results/population_average_cv.json")
 
@@ -192,6 +225,10 @@ QUOTES: list[Quote] = [
     Quote("README.md", "the default run took {run_s} s, {fdem_runs} FDEM runs", lambda J: {
         "run_s": round(J("benchmarks/results/bench_default_run.json")["runs"]["new"]["wall_s"]),
         "fdem_runs": J("benchmarks/results/bench_default_run.json")["runs"]["new"]["fdem_runs"]}, by=README_RUN),
+    Quote("docs/workflow.md", "The five-record `config/validation.yaml` took {m:.1f} min on 2 cores "
+          "(`benchmarks/results/bench_loro.json`). Of its job time, {d:.0f} % went to the selection's emulator design, "
+          "{c:.0f} % to the calibrations' ensembles and replicates and {k:.0f} % to the real-run check. {cp} of its "
+          "{n} FDEM runs were copied from another fold", lambda J: _loro_costs()),
     Quote("docs/workflow.md", "writes the same result files in {run_s} s", lambda J: {
         "run_s": round(J("benchmarks/results/bench_default_run.json")["runs"]["new"]["wall_s"])}),
     Quote("README.md", "covers 88-90 % with uniform ranks", by=HARNESS),
@@ -351,6 +388,21 @@ QUOTES: list[Quote] = [
               "mr": _loro("marble")["cv_risk_worse_than_base"]["records"],
               "sf": _loro("sandstone")["folds_worse"], "sn": _loro("sandstone")["folds"],
               "mf": _loro("marble")["folds_worse"], "mn": _loro("marble")["folds"]}),
+    Quote(CL, "The base model's held-out RMSE is {b} MPa on average against {first} MPa in the first run", lambda J: {
+        "b": _mpa(J(f"{RERUN}/sandstone_unseen.json")["totals"]["mean_rmse_before"]),
+        "first": _mpa(_loro("sandstone")["mean_rmse_before"])}),
+    Quote(CL, "The loop lowers the error to {a} MPa. The held-out 90 % bands cover {cb:.2f} -> {ca:.2f} of the held-out "
+          "curves on average", lambda J: {
+              "a": _mpa(J(f"{RERUN}/sandstone_unseen.json")["totals"]["mean_rmse_after"]),
+              "cb": J(f"{RERUN}/sandstone_unseen.json")["totals"]["mean_predictive_coverage_90_before"],
+              "ca": J(f"{RERUN}/sandstone_unseen.json")["totals"]["mean_predictive_coverage_90_after"]}),
+    Quote(CL, "They are wide: {w} MPa rms from edge to edge, against peaks of {p} MPa. The model discrepancy ({d} MPa sd)",
+          lambda J: {"w": _span([b["band_width_rms_Pa"] / 1e6 for b in _rerun_bands()], lambda x: f"{x:.0f}"),
+                     "p": _span(_rerun_peaks(), lambda x: f"{x:.0f}"),
+                     "d": _span([b["parts_rms_Pa"]["discrepancy"] / 1e6 for b in _rerun_bands()], lambda x: f"{x:.0f}")}),
+    Quote(CL, "leave-one-out error is {n} times the records' noise and {s} times the simulator's own scatter", lambda J: {
+        "n": _span(_emulator_ratios("noise_rms_Pa"), lambda x: f"{x:.0f}"),
+        "s": _span(_emulator_ratios("simulator_rms_Pa"), lambda x: f"{x:.1f}")}),
     Quote(CL, "lowered the emulated cross-validated RMSE by {rel:.0f} % on the earlier series' calibration records "
           "(`studies/population_average_cv.py`, `studies/results/population_average_cv.json`: {point:.2f} -> {avg:.2f} MPa, "
           "se {se:.2f}, better in {better} of {n}, worse than the base in {worse} of {n} either way)", lambda J: {

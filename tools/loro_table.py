@@ -50,12 +50,19 @@ def _mean_coverage(series: dict) -> str:
             f" ({n} of {len(series['rows'])} folds)")
 
 
-def rows(series: dict) -> list[str]:
+def _label(series: dict, path: str) -> str:
+    """The series' name, marked where the committed folder holds a re-run of a series run before
+    (``loro_rerun_*``: the same records and config through later code)."""
+    return series["experiment"] + (" (re-run)" if Path(path).parent.name.startswith("loro_rerun") else "")
+
+
+def rows(series: dict, label: str | None = None) -> list[str]:
+    label = label or series["experiment"]
     out = []
     for r in series["rows"]:
         rate = r.get("strain_rate_per_s")
         out.append(
-            f"| {series['experiment']} | {r['heldout']}" + (f" ({rate:.0f} 1/s)" if rate else "")
+            f"| {label} | {r['heldout']}" + (f" ({rate:.0f} 1/s)" if rate else "")
             + f" | {', '.join(r['effects']) or 'none (base kept)'} "
             f"| {_mpa(r['rmse_before'])} -> {_mpa(r['rmse_after'])} "
             f"| {_pct(r.get('peak_rel_error_before'))} -> {_pct(r.get('peak_rel_error_after'))} "
@@ -63,7 +70,7 @@ def rows(series: dict) -> list[str]:
             f"| {_coverage(r)} |")
     t = series["totals"]
     sd = t.get("sd_rmse_change")
-    out.append(f"| {series['experiment']} | **mean over {t['folds']} folds** | "
+    out.append(f"| {label} | **mean over {t['folds']} folds** | "
                + ", ".join(f"{e} {n}/{t['folds']}" for e, n in t["effects_kept"].items())
                + f" | **{_mpa(t['mean_rmse_before'])} -> {_mpa(t['mean_rmse_after'])}** (change "
                f"{t['mean_rmse_change'] / 1e6:+.1f}" + (f", sd {sd / 1e6:.1f}" if sd is not None else "")
@@ -103,7 +110,8 @@ def block(paths) -> str:
     lines = ["| series | held-out record | effects kept | held-out RMSE, real FDEM [MPa] | peak error | "
              "time-to-peak error [us] | held-out 90 % band coverage |", "|---|---|---|---|---|---|---|"]
     for p in paths:
-        lines += rows(json.loads((ROOT / p).read_text()))
+        series = json.loads((ROOT / p).read_text())
+        lines += rows(series, _label(series, p))
     head = "From " + ", ".join(f"`{p}`" for p in paths) + " (before: base model; after: the model the fold kept):"
     foot = ("The band coverage is the fraction of the held-out curve inside its 90 % predictive band "
             "(check.json's `predictive_coverage_90`); \"-\": the fold was run before the check reported it. "
