@@ -388,6 +388,10 @@ QUOTES: list[Quote] = [
               "mr": _loro("marble")["cv_risk_worse_than_base"]["records"],
               "sf": _loro("sandstone")["folds_worse"], "sn": _loro("sandstone")["folds"],
               "mf": _loro("marble")["folds_worse"], "mn": _loro("marble")["folds"]}),
+    Quote("README.md", "held-out 90 % bands covered {cb:.2f} -> {ca:.2f} of the curves but were {w} MPa wide", lambda J: {
+        "cb": J(f"{RERUN}/sandstone_unseen.json")["totals"]["mean_predictive_coverage_90_before"],
+        "ca": J(f"{RERUN}/sandstone_unseen.json")["totals"]["mean_predictive_coverage_90_after"],
+        "w": _span([b["band_width_rms_Pa"] / 1e6 for b in _rerun_bands()], lambda x: f"{x:.0f}")}),
     Quote(CL, "The base model's held-out RMSE is {b} MPa on average against {first} MPa in the first run", lambda J: {
         "b": _mpa(J(f"{RERUN}/sandstone_unseen.json")["totals"]["mean_rmse_before"]),
         "first": _mpa(_loro("sandstone")["mean_rmse_before"])}),
