@@ -39,7 +39,9 @@ def _entry(store: Path, key: str) -> Path:
 def remember(store: str | Path, key: str, folder: str | Path) -> None:
     """Index ``folder`` as the run that ``key`` made (written atomically; the last writer wins, and any
     folder a request made holds the same files)."""
-    atomic_write_json(_entry(Path(store), key), {"folder": os.path.abspath(folder)})
+    # relative to the store: a results tree moved or cloned elsewhere keeps its index, and two runs of
+    # one config write the same index (tools/compare_runs.py)
+    atomic_write_json(_entry(Path(store), key), {"folder": os.path.relpath(folder, store)})
 
 
 def copy_made(store: str | Path, key: str, folder: str | Path, made_by) -> str | None:
@@ -50,7 +52,7 @@ def copy_made(store: str | Path, key: str, folder: str | Path, made_by) -> str |
     if not entry.is_file():
         return None
     try:
-        source = Path(read_json(entry)["folder"])
+        source = Path(store) / read_json(entry)["folder"]
     except (OSError, ValueError, KeyError, TypeError):
         return None
     folder = Path(folder)
@@ -66,4 +68,4 @@ def copy_made(store: str | Path, key: str, folder: str | Path, made_by) -> str |
         for name in SHARED_FILES:
             (folder / name).unlink(missing_ok=True)
         return None
-    return str(source)
+    return os.path.normpath(source)
