@@ -117,7 +117,8 @@ def iteration_files(exp, name):
 
 def mesh_seed_of(exp, stage, k=0, index=0, record=None):
     """The mesh realization of one simulation (calibration.experiment.run_mesh_seed; None: unperturbed);
-    a fold's record keeps its position in the series (calibration.diagnosis_config.series_position)."""
+    a fold's record keeps its position in the series (calibration.diagnosis_config.series_position).
+    """
     return run_mesh_seed(
         EXPERIMENTS[exp],
         stage,
