@@ -129,17 +129,19 @@ def _gaps_003():
 RERUN = "benchmarks/results/loro_rerun_sandstone"
 
 
-def _rerun_bands() -> list[dict]:
+def _rerun(rock="sandstone") -> dict:
+    return J(f"benchmarks/results/loro_rerun_{rock}/{rock}_unseen.json")
+
+
+def _rerun_bands(rock="sandstone") -> list[dict]:
     """Each re-run fold's held-out record's band, before and after (its check.json)."""
-    rows = J(f"{RERUN}/sandstone_unseen.json")["rows"]
-    return [J(f"{RERUN}/{r['heldout']}_check.json")["predictive_band"]["records"][r["heldout"]][w]
-            for r in rows for w in ("before", "after")]
+    return [J(f"benchmarks/results/loro_rerun_{rock}/{r['heldout']}_check.json")["predictive_band"]["records"]
+            [r["heldout"]][w] for r in _rerun(rock)["rows"] for w in ("before", "after")]
 
 
-def _rerun_peaks() -> list[float]:
+def _rerun_peaks(rock="sandstone") -> list[float]:
     """The held-out records' observed peaks [MPa]: the peak error over the relative peak error."""
-    rows = J(f"{RERUN}/sandstone_unseen.json")["rows"]
-    return [r["peak_error_before"] / r["peak_rel_error_before"] / 1e6 for r in rows]
+    return [r["peak_error_before"] / r["peak_rel_error_before"] / 1e6 for r in _rerun(rock)["rows"]]
 
 
 def _emulator_ratios(over: str) -> list[float]:
@@ -404,6 +406,18 @@ QUOTES: list[Quote] = [
           lambda J: {"w": _span([b["band_width_rms_Pa"] / 1e6 for b in _rerun_bands()], lambda x: f"{x:.0f}"),
                      "p": _span(_rerun_peaks(), lambda x: f"{x:.0f}"),
                      "d": _span([b["parts_rms_Pa"]["discrepancy"] / 1e6 for b in _rerun_bands()], lambda x: f"{x:.0f}")}),
+    Quote(CL, "`benchmarks/results/loro_rerun_marble/`, {m:.0f} min on 2 cores). Its held-out RMSE is {b} -> {a} MPa on "
+          "average; one fold of four is worse", lambda J: {
+              "m": J("benchmarks/results/loro_rerun_marble/run.json")["wall_s"] / 60, "b": _mpa(_rerun("marble")["totals"]["mean_rmse_before"]),
+              "a": _mpa(_rerun("marble")["totals"]["mean_rmse_after"])}),
+    Quote(CL, "held-out bands cover {cb:.2f} -> {ca:.2f} of the held-out curves on average, {lo:.2f}-{hi:.2f} per fold. "
+          "They are {w} MPa rms wide against peaks of {p} MPa", lambda J: {
+              "cb": _rerun("marble")["totals"]["mean_predictive_coverage_90_before"],
+              "ca": _rerun("marble")["totals"]["mean_predictive_coverage_90_after"],
+              "lo": min(b["predictive_coverage_90"] for b in _rerun_bands("marble")),
+              "hi": max(b["predictive_coverage_90"] for b in _rerun_bands("marble")),
+              "w": _span([b["band_width_rms_Pa"] / 1e6 for b in _rerun_bands("marble")], lambda x: f"{x:.0f}"),
+              "p": _span(_rerun_peaks("marble"), lambda x: f"{x:.0f}")}),
     Quote(CL, "leave-one-out error is {n} times the records' noise and {s} times the simulator's own scatter", lambda J: {
         "n": _span(_emulator_ratios("noise_rms_Pa"), lambda x: f"{x:.0f}"),
         "s": _span(_emulator_ratios("simulator_rms_Pa"), lambda x: f"{x:.1f}")}),
