@@ -255,13 +255,30 @@ def plot_sensitivity(path, obs: Observations, params: pd.DataFrame, responses: n
 
 
 def plot_diagnosis_check(path, curves: Mapping[str, Mapping], errors: Mapping[str, Mapping],
-                         added: Sequence[str], confirmation: str | None = None) -> Path:
+                         added: Sequence[str], confirmation: str | None = None, bands: pd.DataFrame | None = None,
+                         band_records: Mapping[str, Mapping] | None = None) -> Path:
     """The FDEM check of the frozen protocol's answer (:func:`calibration.closing.assemble`'s curves and
     errors): per record, the data and the real runs before (base model) and after (the confirmed model),
-    every mesh realization of a replicated check drawn, with their RMSE; ``confirmation`` (the confirmation's text) as the figure's title."""
+    every mesh realization of a replicated check drawn, with their RMSE; ``confirmation`` (the confirmation's
+    text) as the figure's title. ``bands`` (check_band.csv) and ``band_records`` (check.json's
+    ``predictive_band.records``): the shipped model's 90 % predictive band shaded, with its coverage."""
+    return _save(check_figure(curves, errors, added, confirmation, bands, band_records), path)
+
+
+def check_figure(curves, errors, added, confirmation=None, bands=None, band_records=None):
+    """:func:`plot_diagnosis_check`'s figure."""
     fig, axes = plt.subplots(1, len(curves), figsize=(4.2 * len(curves), 3.6), squeeze=False)
     after_label = "with " + ", ".join(added) if added else "after (nothing added)"
+    shipped = "after" if added else "before"  # the model the check ships: its band is the one a lab reads
     for ax, (r, c) in zip(axes[0], curves.items()):
+        if bands is not None and len(bands):
+            b = bands[(bands["record"] == r) & (bands["model"] == shipped)]
+            if len(b):
+                cov = ((band_records or {}).get(r) or {}).get(shipped) or {}
+                got = cov.get("predictive_coverage_90")
+                ax.fill_between(b["time_s"] * 1e6, b["lower_Pa"] / 1e6, b["upper_Pa"] / 1e6, color="tab:green",
+                                alpha=0.18, lw=0, label="90 % predictive band" + (f" (covers {got:.2f})"
+                                                                                 if got is not None else ""))
         ax.plot(c["time"] * 1e6, c["obs"] / 1e6, ".", ms=2, color="0.5", label="data")
         for which, name, color in (("before", "base model", "tab:blue"), ("after", after_label, "tab:orange")):
             if which == "after" and not added:
@@ -280,7 +297,7 @@ def plot_diagnosis_check(path, curves: Mapping[str, Mapping], errors: Mapping[st
     if confirmation:
         fig.suptitle(textwrap.fill(confirmation, width=int(55 * len(curves))), fontsize=9)
     fig.tight_layout()
-    return _save(fig, path)
+    return fig
 
 
 def plot_loro(path, table: Mapping) -> Path:

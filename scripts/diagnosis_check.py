@@ -24,4 +24,5 @@ report, check, curves, bands = assemble(state["selection"], rows, runs, state["m
 atomic_write_json(out.report, report)
 atomic_write_json(out.check, check)
 atomic_write_csv(bands, out.band)
-plot_diagnosis_check(out.png, curves, check["errors_per_record"], check["added"], check["fdem_confirmation"]["text"])
+plot_diagnosis_check(out.png, curves, check["errors_per_record"], check["added"], check["fdem_confirmation"]["text"],
+                     bands, check["predictive_band"]["records"])

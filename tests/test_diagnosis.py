@@ -264,3 +264,17 @@ def test_measured_curve_applies_the_measurement_chain_on_the_model_grid_and_the_
     curves["r1"]["after"], errors["r1"]["after"] = reps, e
     png = plot_diagnosis_check(tmp_path / "check3.png", curves, errors, ["face_gap"], "face_gap: confirmed")
     assert png.stat().st_size > 1000
+    # the shipped model's 90 % band, shaded from check_band.csv's edges, its coverage in the legend; the
+    # base model's band is not drawn when an effect was added
+    from calibration.plots import check_figure
+    bands = pd.DataFrame({"record": "r1", "data": "heldout", "model": ["after"] * obs_t.size + ["before"] * obs_t.size,
+                          "time_s": np.r_[obs_t, obs_t], "centre_Pa": np.r_[y, y],
+                          "lower_Pa": np.r_[y - 5e6, y - 9e6], "upper_Pa": np.r_[y + 5e6, y + 9e6]})
+    fig = check_figure(curves, errors, ["face_gap"], None, bands, {"r1": {"after": {"predictive_coverage_90": 0.87}}})
+    (ax,) = fig.axes
+    (poly,) = ax.collections
+    v = poly.get_paths()[0].vertices  # MPa, us: the band's upper and lower edges
+    assert v[:, 1].max() == pytest.approx((y + 5e6).max() / 1e6) and v[:, 1].min() == pytest.approx((y - 5e6).min() / 1e6)
+    assert "90 % predictive band (covers 0.87)" in [x.get_text() for x in ax.get_legend().get_texts()]
+    import matplotlib.pyplot as plt
+    plt.close(fig)
