@@ -34,7 +34,7 @@ import pandas as pd
 
 from enkf.covariance import DenseError, ObservationError
 from enkf.diagnosis import group_text, heldout_evaluation, replicate_curve_errors, replicated
-from enkf.diagnosis.band import replicate_variance, run_band
+from enkf.diagnosis.band import replicate_variance, residual_discrepancy, run_band
 from enkf.diagnosis.crossval import seed_for
 from shpb import effects as fx
 
@@ -219,6 +219,48 @@ def _band_of(pred, runs, point_runs, variances: dict, fallback_S, seed, label):
                   else ("calibration's replicates" if fallback_S is not None else "none")}
 
 
+#: The time over which the check's bands average the square of the cross-validated residuals into a
+#: discrepancy (enkf.diagnosis.band.residual_discrepancy). Chosen on calibration records only, every
+#: record's band from the other calibration records' residuals, over the folds of both re-run series:
+#: the lowest mean interval score of 5, 11, 21, 41, 81 and 161 samples of 2 us (studies/band_discrepancy.py).
+BAND_DISCREPANCY_WINDOW_S = 160e-6
+
+
+def _window_samples(times: np.ndarray) -> int:
+    dt = float(np.median(np.diff(times))) if times.size > 1 else BAND_DISCREPANCY_WINDOW_S
+    return int(round(BAND_DISCREPANCY_WINDOW_S / dt)) | 1  # odd: centred on each time
+
+
+def _cv_residuals(selection, real: Mapping, step: int, obs: Observations, noise: Mapping, simulator: Mapping) -> dict:
+    """``{record: (residual, counted)}`` of the calibration records with real runs at their
+    cross-validation point of ``step``: the data less the runs' mean, and the variance the band's other
+    terms give it there (parameters, simulator ``S (1 + 1/K)``, the record's noise)."""
+    out = {}
+    for r in obs.records:
+        runs = real["cv"].get(step, {}).get(r)
+        if runs is None:
+            continue
+        Y = np.array(runs, dtype=float, ndmin=2)
+        pred = selection.steps[step].cv.folds[r]["prediction"]
+        S, _ = replicate_variance([c[r] for c in real["cv"].values() if c.get(r) is not None])
+        if S is None:
+            S = np.diag(simulator[r].dense()) if r in simulator else np.zeros(Y.shape[1])
+        counted = (np.var(np.asarray(pred.draws, float) - np.asarray(pred.curve, float), axis=0)
+                   + S * (1.0 + 1.0 / Y.shape[0]) + np.diag(noise[r].dense()))
+        out[r] = (obs.values[obs.record_slice(r)] - Y.mean(axis=0), counted)
+    return out
+
+
+def _discrepancy_from(cv: Mapping, leave_out: str | None, window: int, fallback: np.ndarray):
+    """``(D, source)``: the discrepancy of a band from the other records' residuals (:func:`_cv_residuals`),
+    or the calibration's estimate where no other record has them or their grids differ."""
+    use = [v for r, v in cv.items() if r != leave_out]
+    if not use or len({v[0].size for v in use} | {fallback.size}) != 1:
+        return fallback, "calibration's estimate"
+    return (residual_discrepancy([v[0] for v in use], [v[1] for v in use], window),
+            f"cross-validated residuals of {len(use)} calibration record(s)")
+
+
 def predictive_bands(selection, real: Mapping, k: int, obs: Observations, heldout: Observations | None,
                      noise: Mapping, simulator: Mapping, discrepancy: Mapping[str, np.ndarray]):
     """``({record: {"data", "before", "after"}}, frame)``: each record's 90 % predictive band of its curve
@@ -229,21 +271,27 @@ def predictive_bands(selection, real: Mapping, k: int, obs: Observations, heldou
         simulations driven by its incident wave);
     (b) the simulator's variability, measured on the record's replicated check runs (pooled over the
         steps' points; with one run per point the protocol's ``simulator`` term);
-    (c) the model discrepancy the calibration estimated on the calibration records (``discrepancy``, their
-        mean; fitted to the base model, so it is cautious for a model that added effects);
+    (c) the model discrepancy of that step's model, read off the calibration records' residuals against
+        their real runs at their cross-validation points (each fitted without the record), less what
+        (a), (b) and (d) give them, averaged over BAND_DISCREPANCY_WINDOW_S
+        (:func:`enkf.diagnosis.band.residual_discrepancy`): large where the model errs, none where it
+        does not, and smaller after the loop where the shipped model errs less. A calibration record's
+        band takes the other calibration records' residuals only. Without another record's residuals,
+        the calibration's estimate (``discrepancy``, their mean; fitted to the base model);
     (d) the instrument noise: the calibration records' pooled level (mean of their noise variances).
 
     A held-out record's band takes nothing computed from its response: not its curve, nor its own
     pre-trigger noise (``noise[h]``, which the selection gave it), nor its onset or its modulus. Its
     band is fixed before its curve is read; the curve only scores it (``frame`` holds the bands, SI).
-    The calibration records' bands (at their cross-validation points, parameters fitted without them)
-    hold their own data in (c) and (d): in-sample."""
+    A calibration record's curve enters its band only through the posterior (a) and the pooled noise (d)."""
     calib = list(obs.records)
-    variances = {"discrepancy": _mean_block([np.asarray(discrepancy[r], float) for r in calib]),
-                 "noise": _mean_block([np.diag(noise[r].dense()) for r in calib])}
+    fallback = _mean_block([np.asarray(discrepancy[r], float) for r in calib])
+    pooled_noise = _mean_block([np.diag(noise[r].dense()) for r in calib])
+    window = _window_samples(obs.time[obs.record_slice(calib[0])])
+    cv = {step: _cv_residuals(selection, real, step, obs, noise, simulator) for step in {0, k}}
     seed = int(selection.settings.get("seed", 0))
-    jobs = [(r, "cv", "calibration (in-sample: its own data set the discrepancy and noise terms)", obs)
-            for r in calib]
+    jobs = [(r, "cv", "calibration (cross-validated; its band's discrepancy from the other calibration records)",
+             obs) for r in calib]
     if heldout is not None:
         jobs += [(h, "heldout", "heldout", heldout) for h in heldout.records]
     out, frames = {}, []
@@ -255,8 +303,10 @@ def predictive_bands(selection, real: Mapping, k: int, obs: Observations, heldou
         for when, step in (("before", 0), ("after", k)):
             st = selection.steps[step]
             pred = st.heldout[rec] if role == "heldout" else st.cv.folds[rec]["prediction"]
-            bands[when] = _band_of(pred, real[role].get(step, {}).get(rec), pts, variances, simulator.get(rec),
-                                   seed, (rec, step))
+            D, source = _discrepancy_from(cv[step], rec if role == "cv" else None, window, fallback)
+            got = _band_of(pred, real[role].get(step, {}).get(rec), pts, {"discrepancy": D, "noise": pooled_noise},
+                           simulator.get(rec), seed, (rec, step))
+            bands[when] = None if got is None else (got[0], {**got[1], "discrepancy_from": source})
         s = src.record_slice(rec)
         t, y = src.time[s], src.values[s]
         for when, got in bands.items():
@@ -390,11 +440,15 @@ def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: Emulated
              "errors_per_record": errors, "heldout": held, "cv_risk_worse_than_base": risk,
              "predictive_band": {"level": 0.90, "records": bands, "file": "check_band.csv",
                                  "terms": "posterior members x population draws on the emulator of the record, "
-                                          "the simulator's variability from the check's replicates, the discrepancy "
-                                          "and the instrument noise pooled over the calibration records; centred "
-                                          "on the mean of the real FDEM runs at the prediction point",
+                                          "the simulator's variability from the check's replicates, the model "
+                                          "discrepancy of each step's model from the calibration records' "
+                                          "cross-validated residuals on real runs, and the instrument noise pooled "
+                                          "over the calibration records; centred on the mean of the real FDEM "
+                                          "runs at the prediction point",
                                  "note": "held-out records: nothing from their response enters their band; "
-                                         "calibration records: in-sample"},
+                                         "calibration records: their discrepancy from the other calibration "
+                                         "records, their own curve only through the posterior and the pooled "
+                                         "noise"},
              "note": "real FDEM runs: calibration records at their cross-validation points (each predicted by a "
                      "calibration without it), held-out records at their prediction points; before = base "
                      "model, after = the confirmed model"}

@@ -15,7 +15,8 @@ import pytest
 from calibration.closing import assemble, check_rows, predictive_bands
 from calibration.observations import OBS_COLUMNS, Observations
 from enkf import AR1Error
-from enkf.diagnosis.band import SCORE_RATIO_BAR, informative, interval_score, replicate_variance, run_band
+from enkf.diagnosis.band import (SCORE_RATIO_BAR, informative, interval_score, replicate_variance,
+                                 residual_discrepancy, run_band)
 from test_protocol_shpb import CALIB, K, MODEL_T, OBS_T, NOISE, curve, data, emulated, run
 
 T = np.arange(0.0, 150e-6, 1.5e-6)
@@ -108,6 +109,45 @@ def test_the_replicates_give_the_simulator_variability_pooled_over_points():
     assert replicate_variance([pulse(POST_MEAN)]) == (None, 0)  # one run: nothing measured
 
 
+def test_the_residual_discrepancy_is_where_the_residuals_are():
+    """Residuals of sd 2 MPa after 60 us and none before, on six records, 0.5 MPa^2 of them counted by the
+    other terms: the discrepancy is (2 MPa)^2 less the counted variance after the onset (within the
+    scatter of six records' squares averaged over the window), zero before it, never negative."""
+    rng = np.random.default_rng(3)
+    sd = np.where(T > 60e-6, 2e6, 0.0)
+    E = sd * rng.standard_normal((6, T.size))
+    counted = np.full((6, T.size), 0.5e12)
+    D = residual_discrepancy(E, counted, window=21)
+    late, early = T > 90e-6, T < 40e-6
+    # 6 records x 21 samples: the mean square scatters by about sqrt(2 / 126) = 13 % of 4e12
+    assert np.mean(D[late]) == pytest.approx(4e12 - 0.5e12, rel=0.2)
+    assert np.all(D[early] == 0.0) and np.all(D >= 0.0)
+    with pytest.raises(ValueError, match="one row per record"):
+        residual_discrepancy(E, counted[:, :-1], window=21)
+
+
+def test_a_band_with_the_residual_discrepancy_of_four_records_covers_a_fifth_at_its_level():
+    """Records whose discrepancy grows with the pulse (sd 0.3-3 MPa, AR(1), 10 us) and 0.3 MPa of noise:
+    the discrepancy read off four records' residuals makes the fifth record's band cover it at about its
+    level; the foot's discrepancy taken everywhere does not."""
+    rng = np.random.default_rng(11)
+    shape = 0.1 + pulse(POST_MEAN)[0] / POST_MEAN[0]
+    delta, noise = AR1Error(3e6 * shape, T, 10e-6), AR1Error(R_SD, T, 3e-6)
+    centre = pulse(POST_MEAN)[0]
+    R = np.full(T.size, R_SD ** 2)
+    cov, flat = [], []
+    for _ in range(300):
+        E = delta.sample(rng, 5) + noise.sample(rng, 5)
+        D = residual_discrepancy(E[:4], np.tile(R, (4, 1)), window=21)
+        for d, out in ((D, cov), (np.full(T.size, (0.3e6) ** 2), flat)):
+            band = run_band(centre[None, :], centre, centre, {"discrepancy": d, "noise": R}, rng=rng, n_samples=2000)
+            out.append(band.coverage(centre + E[4]))
+    # 300 curves: the mean's sd is about 0.01; measured 0.90, against 0.66 for the discrepancy of the
+    # pulse's foot taken everywhere (over-confident at the pulse)
+    assert 0.85 <= np.mean(cov) <= 0.95
+    assert np.mean(flat) < 0.75
+
+
 # ---------------------------------------------------------------------------------------------------
 # the workflow's bands on the stand-in of tests/test_protocol_shpb.py, and the held-out record's inputs
 # ---------------------------------------------------------------------------------------------------
@@ -163,7 +203,8 @@ def test_a_held_out_band_is_the_same_whatever_its_curve_and_its_own_noise(loop):
     cov = report["heldout"]["H"]["after"]["predictive_coverage_90"]
     assert cov >= 0.9 and report2["heldout"]["H"]["after"]["predictive_coverage_90"] < 0.5
     assert check["errors_per_record"]["H"]["after"]["predictive_coverage_90"] == cov
-    assert check["predictive_band"]["records"]["A"]["data"].startswith("calibration (in-sample")
+    assert check["predictive_band"]["records"]["A"]["data"].startswith("calibration (cross-validated")
+    assert band["after"]["discrepancy_from"] == f"cross-validated residuals of {len(CALIB)} calibration record(s)"
 
 
 def test_the_band_of_a_record_with_one_run_per_point_takes_the_protocol_simulator_term(loop):
@@ -180,6 +221,32 @@ def test_the_band_of_a_record_with_one_run_per_point_takes_the_protocol_simulato
     assert after["simulator_from"] == "calibration's replicates" and after["replicates"] == 1
     assert after["parts_rms_Pa"]["simulator"] == pytest.approx(np.sqrt(2) * 0.7e6, rel=1e-9)
     assert out["A"]["after"]["simulator_from"] == "none"
+
+
+def test_a_calibration_records_band_takes_the_other_records_residuals_not_its_own(loop):
+    """A calibration record's band: its discrepancy from the other calibration records' cross-validated
+    residuals, so corrupting its curve leaves its band as it was and moves the others' (whose discrepancy
+    reads its residual); the held-out band reads every calibration record's."""
+    from calibration.protocol import real_curves
+
+    obs, sel, rows, runs = loop
+    real = real_curves(rows, runs, emulated())
+    held = _obs({"H": obs["H"]}, 0.3e6)
+    disc = {r: np.full(OBS_T.size, (0.5e6) ** 2) for r in CALIB}
+    a, b = CALIB[0], CALIB[1]
+    clean = _obs({r: obs[r] for r in CALIB}, 0.3e6)
+    bad = _obs({r: (obs[r] + 20e6 * np.sin(OBS_T / 7e-6) if r == a else obs[r]) for r in CALIB}, 0.3e6)
+    out, frame = predictive_bands(sel, real, 1, clean, held, NOISE, {}, disc)
+    out2, frame2 = predictive_bands(sel, real, 1, bad, held, NOISE, {}, disc)
+
+    def edges(f, r):
+        g = f[(f.record == r) & (f.model == "after")]
+        return g["lower_Pa"].to_numpy(), g["upper_Pa"].to_numpy()
+
+    assert all(np.array_equal(x, y) for x, y in zip(edges(frame, a), edges(frame2, a)))
+    assert out[a]["after"]["discrepancy_from"] == f"cross-validated residuals of {len(CALIB) - 1} calibration record(s)"
+    assert out2[b]["after"]["parts_rms_Pa"]["discrepancy"] > 5 * out[b]["after"]["parts_rms_Pa"]["discrepancy"]
+    assert out2["H"]["after"]["parts_rms_Pa"]["discrepancy"] > 5 * out["H"]["after"]["parts_rms_Pa"]["discrepancy"]
 
 
 # ---------------------------------------------------------------------------------------------------

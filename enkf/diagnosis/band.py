@@ -31,9 +31,9 @@ import numpy as np
 
 from ..covariance import DiagonalError
 from ..predictive import predictive_band
-from ..variability import SMOOTH_WINDOW, smoothed_variance
+from ..variability import SMOOTH_WINDOW, _smooth, smoothed_variance
 
-__all__ = ["RunBand", "informative", "interval_score", "replicate_variance", "run_band"]
+__all__ = ["RunBand", "informative", "interval_score", "replicate_variance", "residual_discrepancy", "run_band"]
 
 #: The informativeness bar: a band's mean interval score at most this fraction of the prior band's. The
 #: loosest of issue 52's bars for a posterior's own interval score over the prior's (0.55, for ``E_t``).
@@ -96,6 +96,21 @@ def replicate_variance(point_runs: Sequence, window: int = SMOOTH_WINDOW) -> tup
         return None, 0
     dev = np.vstack(devs)
     return smoothed_variance(dev, dof, np.zeros(dev.shape[1], int), window), dof
+
+
+def residual_discrepancy(residuals: Sequence, counted: Sequence, window: int) -> np.ndarray:
+    """Per-time variance of the model discrepancy ``D`` read off other records' residuals: ``residuals[i]``
+    (m,) a record's data less the mean of its real runs at a point fitted without it (its cross-validation
+    point), ``counted[i]`` (m,) the variance the band's other terms already give that residual (parameters,
+    simulator ``S (1 + 1/K)``, noise). The mean over records of ``residual^2 - counted``, averaged over
+    ``window`` neighbouring times and floored at zero: ``D`` where the model errs (the toe, the peak, the
+    post-peak), none where it does not (before the wave arrives)."""
+    E = np.array(residuals, dtype=float, ndmin=2)
+    C = np.array(counted, dtype=float, ndmin=2)
+    if E.shape != C.shape:
+        raise ValueError(f"residuals {E.shape} and counted variances {C.shape}: one row per record, one grid")
+    raw = np.mean(E ** 2 - C, axis=0)
+    return np.maximum(_smooth(raw, np.zeros(raw.size, int), int(window)), 0.0)
 
 
 def run_band(draws, emulated_point, runs, variances: Mapping[str, np.ndarray], *, rng, level: float = 0.90,
