@@ -28,12 +28,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
 
 from enkf.covariance import DenseError, ObservationError
-from enkf.diagnosis import group_text, heldout_evaluation, replicate_curve_errors, replicated
+from enkf.diagnosis import group_text, heldout_evaluation, box_draws, replicate_curve_errors, replicated
 from enkf.diagnosis.band import replicate_variance, residual_discrepancy, run_band
 from enkf.diagnosis.crossval import seed_for
 from shpb import effects as fx
@@ -262,7 +263,7 @@ def _discrepancy_from(cv: Mapping, leave_out: str | None, window: int, fallback:
 
 
 def predictive_bands(selection, real: Mapping, k: int, obs: Observations, heldout: Observations | None,
-                     noise: Mapping, simulator: Mapping, discrepancy: Mapping[str, np.ndarray]):
+                     noise: Mapping, simulator: Mapping, discrepancy: Mapping[str, np.ndarray], model=None):
     """``({record: {"data", "before", "after"}}, frame)``: each record's 90 % predictive band of its curve
     under the base model (step 0) and the shipped one (step ``k``), centred on the mean of the real FDEM
     runs at its prediction point, with :func:`enkf.diagnosis.band.run_band`'s terms:
@@ -283,7 +284,14 @@ def predictive_bands(selection, real: Mapping, k: int, obs: Observations, heldou
     A held-out record's band takes nothing computed from its response: not its curve, nor its own
     pre-trigger noise (``noise[h]``, which the selection gave it), nor its onset or its modulus. Its
     band is fixed before its curve is read; the curve only scores it (``frame`` holds the bands, SI).
-    A calibration record's curve enters its band only through the posterior (a) and the pooled noise (d)."""
+    A calibration record's curve enters its band only through the posterior (a) and the pooled noise (d).
+
+    With ``model`` (the emulated forward model), each band is scored against the design box's: the same
+    band with the posterior's draws in (a) replaced by draws uniform over the emulator's design box
+    (:func:`enkf.diagnosis.box_draws`: the base posterior's neighbourhood, clipped to the prior box, and
+    the candidates' ranges; the emulator holds nowhere else, so the prior box itself cannot be drawn).
+    ``interval_score_over_box`` near 1: knowing the parameters better than that box does not improve the
+    prediction; below :data:`enkf.diagnosis.band.SCORE_RATIO_BAR`, it does."""
     calib = list(obs.records)
     fallback = _mean_block([np.asarray(discrepancy[r], float) for r in calib])
     pooled_noise = _mean_block([np.diag(noise[r].dense()) for r in calib])
@@ -304,17 +312,25 @@ def predictive_bands(selection, real: Mapping, k: int, obs: Observations, heldou
             st = selection.steps[step]
             pred = st.heldout[rec] if role == "heldout" else st.cv.folds[rec]["prediction"]
             D, source = _discrepancy_from(cv[step], rec if role == "cv" else None, window, fallback)
-            got = _band_of(pred, real[role].get(step, {}).get(rec), pts, {"discrepancy": D, "noise": pooled_noise},
-                           simulator.get(rec), seed, (rec, step))
-            bands[when] = None if got is None else (got[0], {**got[1], "discrepancy_from": source})
+            terms = {"discrepancy": D, "noise": pooled_noise}
+            got = _band_of(pred, real[role].get(step, {}).get(rec), pts, terms, simulator.get(rec), seed, (rec, step))
+            box = None
+            if got is not None and model is not None:
+                draws = box_draws(model, st.spec, rec, pred.draws.shape[0], seed=seed)
+                box = _band_of(replace(pred, draws=draws), real[role][step][rec], pts, terms, simulator.get(rec),
+                               seed, (rec, step, "box"))[0]
+            bands[when] = None if got is None else (got[0], {**got[1], "discrepancy_from": source}, box)
         s = src.record_slice(rec)
         t, y = src.time[s], src.values[s]
         for when, got in bands.items():
             if got is None:
                 entry[when] = None
                 continue
-            band, info = got
+            band, info, box = got
             entry[when] = {**band.summary(y), **info}
+            if box is not None:
+                entry[when]["box_interval_score_Pa"] = box.score(y)
+                entry[when]["interval_score_over_box"] = band.score(y) / box.score(y)
             frames.append(pd.DataFrame({"record": rec, "data": role, "model": when, "time_s": t,
                                         "centre_Pa": band.centre, "lower_Pa": band.lower, "upper_Pa": band.upper}))
         out[rec] = entry
@@ -412,10 +428,12 @@ def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: Emulated
         held = heldout_evaluation(selection, hv, ht, final=k,
                                   real={"before": real["heldout"][0], "after": real["heldout"][k]})
     bands, band_frame = predictive_bands(selection, real, k, obs, heldout if held else None, noise, simulator,
-                                         discrepancy)
+                                         discrepancy, model)
     for h in held:
         for w in ("before", "after"):
             held[h][w]["predictive_coverage_90"] = bands[h][w]["predictive_coverage_90"]
+            if "interval_score_over_box" in bands[h][w]:
+                held[h][w]["interval_score_over_box"] = bands[h][w]["interval_score_over_box"]
     shipped = selection.steps[k]
     if k == 0:
         verdict = "base_kept"
@@ -483,7 +501,8 @@ def loro_table(folds: Mapping[str, Mapping], record_info: Mapping[str, Mapping] 
                    "verdict": rep["verdict"], "estimates": shared,
                    "heldout_values": ev["after"].get("point"), "heldout_intervals": ev["after"].get("intervals")}
             for w in ("before", "after"):
-                for key in ("rmse", "peak_error", "peak_rel_error", "time_to_peak_error", "predictive_coverage_90"):
+                for key in ("rmse", "peak_error", "peak_rel_error", "time_to_peak_error", "predictive_coverage_90",
+                            "interval_score_over_box"):
                     row[f"{key}_{w}"] = ev[w].get(key)
             row["rmse_change"] = ev["after"]["rmse"] - ev["before"]["rmse"]
             info = (record_info or {}).get(h, {})
@@ -505,6 +524,9 @@ def loro_table(folds: Mapping[str, Mapping], record_info: Mapping[str, Mapping] 
         cov = [r[f"predictive_coverage_90_{w}"] for r in rows if r.get(f"predictive_coverage_90_{w}") is not None]
         totals[f"mean_predictive_coverage_90_{w}"] = float(np.mean(cov)) if cov else None
         totals[f"folds_with_predictive_coverage_{w}"] = len(cov)
+        # the bands' interval score over the design box's (None for folds run before the check scored it)
+        ratio = [r[f"interval_score_over_box_{w}"] for r in rows if r.get(f"interval_score_over_box_{w}") is not None]
+        totals[f"mean_interval_score_over_box_{w}"] = float(np.mean(ratio)) if ratio else None
     return {"rows": rows, "totals": totals}
 
 

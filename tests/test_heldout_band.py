@@ -249,6 +249,36 @@ def test_a_calibration_records_band_takes_the_other_records_residuals_not_its_ow
     assert out2["H"]["after"]["parts_rms_Pa"]["discrepancy"] > 5 * out["H"]["after"]["parts_rms_Pa"]["discrepancy"]
 
 
+def test_each_band_is_scored_against_the_box_s_and_a_box_wide_prediction_is_not_informative(loop):
+    """check.json's ``interval_score_over_box``: the band's interval score over that of the same band with
+    draws uniform over the model's box. The stand-in's held-out record after the loop: 0.51 (measured);
+    the same prediction with the box's draws put in its place scores about 1 and is flagged."""
+    from dataclasses import replace
+
+    from calibration.protocol import real_curves
+    from enkf.diagnosis import box_draws
+
+    obs, sel, rows, runs = loop
+    real = real_curves(rows, runs, emulated())
+    cal, held = _obs({r: obs[r] for r in CALIB}, 0.3e6), _obs({"H": obs["H"]}, 0.3e6)
+    disc = {r: np.full(OBS_T.size, (0.5e6) ** 2) for r in CALIB}
+    out, _ = predictive_bands(sel, real, 1, cal, held, NOISE, {}, disc, emulated())
+    after = out["H"]["after"]
+    assert after["interval_score_over_box"] == pytest.approx(after["interval_score_Pa"] / after["box_interval_score_Pa"])
+    assert informative(after["interval_score_Pa"], after["box_interval_score_Pa"])
+    step = sel.steps[1]
+    pred = step.heldout["H"]
+    wide = box_draws(emulated(), step.spec, "H", pred.draws.shape[0], seed=12345)
+    step.heldout["H"] = replace(pred, draws=wide)
+    try:
+        out2, _ = predictive_bands(sel, real, 1, cal, held, NOISE, {}, disc, emulated())
+    finally:
+        step.heldout["H"] = pred
+    ratio = out2["H"]["after"]["interval_score_over_box"]
+    assert 0.9 < ratio < 1.1 and not informative(out2["H"]["after"]["interval_score_Pa"],
+                                                 out2["H"]["after"]["box_interval_score_Pa"])
+
+
 # ---------------------------------------------------------------------------------------------------
 # the leave-one-record-out table
 # ---------------------------------------------------------------------------------------------------

@@ -35,7 +35,14 @@ def _coverage(r: dict) -> str:
     """The held-out record's 90 % predictive band coverage before -> after ("-" for a fold run before the
     check reported it)."""
     b, a = r.get("predictive_coverage_90_before"), r.get("predictive_coverage_90_after")
-    return "-" if b is None and a is None else f"{_cov(b)} -> {_cov(a)}"
+    return ("-" if b is None and a is None else f"{_cov(b)} -> {_cov(a)}") + _over_box(
+        r.get("interval_score_over_box_before"), r.get("interval_score_over_box_after"))
+
+
+def _over_box(b, a) -> str:
+    """The band's interval score over the design box's band, before -> after ("" for a fold run before the
+    check scored it)."""
+    return "" if b is None and a is None else f"; score/box {_cov(b)} -> {_cov(a)}"
 
 
 def _mean_coverage(series: dict) -> str:
@@ -46,8 +53,10 @@ def _mean_coverage(series: dict) -> str:
     if vals["before"] is None and vals["after"] is None:
         return "-"
     n = max(v[1] for v in vals.values() if v is not None)
+    t = series["totals"]
     return (f"**{_cov(vals['before'] and vals['before'][0])} -> {_cov(vals['after'] and vals['after'][0])}**"
-            f" ({n} of {len(series['rows'])} folds)")
+            f" ({n} of {len(series['rows'])} folds)" + _over_box(t.get("mean_interval_score_over_box_before"),
+                                                                 t.get("mean_interval_score_over_box_after")))
 
 
 def _label(series: dict, path: str) -> str:
@@ -115,6 +124,10 @@ def block(paths) -> str:
     head = "From " + ", ".join(f"`{p}`" for p in paths) + " (before: base model; after: the model the fold kept):"
     foot = ("The band coverage is the fraction of the held-out curve inside its 90 % predictive band "
             "(check.json's `predictive_coverage_90`); \"-\": the fold was run before the check reported it. "
+            "Score/box: the band's interval score over that of the same band with the posterior's draws replaced "
+            "by draws uniform over the emulator's design box (the base posterior's neighbourhood and the "
+            "candidates' ranges; `interval_score_over_box`): 1, knowing the parameters better than that box "
+            "does not improve the prediction; below 0.55, it does. "
             "These records are development data: they were read while the method was built, so a coverage "
             "here is not a test on unseen records.")
     return f"{START}\n{head}\n\n" + "\n".join(lines) + f"\n\n{foot}\n{END}"

@@ -81,6 +81,7 @@ from .population import Population, fit_population, record_name
 
 __all__ = ["CVResult", "Fit", "ForwardModel", "ModelSpec", "Prediction", "RecordErrors", "calibrate",
            "compare_cv", "compare_replicated", "cross_validate", "fit_populations", "given_fit", "holm", "predict_record",
+           "box_draws",
            "scope_of", "seed_for", "squared_error_difference"]
 
 SCOPES = ("per_record", "shared")
@@ -330,6 +331,17 @@ def predict_record(model: ForwardModel, spec: ModelSpec, fit: Fit, record: str, 
     Xs = np.column_stack([fit.column(n) for n in shared] + [np.full(N, point[record_name(p, record)]) for p in per])
     spread = np.atleast_2d(np.cov(np.asarray(f(Xs), dtype=float).T))
     return Prediction(record, point, curve, np.asarray(f(X), dtype=float), band_level, dict(populations), spread)
+
+
+def box_draws(model: ForwardModel, spec: ModelSpec, record: str, n: int, *, seed: int) -> np.ndarray:
+    """``(n, m)`` curves of ``record`` with every parameter of ``spec`` uniform over ``model``'s box (an
+    emulated model's: its design box): what knowing only that box predicts, against which a prediction's
+    band must score better to say more than the box (:func:`enkf.diagnosis.band.informative`)."""
+    names = spec.shared + [record_name(p, record) for p in spec.per_record]
+    lo, hi = model.box(names)
+    rng = np.random.default_rng(seed_for(seed, "box draws", record, *names))
+    X = lo + (hi - lo) * rng.random((int(n), len(names)))
+    return np.asarray(model.forward(names, [record])(X), dtype=float)
 
 
 def score_prediction(pred: Prediction, y: np.ndarray, errors: RecordErrors) -> dict:
