@@ -90,6 +90,42 @@ def test_different_seeds_move_interior_nodes_only(build):
         assert np.array_equal(a.body(name).nodes, base.body(name).nodes)
 
 
+def _reference_realization(nodes, tris, fixed, mesh_seed):
+    """perturb_interior_nodes as written first, in NumPy, node after node: the compiled loop must give
+    its nodes bit for bit (the meshes, and so every recorded curve, did not change with it)."""
+    from shpb.meshing import MAX_HALVINGS, _draws_in_unit_disc
+
+    move = _draws_in_unit_disc(np.random.default_rng(mesh_seed), len(nodes))
+    move *= (MESH_JITTER * _shortest_edge_at_nodes(nodes, tris))[:, None]
+    floor = MIN_ANGLE_KEEP * float(_min_angles(nodes, tris).min())
+    order = np.argsort(tris.ravel(), kind="stable")
+    star = np.split(order // 3, np.cumsum(np.bincount(tris.ravel(), minlength=len(nodes)))[:-1])
+    out = np.array(nodes, dtype=np.float64, copy=True)
+    for i in np.flatnonzero(~fixed):
+        old = out[i].copy()
+        for k in range(MAX_HALVINGS + 1):
+            out[i] = old + move[i] * 0.5**k
+            if _min_angles(out, tris[star[i]]).min() >= floor:
+                break
+        else:
+            out[i] = old
+    return out
+
+
+@pytest.mark.parametrize("preset", ["fast", "standard"])
+def test_the_compiled_realization_is_the_numpy_one_bit_for_bit(preset):
+    p = get_preset(preset)
+    nodes, tris = _mesh_flattened_disc(0.025, p.specimen_h_m, p, np.radians(DISC_FLAT_HALF_ANGLE_DEG))
+    keep = np.array([0, 5, 17])
+    fixed = _boundary_nodes(tris, len(nodes))
+    fixed[keep] = True
+    for seed in (1, 2, 664916189):
+        ref = _reference_realization(nodes, tris, fixed, seed)
+        got = perturb_interior_nodes(nodes, tris, keep, seed)
+        assert np.array_equal(got, ref), seed
+        assert np.count_nonzero(np.any(got != nodes, axis=1)) > 0.5 * np.count_nonzero(~fixed)
+
+
 @pytest.mark.parametrize("build", [disc, cyl], ids=["disc", "cylinder"])
 def test_realizations_keep_valid_triangles_and_the_area(build):
     s0 = specimen(build())
