@@ -137,17 +137,23 @@ def _diagnosis(check: Mapping) -> list[str]:
     for group in check.get("identification") or []:
         out.append(f"<p style=\"margin:0.4em 0 0 0\">Identification: {escape(str(group.get('text', '')))}.</p>")
     per = check.get("errors_per_record")
+    bands = _get(check, "predictive_band", "records") or {}
     if isinstance(per, Mapping) and per:
         rows = []
         for rec, e in sorted(per.items(), key=lambda kv: (_get(kv[1], "data") == "heldout", kv[0])):
             rows.append([escape(str(rec)), escape(str(_get(e, "data") or "?")).replace("heldout", "held out"),
                          _num(_get(e, "before", "rmse"), 1e-6), _num(_get(e, "after", "rmse"), 1e-6),
                          _num(_get(e, "before", "peak_rel_error"), 100.0, "+.1f"),
-                         _num(_get(e, "after", "peak_rel_error"), 100.0, "+.1f")])
+                         _num(_get(e, "after", "peak_rel_error"), 100.0, "+.1f"),
+                         _num(_get(bands, rec, "after", "predictive_coverage_90"), 1.0, ".2f"),
+                         _num(_get(bands, rec, "after", "interval_score_over_box"), 1.0, ".2f")])
         out += ["<p style=\"margin:0.2em 0 0 0\">Errors of real FDEM runs at the posterior means before and "
-                "after the loop (diagnosis/check.json):</p>",
+                "after the loop (diagnosis/check.json), and each record's 90 % predictive band after it: the share "
+                "of the record inside, and its interval score over that of the same band with the parameters "
+                "uniform over the emulator's design box (near 1: the model's miss, not the parameters, limits the "
+                "prediction; '?': a check made before it was scored):</p>",
                 _table(["record", "used for", "RMSE before [MPa]", "RMSE after [MPa]", "peak error before [%]",
-                        "peak error after [%]"], rows)]
+                        "peak error after [%]", "band covers", "band score / box"], rows)]
     return out
 
 

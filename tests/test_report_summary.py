@@ -34,8 +34,18 @@ def test_the_summary_gives_verdict_intervals_misfit_per_iteration_and_the_heldou
     assert "target 1.149" in html
     # the diagnosis: effects kept and the FDEM errors before/after, the held-out record last
     assert "effects kept: face_gap, trigger_shift" in html
-    assert rows[-1] == ["CaMa_SHPB_005", "held out", "18.64", "11.59", "-1.3", "+10.4"]
-    assert ["CaMa_SHPB_004", "calibration", "17.25", "13.59", "+2.1", "+11.9"] in rows
+    # a check made before the bands were scored: their cells say so
+    assert rows[-1] == ["CaMa_SHPB_005", "held out", "18.64", "11.59", "-1.3", "+10.4", "?", "?"]
+    assert ["CaMa_SHPB_004", "calibration", "17.25", "13.59", "+2.1", "+11.9", "?", "?"] in rows
+
+
+def test_the_diagnosis_shows_each_record_s_band_coverage_and_its_score_over_the_design_box():
+    check = json.loads((REPO / "benchmarks" / "results" / "loro_rerun_sandstone" / "SeeSst_SHPB_023_check.json")
+                       .read_text())
+    rows = _cells(summary_html("sandstone_unseen__SeeSst_SHPB_023", {"verdict": "ok"}, check))
+    band = check["predictive_band"]["records"]["SeeSst_SHPB_023"]["after"]
+    assert rows[-1][0] == "SeeSst_SHPB_023" and rows[-1][1] == "held out"
+    assert rows[-1][-2:] == [f"{band['predictive_coverage_90']:.2f}", f"{band['interval_score_over_box']:.2f}"]
 
 
 def test_a_twin_shows_its_truth_against_the_interval_and_no_diagnosis():
