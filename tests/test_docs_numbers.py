@@ -254,14 +254,11 @@ KILL = "tests/test_docs_tables.py::test_the_workflow_docs_kill_figures_are_the_c
 QUOTES: list[Quote] = [
     # README: the default run and the coverage harness
     Quote("README.md", "the default run took {run_s} s, {fdem_runs} FDEM runs", lambda J: {
-        "run_s": round(J("benchmarks/results/bench_default_run.json")["runs"]["new"]["wall_s"]),
-        "fdem_runs": J("benchmarks/results/bench_default_run.json")["runs"]["new"]["fdem_runs"]}, by=README_RUN),
+        "run_s": J(f"{RUN}/run.json")["run_s"], "fdem_runs": J(f"{RUN}/run.json")["fdem_runs"]}, by=README_RUN),
     Quote("docs/workflow.md", "The five-record `config/validation.yaml` took {m:.1f} min on 2 cores "
           "(`benchmarks/results/bench_loro.json`). Of its job time, {d:.0f} % went to the selection's emulator design, "
           "{c:.0f} % to the calibrations' ensembles and replicates and {k:.0f} % to the real-run check. {cp} of its "
           "{n} FDEM runs were copied from another fold", lambda J: _loro_costs()),
-    Quote("docs/workflow.md", "writes the same result files in {run_s} s", lambda J: {
-        "run_s": round(J("benchmarks/results/bench_default_run.json")["runs"]["new"]["wall_s"])}),
     Quote("README.md", "covers 88-90 % with uniform ranks", by=HARNESS),
     Quote("README.md", "covering {cov:.0f} % of the {n} repeat twins", lambda J: {
         "cov": 100 * _bars("coverage_well_specified_repeat.json")["coverage_90 sigma_t"]["value"],
@@ -273,8 +270,8 @@ QUOTES: list[Quote] = [
                       lambda x: f"{100 * x:.0f}")}),
     Quote("README.md", "intervals about 0.8 of the prior's width", by=HARNESS),
     # docs/workflow.md: the default run
-    Quote("docs/workflow.md", "install {install_s} s, run {run_s} s, exit {exit_code}; {fdem_runs} FDEM runs, "
-          "{refine_runs} of them `twin_ref`'s refinement batch", lambda J: J(f"{RUN}/run.json")),
+    Quote("docs/workflow.md", "install {install_s} s in a new virtual environment, run {run_s} s, exit {exit_code}; "
+          "{fdem_runs} FDEM runs, {refine_runs} of them `twin_ref`'s refinement batch", lambda J: J(f"{RUN}/run.json")),
     Quote("docs/workflow.md", "is {stat} against the statistic's target {target}", lambda J: {
         "stat": f"{_twin()['verdict']['chi2_per_obs']['reported_against_noise_and_simulator']:.2f}",
         "target": f"{_twin()['verdict']['chi2_per_obs']['stop_target']:.2f}"}),
@@ -317,12 +314,18 @@ QUOTES: list[Quote] = [
           "and {pa:.0f} % by the confirmed one", lambda J: {
               "rb": _mpa(_heldout()["before"]["rmse"]), "pb": 100 * _heldout()["before"]["peak_rel_error"],
               "ra": _mpa(_heldout()["after"]["rmse"]), "pa": 100 * _heldout()["after"]["peak_rel_error"]}),
-    Quote("docs/workflow.md", "went from {b0} to {a0} MPa with `{e0}` (z = {z0}, p = {p0} against {l0}) and on to {a1} MPa "
-          "with `{e1}` (z = {z1}, p = {p1} against {l1})", lambda J: {
+    Quote("docs/workflow.md", "went from {b0} to {a0} MPa with `{e0}` (z = {z0}, p = {p0} against {l0}), and on to {a1} MPa "
+          "with `{e1}`, short of its level (z = {z1}, p = {p1} against {l1})", lambda J: {
               k: v for i in (0, 1) for k, v in {
                   f"b{i}": _mpa(_walk_step(i)["real_cv_rmse_before"]), f"a{i}": _mpa(_walk_step(i)["real_cv_rmse_after"]),
                   f"e{i}": _walk_step(i)["effect"], f"z{i}": f"{_walk_step(i)['z']:.2f}",
-                  f"p{i}": f"{_walk_step(i)['p']:.3f}", f"l{i}": f"{_walk_step(i)['level']:.4f}"}.items()}),
+                  f"p{i}": f"{_walk_step(i)['p']:.3f}", f"l{i}": f"{_walk_step(i)['level']:.4f}"}.items()}
+          if _walk_step(0)["confirmed"] and not _walk_step(1)["confirmed"] else {}),
+    Quote("docs/workflow.md", "its 90 % band covers {c:.2f} of its curve, scoring {s:.2f} of the design box's band", lambda J: {
+        "c": J(f"{RUN}/marble_loop/diagnosis/check.json")["predictive_band"]["records"]["CaMa_SHPB_006"]["after"]
+        ["predictive_coverage_90"],
+        "s": J(f"{RUN}/marble_loop/diagnosis/check.json")["predictive_band"]["records"]["CaMa_SHPB_006"]["after"]
+        ["interval_score_over_box"]}),
     # docs/shpb-models.md: bench_shpb.json, the onset theory, bench_sim_variability.json
     Quote(SM, "(-0.03, +0.03) R, {t:.0f} us after the incident wave's arrival", lambda J: {
         "t": _shpb("standard", "reference")["first_joint_t_s"] * 1e6}),

@@ -49,12 +49,11 @@ def test_the_censored_twins_table_is_generated_from_the_readme_table_s_json():
 
 
 def test_the_readme_quotes_the_default_runs_time_from_its_run_json():
-    # the newer code's run of the committed old-against-new benchmark (benchmarks/bench_default_run.py)
-    bench = json.loads((ROOT / "benchmarks" / "results" / "bench_default_run.json").read_text())
-    run = bench["runs"]["new"]
+    # the committed default run's own record (benchmarks/results/default_run/run.json)
+    run = json.loads((ROOT / "benchmarks" / "results" / "default_run" / "run.json").read_text())
     text = (ROOT / "README.md").read_text()
-    assert run["exit_code"] == 0 and bench["cores"] == 2 and bench["command"].endswith("(fresh clone)")
-    assert f"the default run took {round(run['wall_s'])} s, {run['fdem_runs']} FDEM runs" in " ".join(text.split())
+    assert run["exit_code"] == 0 and run["cores"] == 2 and run["fresh_clone_empty_folder"]
+    assert f"the default run took {run['run_s']} s, {run['fdem_runs']} FDEM runs" in " ".join(text.split())
 
 
 def test_the_workflow_docs_default_run_tables_are_the_tools_output():
