@@ -326,6 +326,25 @@ def final_iteration(spec: ExperimentSpec, analyses: Sequence[Mapping]) -> tuple[
     return len(analyses), None
 
 
+#: The libraries whose arithmetic a posterior depends on: a re-run on other versions may move it (the
+#: loop, the emulator's smoothing choice and the MCMC amplify a last-digit change), so summary.json says
+#: which ones made it.
+LIBRARIES = ("numpy", "scipy", "numba", "iterative_ensemble_smoother", "emcee")
+
+
+def library_versions() -> dict:
+    """``{"python": ..., library: version}`` of this process (None for one not installed)."""
+    import platform
+    from importlib import metadata
+
+    def version(name):
+        try:
+            return metadata.version(name.replace("_", "-"))
+        except metadata.PackageNotFoundError:
+            return None
+    return {"python": platform.python_version(), **{n: version(n) for n in LIBRARIES}}
+
+
 def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], decision: Mapping,
             final_params: pd.DataFrame, final_alive, forecast_misfit: Mapping, n_simulations: int,
             wall_s: float | None, simulation_wall_s: float, sensitivity: Mapping | None = None,
@@ -381,6 +400,7 @@ def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], 
         "spread_ratio": {p: _ratio(analyses[R], p) for p in names},
         "wall_s": wall_s,
         "simulation_wall_s": simulation_wall_s,
+        "environment": library_versions(),
     }
     out["posterior_ensemble_info"] = posterior_tempering(spec, R, K)
     out["discrepancy"] = (analyses[R].get("model_error") or {}).get("discrepancy")

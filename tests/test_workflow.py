@@ -389,6 +389,10 @@ def test_workflow_runs_end_to_end_and_a_second_run_has_nothing_to_do(tmp_path, m
     for key in ("experiment", "iterations", "converged", "stop_reason", "n_simulations", "posterior", "truth",
                 "misfit", "wall_s"):
         assert key in summary, key
+    import numpy
+    import scipy
+    # the libraries that made the posterior: another version may move it
+    assert summary["environment"]["numpy"] == numpy.__version__ and summary["environment"]["scipy"] == scipy.__version__
     assert summary["iterations"] == analyses and summary["stop_reason"] == "max_iterations" or summary["converged"]
     # n members and 3 replicates per ensemble, the truth and the forecast
     assert summary["n_simulations"] == (analyses + 1) * (n + 3) + 1 + 1
