@@ -431,9 +431,8 @@ def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: Emulated
                                          discrepancy, model)
     for h in held:
         for w in ("before", "after"):
-            held[h][w]["predictive_coverage_90"] = bands[h][w]["predictive_coverage_90"]
-            if "interval_score_over_box" in bands[h][w]:
-                held[h][w]["interval_score_over_box"] = bands[h][w]["interval_score_over_box"]
+            held[h][w].update({key: bands[h][w][key] for key in ("predictive_coverage_90", "interval_score_over_box")
+                               if key in bands[h][w]})
     shipped = selection.steps[k]
     if k == 0:
         verdict = "base_kept"

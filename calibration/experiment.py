@@ -37,6 +37,7 @@ from enkf import (AnalysisSettings, BoxTransform, DenseError, EmulatedSettings, 
                   mean_misfit, misfit_table, posterior_dict, prediction_interval_dict)
 from enkf.process import all_runs as _all_runs, capped_truncation  # noqa: F401 (capped_truncation: re-exported)
 
+from .job_log import library_versions
 from .diagnosis_config import diagnosis_settings  # here and re-exported; defined apart, light for the parse
 from .model_error import (MESH_PURPOSE, MESH_STAGES, discrepancy_kind, mesh_mode,  # noqa: F401
                           mesh_seed, posterior_predictive, posterior_tempering, replicate_count, run_mesh_seed)
@@ -324,25 +325,6 @@ def final_iteration(spec: ExperimentSpec, analyses: Sequence[Mapping]) -> tuple[
             return k, {**d, "stop": True, "reason": "no_update",
                        "message": "the stored analysis has no update to continue from; re-run the analysis"}
     return len(analyses), None
-
-
-#: The libraries whose arithmetic a posterior depends on: a re-run on other versions may move it (the
-#: loop, the emulator's smoothing choice and the MCMC amplify a last-digit change), so summary.json says
-#: which ones made it.
-LIBRARIES = ("numpy", "scipy", "numba", "iterative_ensemble_smoother", "emcee")
-
-
-def library_versions() -> dict:
-    """``{"python": ..., library: version}`` of this process (None for one not installed)."""
-    import platform
-    from importlib import metadata
-
-    def version(name):
-        try:
-            return metadata.version(name.replace("_", "-"))
-        except metadata.PackageNotFoundError:
-            return None
-    return {"python": platform.python_version(), **{n: version(n) for n in LIBRARIES}}
 
 
 def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], decision: Mapping,

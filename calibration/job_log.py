@@ -5,7 +5,8 @@ the job's log, so that the output of jobs running side by side (or on cluster no
 on the terminal. Two things still reach the terminal: a job's traceback (it is written to the log and to
 the run's stderr, so a failing job says why where the user looks first) and what the job writes to the
 stream `log_to` returns (the one line per analysis the run prints, scripts/analysis.py). The log's
-first line is the job's thread settings.
+first line is the job's thread settings; `library_versions` gives the numerical libraries' versions, which
+summary.json records (the two things beside the code a re-run's numbers depend on).
 """
 from __future__ import annotations
 
@@ -41,3 +42,22 @@ def log_to(path: str | os.PathLike) -> TextIO:
     # depends on its thread count)
     print("threads:", *(f"{v}={os.environ.get(v)}" for v in THREAD_VARIABLES), flush=True)
     return console
+
+
+#: The libraries whose arithmetic a posterior depends on: a re-run on other versions may move it (the
+#: loop, the emulator's smoothing choice and the MCMC amplify a last-digit change), so summary.json says
+#: which ones made it.
+LIBRARIES = ("numpy", "scipy", "numba", "iterative_ensemble_smoother", "emcee")
+
+
+def library_versions() -> dict:
+    """``{"python": ..., library: version}`` of this process (None for one not installed)."""
+    import platform
+    from importlib import metadata
+
+    def version(name):
+        try:
+            return metadata.version(name.replace("_", "-"))
+        except metadata.PackageNotFoundError:
+            return None
+    return {"python": platform.python_version(), **{n: version(n) for n in LIBRARIES}}

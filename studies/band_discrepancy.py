@@ -8,7 +8,7 @@ pass each clone's root), each calibration record's band of its real cross-valida
   mean (the shipped form is this with the record's own estimate in the mean);
 * ``cv<w>``: the per-time mean square of the other calibration records' cross-validated residuals on
   real FDEM runs at the same step, less the variance the other terms count there, smoothed over ``w``
-  samples (:func:`enkf.diagnosis.band.residual_discrepancy`).
+  samples: the workflow's term (calibration.closing._discrepancy_from) at window ``w``.
 
 Each calibration record's curve scores its band (coverage of the 90 % band, interval score): the
 record's own residual enters neither form. Held-out records are not read. Writes JSON.
@@ -27,10 +27,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT)]
 
-from calibration.closing import _mean_block  # noqa: E402
+from calibration.closing import _cv_residuals, _discrepancy_from, _mean_block  # noqa: E402
 from calibration.observations import read_curve, read_observations  # noqa: E402
 from calibration.protocol import real_curves  # noqa: E402
-from enkf.diagnosis.band import interval_score, replicate_variance, residual_discrepancy, run_band  # noqa: E402
+from enkf.diagnosis.band import replicate_variance, run_band  # noqa: E402
 
 WINDOWS = (5, 11, 21, 41, 81, 161)
 
@@ -44,40 +44,33 @@ def fold_data(fold: Path):
 
 
 def score_fold(fold: Path) -> dict:
+    """Every calibration record's band at every checked step, one per form; the residuals and the
+    variances they are taken against are the workflow's own (calibration.closing._cv_residuals)."""
     state, real, obs = fold_data(fold)
     sel, noise = state["selection"], state["noise"]
     calib = list(obs.records)
     k = max(s for s in real["cv"])  # the last step with real runs is the shipped one or the base
-    steps = sorted(real["cv"])
     out = {}
-    for step in steps:
-        per = {}
-        for r in calib:
-            runs = real["cv"][step].get(r)
-            if runs is None:
-                continue
-            pred = sel.steps[step].cv.folds[r]["prediction"]
-            S, _ = replicate_variance([c[r] for c in real["cv"].values() if c.get(r) is not None])
-            Y = np.array(runs, float, ndmin=2)
-            y = obs.values[obs.record_slice(r)]
-            per[r] = {"pred": pred, "runs": Y, "y": y, "S": S, "R": np.diag(noise[r].dense()),
-                      "P": np.var(np.asarray(pred.draws) - np.asarray(pred.curve), axis=0),
-                      "resid": y - Y.mean(axis=0)}
+    for step in sorted(real["cv"]):
+        cv = _cv_residuals(sel, real, step, obs, noise, {})
         res = {}
-        for r, d in per.items():
-            others = [o for o in per if o != r]
+        for r in cv:
+            others = [o for o in cv if o != r]
             if not others:
                 continue
-            base = {"noise": _mean_block([per[o]["R"] for o in calib if o in per]), "simulator": d["S"]}
+            runs = np.array(real["cv"][step][r], float, ndmin=2)
+            pred = sel.steps[step].cv.folds[r]["prediction"]
+            S, _ = replicate_variance([c[r] for c in real["cv"].values() if c.get(r) is not None])
+            y = obs.values[obs.record_slice(r)]
+            base = {"noise": _mean_block([np.diag(noise[o].dense()) for o in calib if o in cv]), "simulator": S}
             forms = {"calibration": _mean_block([np.asarray(state["discrepancy"][o], float) for o in others])}
             for w in WINDOWS:
-                counted = [per[o]["P"] + per[o]["S"] * (1 + 1 / per[o]["runs"].shape[0]) + per[o]["R"] for o in others]
-                forms[f"cv{w}"] = residual_discrepancy([per[o]["resid"] for o in others], counted, window=w)
+                forms[f"cv{w}"] = _discrepancy_from(cv, r, w, forms["calibration"])[0]
             res[r] = {}
             for name, D in forms.items():
-                band = run_band(d["pred"].draws, d["pred"].curve, d["runs"], {**base, "discrepancy": D},
+                band = run_band(pred.draws, pred.curve, runs, {**base, "discrepancy": D},
                                 rng=np.random.default_rng(1), level=0.90)
-                res[r][name] = {"coverage_90": band.coverage(d["y"]), "interval_score_Pa": band.score(d["y"]),
+                res[r][name] = {"coverage_90": band.coverage(y), "interval_score_Pa": band.score(y),
                                 "width_rms_Pa": band.width_rms()}
         out[str(step)] = res
     return {"steps": out, "shipped_step": k}

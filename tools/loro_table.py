@@ -3,6 +3,7 @@
 
     python tools/loro_table.py benchmarks/results/loro_seen/marble_loro.json [more series] [--docs]
     python tools/loro_table.py --add-risk <series summary.json> <its folds' report.json ...>
+    python tools/loro_table.py --figure <series summary.json> <folds.png>   # the series' figure, re-made
 
 The block sits between ``<!-- loro-table:start -->`` and ``<!-- loro-table:end -->`` in
 docs/closing-the-loop.md;
@@ -146,6 +147,11 @@ def main(argv) -> int:
     paths = [a for a in argv[1:] if not a.startswith("--")]
     if "--add-risk" in argv:  # tools/loro_table.py --add-risk <summary.json> <fold report.json>...
         add_risk(ROOT / paths[0], paths[1:])
+        return 0
+    if "--figure" in argv:  # tools/loro_table.py --figure <summary.json> <folds.png>: the loro rule's figure
+        from calibration.plots import plot_loro
+
+        plot_loro(paths[1], json.loads(Path(paths[0]).read_text()))
         return 0
     text = block(paths)
     if "--docs" in argv:
