@@ -11,7 +11,7 @@ intervals (prediction intervals of one more draw, :func:`enkf.prediction_interva
 box, so a posterior that returns the prior covers everything and shows up as ``width_over_prior``
 near 1 and in the SBC ranks, not as a good coverage.
 
-Two sets:
+Three sets:
 
 * ``well_specified`` (``--twins``, default 50): data and model at ``fast``.
 * ``misspecified`` (``--misspecified``, default 10): data from the ``standard`` mesh, model at
@@ -21,6 +21,10 @@ Two sets:
   (:mod:`calibration.approximation`: the pairs' design and mesh realizations from the set's seed, the
   data corrected by the pairs' mean difference and their scatter added to the noise), its twins cached
   in ``<cache>/approx-<n>/`` beside the pairs' curves.
+* ``misspecified_rate`` (``--misspecified-rate``, default 0): data on the model's own mesh from a disc
+  whose joint strengths rise with the opening rate (``rate_strength.k`` = ``--planted-rate-k``, 0.25: the
+  planted-effect plan's disc value, +6 % on the reference twin's peak), an effect the calibration does not
+  declare (issue 52's undeclared rate dependence).
 
 ``--mesh``, ``--replicates`` and ``--smoothing`` override the twin's settings for development runs on
 other seeds (``--seed``); the committed JSON is the default twin's, seeds 40 and 41. The twin reports
@@ -125,7 +129,7 @@ def _same_spec(a, b) -> bool:
 
 
 def run_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: str, approx=None,
-             keep: Path | None = None) -> dict:
+             keep: Path | None = None, planted: dict | None = None) -> dict:
     """One twin through the workflow's analysis steps, with the workflow's mesh realizations (the
     truth on its own, the members per ``simulation.mesh_realizations``) and replicates at each
     iteration's ensemble mean; the reported posterior's numbers. ``approx``: ``(offset, M, info)`` of
@@ -142,7 +146,7 @@ def run_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: str, ap
                                   refine_runs=spec.refine_runs, refine_temper=spec.refine_temper), spec):
             raise SystemExit(f"{keep}: its runs were made with another loop than this twin's")
     else:
-        spec, params, responses, analyses, obs = simulate_twin(pool, exp, truth, seed, data_preset, approx)
+        spec, params, responses, analyses, obs = simulate_twin(pool, exp, truth, seed, data_preset, approx, planted)
         if keep is not None:
             keep.parent.mkdir(parents=True, exist_ok=True)
             atomic_write_bytes(keep, pickle.dumps((spec, params, responses, analyses, obs)))
@@ -158,6 +162,8 @@ def run_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: str, ap
     rec["emulator_mcmc"] = _mcmc_record(spec, truth, seed, params, responses, analyses, obs, refine)
     if approx is not None:
         rec["approximation_error"] = {k: v for k, v in approx[2].items() if k != "sd_Pa"}
+    if planted:
+        rec["planted"] = dict(planted)
     return rec
 
 
@@ -178,11 +184,12 @@ def refinement_runs(pool, exp: dict, spec, params, responses, analyses, obs, kee
     return P, Y
 
 
-def twin_task(exp: dict, names, p, preset: str, ms) -> tuple:
-    """The pool's task of one run of the twin's disc at parameters ``p`` on mesh realization ``ms``."""
+def twin_task(exp: dict, names, p, preset: str, ms, planted: dict | None = None) -> tuple:
+    """The pool's task of one run of the twin's disc at parameters ``p`` on mesh realization ``ms``;
+    ``planted``: simulation parameters set besides them (an effect the calibration does not declare)."""
     o, sim = exp["observations"], exp["simulation"]
     grid = observation_grid(o["t_start"], o["t_end"], o["dt"])
-    return (preset, dict(zip(names, map(float, p))), sim["t_end"], sim["sample_dt"], grid, ms)
+    return (preset, {**dict(zip(names, map(float, p))), **(planted or {})}, sim["t_end"], sim["sample_dt"], grid, ms)
 
 
 def approximation_pairs(pool, exp: dict, n: int, seed: int, data_preset: str, path: Path,
@@ -220,8 +227,10 @@ def approximation_pairs(pool, exp: dict, n: int, seed: int, data_preset: str, pa
     return approximation_from_runs(exp, Y, grid)
 
 
-def simulate_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: str, approx=None):
-    """The twin's loop: ``(spec, params, responses, analyses, obs)`` as the workflow would leave them."""
+def simulate_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: str, approx=None,
+                  planted: dict | None = None):
+    """The twin's loop: ``(spec, params, responses, analyses, obs)`` as the workflow would leave them;
+    ``planted``: simulation parameters of the data's run only (an undeclared effect)."""
     exp = {**exp, "seed": seed}
     spec = ExperimentSpec.from_config(EXPERIMENT, exp)
     o = exp["observations"]
@@ -231,7 +240,7 @@ def simulate_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: st
     def task(p, preset, ms):
         return twin_task(exp, names, p, preset, ms)
 
-    ref = pool.map(_simulate, [task(truth, data_preset, mesh_seed(seed, "truth"))])[0]
+    ref = pool.map(_simulate, [twin_task(exp, names, truth, data_preset, mesh_seed(seed, "truth"), planted)])[0]
     obs = twin_observations(pd.DataFrame({"time_s": grid, "stress_Pa": ref}), grid, rng=rng_for(seed, "noise"),
                             relative_sigma=o["noise"]["relative_sigma"])
     if approx is not None:
@@ -439,7 +448,7 @@ def rescore(path: Path, out: Path | None = None) -> dict:
                          f"expected a bench_coverage JSON of {EXPERIMENT!r}")
     spec = ExperimentSpec.from_config(EXPERIMENT, twin_experiment())
     verdicts = {}
-    for name in ("misspecified", "well_specified"):
+    for name in ("misspecified", "misspecified_rate", "well_specified"):
         block = bench.get(name) or {}
         twins = block.get("twins") or []
         for i, r in enumerate(twins):
@@ -467,6 +476,11 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--twins", type=int, default=50)
     ap.add_argument("--misspecified", type=int, default=10)
+    ap.add_argument("--misspecified-rate", type=int, default=0,
+                    help="twins whose data carry an undeclared rate-dependent strength (--planted-rate-k), "
+                         "on the model's own mesh")
+    ap.add_argument("--planted-rate-k", type=float, default=0.25,
+                    help="rate_strength.k of the misspecified_rate set's data (the planted-effect plan's disc value)")
     ap.add_argument("--cores", type=int, default=2)
     ap.add_argument("--seed", type=int, default=40)
     ap.add_argument("--cache", default=str(ROOT / "benchmarks" / "cache" / "coverage_v3"))
@@ -534,7 +548,9 @@ def main(argv=None) -> dict:
     cache.mkdir(parents=True, exist_ok=True)
     # the small misspecified set first, so that a run cut short has both
     sets = {"misspecified": (args.misspecified, "standard", args.seed + 1),
+            "misspecified_rate": (args.misspecified_rate, "fast", args.seed + 2),
             "well_specified": (args.twins, "fast", args.seed)}
+    planted = {"misspecified_rate": {"rate_strength.k": args.planted_rate_k}}
     started, simulated, rescored, result = time.time(), 0, 0, {}
     with get_context("spawn").Pool(max(1, args.cores)) as pool:
         for name, (n, data_preset, seed) in sets.items():
@@ -565,7 +581,7 @@ def main(argv=None) -> dict:
                 if args.score_only and not (keep is not None and keep.is_file()):
                     continue
                 reused = keep is not None and keep.is_file()
-                rec = run_twin(pool, exp, truth, 1000 * seed + i, data_preset, approx, keep)
+                rec = run_twin(pool, exp, truth, 1000 * seed + i, data_preset, approx, keep, planted.get(name))
                 atomic_write_text(path, json.dumps(rec, default=float))
                 records.append(rec)
                 simulated += not reused

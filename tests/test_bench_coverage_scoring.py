@@ -296,3 +296,22 @@ def test_the_verdict_passes_a_sharp_calibrated_posterior_and_fails_the_prior_and
         assert prior["params"][p]["uninformative_share"] == 1.0
     over = verdict(score(_records("overconfident"), LOWER, UPPER, NAMES))
     assert {f"{bar} {p}" for bar in ("coverage_90", "sbc") for p in NAMES} <= set(over["failed"])
+
+
+def test_a_planted_effect_reaches_the_data_run_only():
+    """The misspecified_rate set's undeclared rate dependence is a parameter of the data's run: the
+    twin's task carries it beside the calibrated parameters, the members' tasks (no ``planted``) do not,
+    and the simulator reads it as its own parameter (a rate-dependent strength changes the disc's curve
+    by more than the 1 % noise at the planted k)."""
+    from benchmarks import bench_coverage as bc
+
+    exp = bc.twin_experiment()
+    names = ["sigma_t", "E_t"]
+    data = bc.twin_task(exp, names, [45e6, 500.0], "fast", 7, {"rate_strength.k": 0.25})
+    member = bc.twin_task(exp, names, [45e6, 500.0], "fast", 7)
+    assert data[1] == {"sigma_t": 45e6, "E_t": 500.0, "rate_strength.k": 0.25}
+    assert member[1] == {"sigma_t": 45e6, "E_t": 500.0}
+    assert data[2:4] == member[2:4] and data[5] == member[5] and np.array_equal(data[4], member[4])
+    y_data, y_member = bc._simulate(data), bc._simulate(member)
+    peak = np.nanmax(y_member)
+    assert np.nanmax(np.abs(y_data - y_member)) > 0.01 * peak
