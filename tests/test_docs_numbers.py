@@ -101,6 +101,12 @@ def _error_models(experiment):
     return next(e for e in J("studies/results/error_models.json")["experiments"] if e["experiment"] == experiment)
 
 
+def _form_lambda(emulator_error):
+    """The measured marble's self-calibration factor with this emulator error, without a refinement batch."""
+    rows = J("studies/results/posterior_forms_measured.json")["forms"]["marble_loop"]
+    return next(r["lambda"] for r in rows if r["emulator_error"] == emulator_error and not r["refinement_batch"])
+
+
 CL = "docs/closing-the-loop.md"
 REFUTED = "benchmarks/results/loro_seen/refuted_steps.json"
 
@@ -259,6 +265,8 @@ QUOTES: list[Quote] = [
           "(`benchmarks/results/bench_loro.json`). Of its job time, {d:.0f} % went to the selection's emulator design, "
           "{c:.0f} % to the calibrations' ensembles and replicates and {k:.0f} % to the real-run check. {cp} of its "
           "{n} FDEM runs were copied from another fold", lambda J: _loro_costs()),
+    Quote("README.md", "set the self-calibration factor ({het:.0f} against {ar1:.1f} for the AR(1) error)", lambda J: {
+        "het": _form_lambda("heteroscedastic"), "ar1": _form_lambda("ar1")}),
     Quote("README.md", "covers 88-90 % with uniform ranks", by=HARNESS),
     Quote("README.md", "covering {cov:.0f} % of the {n} repeat twins", lambda J: {
         "cov": 100 * _bars("coverage_well_specified_repeat.json")["coverage_90 sigma_t"]["value"],

@@ -3,10 +3,11 @@ validation harness (benchmarks/bench_coverage.py) scores, `emulator_mcmc` with s
 heteroscedastic emulator error and a refinement batch; the default run's twin says so; and a measured
 experiment's closing-the-loop diagnosis starts from the workflow's own posterior (one base posterior per run).
 
-The measured experiments keep `posterior: ensemble`: run on the default run's marble, the harness's form
-self-calibrated its likelihood by a factor of 97 (its 32-run emulator's errors on the measured curves are
-correlated over the whole window) and returned the prior box (sigma_t 70 MPa [25, 113]) where the last
-ensemble gave 37 MPa [35, 39] (CHANGELOG)."""
+The measured experiments keep `posterior: ensemble` for now: run on the default run's marble, the harness's form
+self-calibrated its likelihood by a factor of 97 and returned the prior box (sigma_t 70 MPa [25, 113]) where the last
+ensemble gave 37 MPa [35, 39] (CHANGELOG). The heteroscedastic emulator error's log-determinant did it, not the fit
+(studies/posterior_forms_measured.py); the AR(1) form, planned for every experiment, is being benchmarked
+(benchmarks/coverage_plan_one_posterior.json)."""
 from __future__ import annotations
 
 import json
