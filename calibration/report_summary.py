@@ -97,7 +97,20 @@ def _parameters(s: Mapping) -> list[str]:
                       and float(q["q05"]) <= float(t) <= float(q["q95"]))
             row.append("-" if t is None else f"{_num(t, f)} ({'inside' if inside else 'outside'})")
         rows.append(row)
-    return [f"<p style=\"margin:0.4em 0 0 0\">Parameters (posterior: {which}):</p>", _table(header, rows)]
+    return [f"<p style=\"margin:0.4em 0 0 0\">Parameters (posterior: {which}; {_scored(s)}):</p>",
+            _table(header, rows)]
+
+
+def _scored(s: Mapping) -> str:
+    """Whether the coverage harness scored the reported posterior's form on this loop (summary.json's
+    ``posterior_form``, calibration.posterior.posterior_form)."""
+    form = s.get("posterior_form")
+    if not isinstance(form, Mapping):
+        return "its form is not recorded"
+    if form.get("scored_by"):
+        return f"this form and loop are scored by the coverage harness, {escape(str(form['scored_by']))}"
+    return ("no coverage benchmark has scored this form on this loop: read the intervals with the verdict "
+            "and the predictive coverage")
 
 
 def _misfit(s: Mapping) -> list[str]:

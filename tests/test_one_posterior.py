@@ -46,3 +46,54 @@ def test_the_default_runs_diagnosis_base_model_is_its_posterior():
     report = json.loads((RUN / "marble_loop" / "diagnosis" / "report.json").read_text())
     assert report["base_posterior"] == "workflow"
     assert base_posterior_mismatches(summary, report) == []
+
+
+def _spec(key):
+    from calibration.experiment import ExperimentSpec
+
+    name, exp = shipped_experiments()[key]
+    return ExperimentSpec.from_config(name, exp), exp
+
+
+def test_each_scored_form_is_its_benchmarks_and_the_default_twins():
+    """calibration.posterior.SCORED names the form and loop its benchmark JSON scored: the JSON records the
+    same form and loop settings, and the loop is config/config.yaml's twin_ref (the harness's twin)."""
+    from calibration.posterior import SCORED, posterior_form
+
+    spec, exp = _spec("config.yaml:twin_ref")
+    for entry in SCORED:
+        bench = json.loads((REPO / entry["benchmark"]).read_text())
+        assert bench["experiment"] == "twin_ref"
+        assert {"posterior": bench["reported_posterior"], "self_calibrate": bench["self_calibrate"],
+                "emulator_error": bench["emulator_error"], "refine_runs": bench["refine_runs"]} == entry["form"]
+        loop = entry["loop"]
+        assert (bench["method"], bench["ensemble_size"], bench["window_s"]) == (
+            loop["method"], loop["ensemble_size"], loop["window_s"])
+    assert posterior_form(spec, exp)["scored_by"] == SCORED[0]["benchmark"]
+
+
+def test_a_summary_says_whether_its_form_was_scored():
+    """Another ensemble size, another prior box, another preset or another form is not the scored loop:
+    its summary says so (scored_by None), as does every measured experiment's ensemble posterior."""
+    from dataclasses import replace
+
+    from calibration.posterior import posterior_form
+
+    spec, exp = _spec("config.yaml:twin_ref")
+    assert posterior_form(replace(spec, ensemble_size=24), exp)["scored_by"] is None
+    assert posterior_form(replace(spec, upper=spec.upper * 1.1), exp)["scored_by"] is None
+    assert posterior_form(spec, {**exp, "preset": "standard"})["scored_by"] is None
+    assert posterior_form(replace(spec, emulator_error="ar1"), exp)["scored_by"] is None
+    assert posterior_form(replace(spec, refine_runs=0), exp)["scored_by"] is None
+    marble, mexp = _spec("config.yaml:marble_loop")
+    assert posterior_form(marble, mexp) == {"posterior": "ensemble", "scored_by": None}
+
+
+def test_summary_html_says_whether_the_intervals_were_scored():
+    from calibration.report_summary import _scored
+
+    assert "scored by the coverage harness, benchmarks/results/x.json" in _scored(
+        {"posterior_form": {"posterior": "emulator_mcmc", "scored_by": "benchmarks/results/x.json"}})
+    assert "no coverage benchmark has scored this form" in _scored({"posterior_form": {"posterior": "ensemble",
+                                                                                        "scored_by": None}})
+    assert "not recorded" in _scored({})
