@@ -67,12 +67,16 @@ def _loop_of(spec: ExperimentSpec, exp: Mapping) -> dict:
 
 def posterior_form(spec: ExperimentSpec, exp: Mapping) -> dict:
     """summary.json's ``posterior_form``: the reported posterior's form (``posterior`` and, for the emulator
-    MCMC, its self-calibration, emulator error and refinement runs) and ``scored_by``, the benchmark JSON of
+    MCMC, its self-calibration, emulator error and refinement runs); ``scored_by``, the benchmark JSON of
     the coverage harness that scored this form on this loop (:data:`SCORED`), or None: intervals no
-    coverage benchmark has scored."""
+    coverage benchmark has scored; ``form_scored_on``, where another loop's twins scored the same form
+    (``{"benchmark", "loop"}``), or None."""
     form, loop = _form_of(spec), _loop_of(spec, exp)
-    scored = next((s["benchmark"] for s in SCORED if s["form"] == form and _same_loop(s["loop"], loop)), None)
-    return {**form, "scored_by": scored}
+    same_form = [s for s in SCORED if s["form"] == form]
+    scored = next((s["benchmark"] for s in same_form if _same_loop(s["loop"], loop)), None)
+    other = next(({"benchmark": s["benchmark"], "loop": s["loop"]} for s in same_form
+                  if not _same_loop(s["loop"], loop)), None)
+    return {**form, "scored_by": scored, "form_scored_on": None if scored else other}
 
 
 def _same_loop(a: Mapping, b: Mapping) -> bool:

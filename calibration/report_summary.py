@@ -109,8 +109,11 @@ def _scored(s: Mapping) -> str:
         return "its form is not recorded"
     if form.get("scored_by"):
         return f"this form and loop are scored by the coverage harness, {escape(str(form['scored_by']))}"
-    return ("no coverage benchmark has scored this form on this loop: read the intervals with the verdict "
-            "and the predictive coverage")
+    other = form.get("form_scored_on")
+    where = (f" (the same form is scored on another loop's twins, {escape(str(other.get('benchmark')))})"
+             if isinstance(other, Mapping) else "")
+    return ("no coverage benchmark has scored this form on this loop" + where
+            + ": read the intervals with the verdict and the predictive coverage")
 
 
 def _misfit(s: Mapping) -> list[str]:

@@ -113,7 +113,8 @@ def test_the_workflow_reports_the_emulator_posterior_with_posterior_emulator_mcm
     assert summary["posterior_method"] == "emulator_mcmc" and summary["posterior_sampler"]["converged_chain"]
     # a stand-in's loop of 6 members is no loop the coverage harness scored: its summary says so
     assert summary["posterior_form"] == {"posterior": "emulator_mcmc", "self_calibrate": False,
-                                         "emulator_error": "ar1", "refine_runs": 5, "scored_by": None}
+                                         "emulator_error": "ar1", "refine_runs": 5, "scored_by": None,
+                                         "form_scored_on": None}
     assert summary["posterior"]["sigma_t"]["mean"] == pytest.approx(samples["sigma_t"].mean(), rel=1e-12)
     assert set(summary["posterior_ensemble"]) == {"sigma_t", "E_t"}
     fc = json.loads((res / "forecast/params.json").read_text())

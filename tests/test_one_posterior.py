@@ -80,13 +80,16 @@ def test_a_summary_says_whether_its_form_was_scored():
     from calibration.posterior import posterior_form
 
     spec, exp = _spec("config.yaml:twin_ref")
-    assert posterior_form(replace(spec, ensemble_size=24), exp)["scored_by"] is None
+    other = posterior_form(replace(spec, ensemble_size=24), exp)
+    assert other["scored_by"] is None and other["form_scored_on"]["benchmark"] == "benchmarks/results/coverage_well_specified.json"
+    assert other["form_scored_on"]["loop"]["ensemble_size"] == 25
+    assert posterior_form(spec, exp)["form_scored_on"] is None
     assert posterior_form(replace(spec, upper=spec.upper * 1.1), exp)["scored_by"] is None
     assert posterior_form(spec, {**exp, "preset": "standard"})["scored_by"] is None
     assert posterior_form(replace(spec, emulator_error="ar1"), exp)["scored_by"] is None
     assert posterior_form(replace(spec, refine_runs=0), exp)["scored_by"] is None
     marble, mexp = _spec("config.yaml:marble_loop")
-    assert posterior_form(marble, mexp) == {"posterior": "ensemble", "scored_by": None}
+    assert posterior_form(marble, mexp) == {"posterior": "ensemble", "scored_by": None, "form_scored_on": None}
 
 
 def test_summary_html_says_whether_the_intervals_were_scored():
@@ -97,3 +100,5 @@ def test_summary_html_says_whether_the_intervals_were_scored():
     assert "no coverage benchmark has scored this form" in _scored({"posterior_form": {"posterior": "ensemble",
                                                                                         "scored_by": None}})
     assert "not recorded" in _scored({})
+    assert "the same form is scored on another loop's twins, benchmarks/results/y.json" in _scored(
+        {"posterior_form": {"scored_by": None, "form_scored_on": {"benchmark": "benchmarks/results/y.json", "loop": {}}}})
