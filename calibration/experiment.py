@@ -44,6 +44,7 @@ from .model_error import (MESH_PURPOSE, MESH_STAGES, discrepancy_kind, mesh_mode
 from .identifiability import linear_sensitivity
 from .observations import Observations
 from .process import WorkflowLikelihood, step_schedule, stop_misfit
+from .scored import posterior_form
 from .sensitivity import AUTO, selected_parameters
 from .verdict import calibration_verdict, member_chi2, reported_iteration
 
@@ -327,12 +328,6 @@ def final_iteration(spec: ExperimentSpec, analyses: Sequence[Mapping]) -> tuple[
     return len(analyses), None
 
 
-def _posterior_form(spec: ExperimentSpec, exp: Mapping) -> dict:
-    from .posterior import posterior_form  # that module imports this one
-
-    return posterior_form(spec, exp)
-
-
 def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], decision: Mapping,
             final_params: pd.DataFrame, final_alive, forecast_misfit: Mapping, n_simulations: int,
             wall_s: float | None, simulation_wall_s: float, sensitivity: Mapping | None = None,
@@ -374,7 +369,7 @@ def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], 
         "stop_message": decision["message"],
         "n_simulations": int(n_simulations),
         "posterior_method": "ensemble" if posterior_samples is None else "emulator_mcmc",
-        "posterior_form": _posterior_form(spec, exp),
+        "posterior_form": posterior_form(spec, exp),
         "posterior": post,
         "prior": {p: {"lower": float(spec.lower[j]), "upper": float(spec.upper[j])} for j, p in enumerate(names)},
         "posterior_iteration": int(R),

@@ -56,9 +56,9 @@ def _spec(key):
 
 
 def test_each_scored_form_is_its_benchmarks_and_the_default_twins():
-    """calibration.posterior.SCORED names the form and loop its benchmark JSON scored: the JSON records the
+    """calibration.scored.SCORED names the form and loop its benchmark JSON scored: the JSON records the
     same form and loop settings, and the loop is config/config.yaml's twin_ref (the harness's twin)."""
-    from calibration.posterior import SCORED, posterior_form
+    from calibration.scored import SCORED, posterior_form
 
     spec, exp = _spec("config.yaml:twin_ref")
     for entry in SCORED:
@@ -77,7 +77,7 @@ def test_a_summary_says_whether_its_form_was_scored():
     its summary says so (scored_by None), as does every measured experiment's ensemble posterior."""
     from dataclasses import replace
 
-    from calibration.posterior import posterior_form
+    from calibration.scored import posterior_form
 
     spec, exp = _spec("config.yaml:twin_ref")
     other = posterior_form(replace(spec, ensemble_size=24), exp)

@@ -1,0 +1,63 @@
+"""Whether the coverage harness scored an experiment's reported posterior (issue 52): summary.json's
+``posterior_form``. A lab's intervals come from a form the harness (benchmarks/bench_coverage.py) scored on
+this loop, or say that they do not, and where the same form was scored on another loop."""
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+__all__ = ["SCORED", "posterior_form"]
+
+#: The reported posteriors the coverage harness (benchmarks/bench_coverage.py) has scored, each with the loop
+#: it was scored on (the default twin's: geometry, preset, loop, prior box, window) and the committed JSON of
+#: its well-specified twins. An experiment's summary.json says whether its own form and loop are one of these
+#: (:func:`posterior_form`): a lab's intervals come from a scored form or say that they do not
+#: (tests/test_one_posterior.py keeps each entry equal to its JSON and to config/config.yaml's twin_ref).
+SCORED = (
+    {"form": {"posterior": "emulator_mcmc", "self_calibrate": True, "emulator_error": "heteroscedastic",
+              "refine_runs": 25},
+     "loop": {"geometry": "brazilian_disc", "preset": "fast", "method": "emulated_esmda", "ensemble_size": 25,
+              "max_iterations": 3, "parameters": {"sigma_t": [4.0e6, 6.0e7], "E_t": [200.0, 2400.0]},
+              "window_s": [0.0, 1.6e-4]},
+     "benchmark": "benchmarks/results/coverage_well_specified.json"},
+)
+
+
+def _form_of(spec) -> dict:
+    if spec.posterior != "emulator_mcmc":
+        return {"posterior": spec.posterior}
+    return {"posterior": spec.posterior, "self_calibrate": bool(spec.self_calibrate),
+            "emulator_error": spec.emulator_error, "refine_runs": int(spec.refine_runs)}
+
+
+def _loop_of(spec, exp: Mapping) -> dict:
+    o = exp.get("observations") or {}
+    return {"geometry": exp.get("geometry"), "preset": exp.get("preset"), "method": spec.method,
+            "ensemble_size": int(spec.ensemble_size), "max_iterations": int(spec.max_iterations),
+            "parameters": {p: [float(lo), float(hi)] for p, lo, hi in zip(spec.names, spec.lower, spec.upper)},
+            "window_s": [float(o.get("t_start", 0.0)), float(o.get("t_end", float("nan")))]}
+
+
+def posterior_form(spec, exp: Mapping) -> dict:
+    """summary.json's ``posterior_form``: the reported posterior's form (``posterior`` and, for the emulator
+    MCMC, its self-calibration, emulator error and refinement runs); ``scored_by``, the benchmark JSON of
+    the coverage harness that scored this form on this loop (:data:`SCORED`), or None: intervals no
+    coverage benchmark has scored; ``form_scored_on``, where another loop's twins scored the same form
+    (``{"benchmark", "loop"}``), or None."""
+    form, loop = _form_of(spec), _loop_of(spec, exp)
+    same_form = [s for s in SCORED if s["form"] == form]
+    scored = next((s["benchmark"] for s in same_form if _same_loop(s["loop"], loop)), None)
+    other = next(({"benchmark": s["benchmark"], "loop": s["loop"]} for s in same_form
+                  if not _same_loop(s["loop"], loop)), None)
+    return {**form, "scored_by": scored, "form_scored_on": None if scored else other}
+
+
+def _same_loop(a: Mapping, b: Mapping) -> bool:
+    """The same loop: equal settings, the same parameters with boxes and the same window to 1e-12."""
+    def numbers(loop):
+        box = loop["parameters"]
+        return [x for p in sorted(box) for x in box[p]] + list(loop["window_s"])
+    rest = [k for k in a if k not in ("parameters", "window_s")]
+    return (set(a) == set(b) and all(a[k] == b[k] for k in rest) and sorted(a["parameters"]) == sorted(b["parameters"])
+            and np.allclose(numbers(a), numbers(b), rtol=1e-12, atol=0.0))
