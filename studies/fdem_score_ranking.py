@@ -38,6 +38,7 @@ from calibration.observations import curve_on_grid, read_observations
 from calibration.workflow_io import read_json
 from enkf.diagnosis import rank_candidates
 from shpb import effects as fx
+from shpb.atomic import emit_json
 from shpb.simulate import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -124,11 +125,7 @@ def main(argv=None) -> dict:
               "walk": {"verdict": report["verdict"], "added": report["added"],
                        "steps": [{k: s.get(k) for k in ("effects", "text") if k in s}
                                  for s in report["confirmation"]["steps"]]}}
-    text = json.dumps(result, indent=1, default=float)
-    if a.out:
-        Path(a.out).write_text(text + "\n")
-    print(text)
-    return result
+    return emit_json(result, a.out)
 
 
 if __name__ == "__main__":

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import copy
-import json
 import os
 from pathlib import Path
 
@@ -47,6 +46,7 @@ from enkf.emulator import smoothed_emulator
 from enkf.hetero import HeteroscedasticError
 from enkf.sampling import latin_hypercube
 from enkf.selfcal import pseudo_runs
+from shpb.atomic import emit_json
 
 ROOT = Path(__file__).resolve().parents[1]
 #: (emulator error, with the refinement batch); the refinement batch only where the run made one
@@ -142,11 +142,7 @@ def main(argv=None) -> dict:
               "forms": {name: forms(res / name, name, cfg[name]) for name in (a.measured, a.twin)},
               "heteroscedastic_split": {a.measured: heteroscedastic_split(res / a.measured, a.measured,
                                                                            cfg[a.measured])}}
-    text = json.dumps(result, indent=1)
-    if a.out:
-        Path(a.out).write_text(text + "\n")
-    print(text)
-    return result
+    return emit_json(result, a.out)
 
 
 if __name__ == "__main__":
