@@ -39,7 +39,7 @@ COMMAND = ["snakemake", "--cores", "2", "--configfile", "config/validation.yaml"
 _COPIED = re.compile(r"^(\S+): copied from ")
 
 
-def _stage(run_json: Path, results: Path) -> str:
+def run_stage(run_json: Path, results: Path) -> str:
     """``member iter_0``, ``replicate iter_2``, ``design``, ``check``, ``forecast`` of a run's folder."""
     parts = run_json.relative_to(results).parts
     if parts[1].startswith("iter_"):
@@ -60,7 +60,7 @@ def fdem_runs(clone: Path) -> dict:
     for run_json in results.glob("*/**/run.json"):
         if run_json.relative_to(results).parts[0].startswith("."):
             continue
-        row = out[_stage(run_json, results)]
+        row = out[run_stage(run_json, results)]
         row["runs"] += 1
         if str(run_json.parent.resolve()) in copied:
             row["copied"] += 1

@@ -20,7 +20,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(REPO)]
 
-from benchmarks.bench_loro import _stage  # noqa: E402
+from benchmarks.bench_loro import run_stage  # noqa: E402
 from shpb.atomic import emit_json  # noqa: E402
 from tools.job_times import job_times  # noqa: E402
 
@@ -37,11 +37,11 @@ def costs(clone: Path, log: str, wall_s: float, cores: int = 2) -> dict:
 
 
 def fdem_runs_of(clone: Path, exp: str) -> dict:
-    """Per stage of one experiment (:func:`benchmarks.bench_loro._stage`'s names): runs and solver seconds."""
+    """Per stage of one experiment (:func:`benchmarks.bench_loro.run_stage`'s names): runs and solver seconds."""
     results = clone / "results"
     out: dict[str, dict] = {}
     for run_json in sorted((results / exp).glob("**/run.json")):
-        row = out.setdefault(_stage(run_json, results), {"runs": 0, "solver_s": 0.0})
+        row = out.setdefault(run_stage(run_json, results), {"runs": 0, "solver_s": 0.0})
         row["runs"] += 1
         row["solver_s"] += float(json.loads(run_json.read_text()).get("solver_wall_s") or 0.0)
     return {k: {**v, "solver_s": round(v["solver_s"], 1)} for k, v in sorted(out.items())}
