@@ -42,7 +42,7 @@ EXP = "bench"
 def config(members: int) -> dict:
     return {"run": [EXP], "experiments": {EXP: {
         "kind": "twin", "geometry": "brazilian_disc", "preset": "fast", "seed": 2021, "ensemble_size": members,
-        "method": "esmda", "esmda": {"steps": 1},
+        "method": "esmda", "esmda": {"steps": 1}, "posterior": "ensemble",
         "parameters": {"sigma_t": [4.0e6, 60.0e6], "E_t": [200.0, 2400.0]},
         "simulation": {"t_end": 1.6e-4, "sample_dt": 5.0e-7},
         "observations": {"t_end": 1.6e-4, "dt": 1.0e-6, "truth": {"sigma_t": 45.0e6, "E_t": 500.0},

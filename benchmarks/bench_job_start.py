@@ -40,7 +40,7 @@ REPLICATE = textwrap.dedent("""
     from calibration.ensemble_files import simulation_params
     p = simulation_params({"ensemble_mean": "x"}, {}, sys.argv[1], {"x": {
         "parameters": {"sigma_t": [4.0e6, 60.0e6], "E_t": [200.0, 2400.0]}, "ensemble_size": 4, "seed": 1,
-        "method": "esmda", "kind": "twin"}})
+        "method": "esmda", "kind": "twin", "posterior": "ensemble"}})
     print(p)
 """)
 

@@ -80,6 +80,24 @@ def _schema_errors(config, schema) -> list[str]:
     return messages
 
 
+#: settings that only the reported emulator posterior reads (posterior: emulator_mcmc)
+_EMULATOR_POSTERIOR_ONLY = ("self_calibrate", "emulator_error", "refine_runs", "refine_temper")
+
+
+def _posterior_option_errors(config: Mapping) -> list[str]:
+    """Settings of the emulator posterior written beside ``posterior: ensemble`` would silently do nothing.
+    Checked on the config as written, before the schema's defaults (which set them for every experiment)."""
+    errors = []
+    for name, exp in (config.get("experiments") or {}).items():
+        if exp.get("posterior", "emulator_mcmc") != "ensemble":
+            continue
+        for key in _EMULATOR_POSTERIOR_ONLY:
+            if key in (exp.get("emulated") or {}):
+                errors.append(f"experiments.{name}.emulated.{key}: a setting of the reported emulator posterior, "
+                              f"which posterior: ensemble does not use; drop it or use posterior: emulator_mcmc")
+    return errors
+
+
 def _semantic_errors(config: Mapping, base: Path) -> list[str]:
     errors: list[str] = []
     exps = config.get("experiments", {})
@@ -112,16 +130,6 @@ def _semantic_errors(config: Mapping, base: Path) -> list[str]:
             errors.append(f"{where}.ensemble_size: {n_members} members cannot span {len(params)} parameters; "
                           f"use more than {len(params)}")
         emulated = exp.get("emulated") or {}
-        # settings of the reported emulator posterior alone: without it they would silently do nothing
-        for key, on, what in (("self_calibrate", emulated.get("self_calibrate"), "true scales the reported "
-                               "emulator posterior's likelihood"),
-                              ("emulator_error", emulated.get("emulator_error", "ar1") != "ar1",
-                               f"{emulated.get('emulator_error')} models the reported emulator posterior's error"),
-                              ("refine_runs", emulated.get("refine_runs", 0) > 0,
-                               f"{emulated.get('refine_runs')} runs refine the reported emulator posterior")):
-            if on and exp.get("posterior") != "emulator_mcmc":
-                errors.append(f"{where}.emulated.{key}: {what} and needs posterior: emulator_mcmc "
-                              f"(got {exp.get('posterior', 'ensemble')})")
         if 0 < emulated.get("refine_runs", 0) < len(params) + 2 and not auto:
             errors.append(f"{where}.emulated.refine_runs: {emulated['refine_runs']} runs cannot measure the "
                           f"emulator's error over {len(params)} parameters; use 0 (none) or at least {len(params) + 2}")
@@ -345,6 +353,8 @@ def validate_config(config: Mapping, schema: Mapping | str | Path, *, base_dir: 
         raise ConfigError(f"{source}: a value is not plain YAML data (numbers, strings, lists, maps): {exc}") from exc
     # NaN passes a schema's minimum (every comparison with it is false): refused first, anywhere
     errors = nonfinite_errors(cfg) + _schema_errors(cfg, schema)
+    if not errors:
+        errors = _posterior_option_errors(cfg)
     if not errors:
         cfg = apply_defaults(cfg, schema)
         errors = _semantic_errors(cfg, Path(base_dir)) + range_errors(cfg)

@@ -145,7 +145,7 @@ def test_a_second_dry_run_reduces_no_record_and_a_changed_record_is_stopped(tmp_
     (tmp_path / "config").mkdir()
     cfg = {"run": ["m"], "experiments": {"m": {
         "kind": "measured", "geometry": "cylinder", "preset": "fast", "seed": 1, "ensemble_size": 4,
-        "method": "esmda", "esmda": {"steps": 1}, "parameters": {"sigma_t": [4.0e+6, 6.0e+7]},
+        "method": "esmda", "esmda": {"steps": 1}, "posterior": "ensemble", "parameters": {"sigma_t": [4.0e+6, 6.0e+7]},
         "simulation": {"t_end": 3.0e-4, "sample_dt": 1.0e-6},
         "observations": {"records": [str(rec)], "t_end": 3.0e-4, "dt": 2.0e-6}}}}
     (tmp_path / "config/config.yaml").write_text(json.dumps(cfg))

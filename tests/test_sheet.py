@@ -176,7 +176,7 @@ def test_a_malformed_sheet_stops_the_config_validation_before_any_job(tmp_path, 
         _set(doc, *edit)
         path = _write(tmp_path, doc)
     cfg = {"experiments": {"byo": {
-        "kind": "measured", "geometry": "cylinder", "preset": "fast", "seed": 1, "ensemble_size": 4,
+        "kind": "measured", "geometry": "cylinder", "preset": "fast", "seed": 1, "ensemble_size": 4, "posterior": "ensemble",
         "parameters": {"sigma_t": [1.0e7, 1.2e8], "E_t": [100.0, 5000.0]},
         "simulation": {"t_end": 1.0e-4}, "observations": {"t_end": 1.0e-4, "records": [str(path)]}}}}
     with pytest.raises(ConfigError) as info:
@@ -194,7 +194,7 @@ def test_snakemake_stops_on_a_malformed_sheet_before_any_job(tmp_path):
     doc["specimen"]["diameter"] = 0.025
     path = _write(tmp_path, doc)
     cfg = {"run": ["byo"], "experiments": {"byo": {
-        "kind": "measured", "geometry": "cylinder", "preset": "fast", "seed": 1, "ensemble_size": 4,
+        "kind": "measured", "geometry": "cylinder", "preset": "fast", "seed": 1, "ensemble_size": 4, "posterior": "ensemble",
         "parameters": {"sigma_t": [1.0e7, 1.2e8], "E_t": [100.0, 5000.0]},
         "simulation": {"t_end": 1.0e-4}, "observations": {"t_end": 1.0e-4, "records": [str(path)]}}}}
     (tmp_path / "config.yaml").write_text(yaml.safe_dump(cfg))

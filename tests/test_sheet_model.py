@@ -39,7 +39,7 @@ def steel_sheet(folder: Path, **specimen) -> Path:
 def measured_config(record: Path) -> dict:
     return {"run": ["byo"], "experiments": {"byo": {
         "kind": "measured", "geometry": "cylinder", "preset": "fast", "seed": 7, "ensemble_size": 3,
-        "method": "esmda", "esmda": {"steps": 1}, "max_rank": 2,
+        "method": "esmda", "esmda": {"steps": 1}, "max_rank": 2, "posterior": "ensemble",
         "parameters": {"sigma_t": [1.0e7, 1.2e8], "E_t": [100.0, 5000.0]},
         "simulation": {"t_end": 1.0e-4, "sample_dt": 1.0e-6},
         "observations": {"t_end": 1.0e-4, "dt": 2.0e-6, "records": [str(record)], "error": {"kind": "ar1"}}}}}

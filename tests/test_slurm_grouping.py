@@ -35,7 +35,7 @@ DEFAULT_PROFILE = REPO / "profiles" / "default"
 def twin(seed: int, ensemble_size: int) -> dict:
     return {
         "kind": "twin", "geometry": "brazilian_disc", "preset": "fast", "seed": seed,
-        "ensemble_size": ensemble_size, "method": "esmda", "esmda": {"steps": 2},
+        "ensemble_size": ensemble_size, "method": "esmda", "esmda": {"steps": 2}, "posterior": "ensemble",
         "parameters": {"sigma_t": [4.0e6, 60.0e6], "E_t": [200.0, 2400.0]},
         "simulation": {"t_end": 1.2e-4, "sample_dt": 1.0e-6},
         "observations": {"t_end": 1.0e-4, "dt": 1.0e-6, "truth": {"sigma_t": 45.0e6, "E_t": 500.0},

@@ -49,6 +49,8 @@ def twin_config(**overrides) -> dict:
     exp = {
         "kind": "twin", "geometry": "brazilian_disc", "preset": "fast", "seed": 3, "ensemble_size": 8,
         "method": "esmda", "esmda": {"steps": 2},
+        # the workflow's mechanics, on the cheaper reported posterior (the shipped form: test_one_posterior.py)
+        "posterior": "ensemble",
         "parameters": {"sigma_t": [4.0e6, 60.0e6], "E_t": [200.0, 2400.0]},
         "simulation": {"t_end": 1.2e-4, "sample_dt": 1.0e-6},
         "observations": {"t_end": 1.0e-4, "dt": 1.0e-6, "truth": {"sigma_t": 45.0e6, "E_t": 500.0},
