@@ -100,7 +100,7 @@ def test_the_workflow_reports_the_emulator_posterior_with_posterior_emulator_mcm
 
     # min_alive_fraction 0.6: 6 members go on with 4 survivors, the emulator's 4 runs (calibration.config_ranges)
     cfg = twin_config(method="emulated_esmda", posterior="emulator_mcmc", ensemble_size=6, max_iterations=2,
-                      min_alive_fraction=0.6, emulated={"refine_runs": 5})
+                      min_alive_fraction=0.6, emulated={"refine_runs": 5, "self_calibrate": False})
     cfg["simulator"] = write_stand_in(tmp_path)
     write_config(tmp_path, cfg)
     out = snakemake(tmp_path, "--cores", "2")

@@ -100,7 +100,7 @@ def test_restores_coverage_where_the_runs_scatter_most():
     assert 0.80 <= _coverage(np.random.default_rng(4), het_model=True) <= 0.98
 
 
-def test_the_default_twin_reports_it_and_bad_settings_are_named():
+def test_a_twin_takes_it_on_request_and_bad_settings_are_named():
     from pathlib import Path
 
     from calibration.experiment import ExperimentSpec
@@ -109,13 +109,17 @@ def test_the_default_twin_reports_it_and_bad_settings_are_named():
     root = Path(__file__).resolve().parents[1]
     cfg = load_yaml(root / "config" / "config.yaml")
     exp = validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)["experiments"]["twin_ref"]
+    assert ExperimentSpec.from_config("twin_ref", exp).emulator_error == "ar1"
+    cfg["experiments"]["twin_ref"]["emulated"] = {"emulator_error": "heteroscedastic"}
+    exp = validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)["experiments"]["twin_ref"]
     assert ExperimentSpec.from_config("twin_ref", exp).emulator_error == "heteroscedastic"
     cfg["experiments"]["twin_ref"]["emulated"]["emulator_error"] = "smooth"
     with pytest.raises(Exception, match="emulator_error"):
         validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)
     cfg["experiments"]["twin_ref"]["emulated"] = {"emulator_error": "heteroscedastic"}
     cfg["experiments"]["twin_ref"]["posterior"] = "ensemble"
-    with pytest.raises(Exception, match="emulator_error: heteroscedastic .*needs posterior: emulator_mcmc"):
+    with pytest.raises(Exception, match="emulated.emulator_error: a setting of the reported emulator posterior, "
+                                        "which posterior: ensemble does not use"):
         validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)
 
 

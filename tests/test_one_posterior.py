@@ -1,13 +1,12 @@
-"""The reported posterior (issue 52): every twin experiment of the shipped configs reports the form the
-validation harness (benchmarks/bench_coverage.py) scores, `emulator_mcmc` with self-calibration, the
-heteroscedastic emulator error and a refinement batch; the default run's twin says so; and a measured
-experiment's closing-the-loop diagnosis starts from the workflow's own posterior (one base posterior per run).
+"""The reported posterior (issue 52): every experiment of the shipped configs, twin or measured, reports the
+form the validation harness (benchmarks/bench_coverage.py) scores, `emulator_mcmc` with the AR(1) emulator
+error, self-calibration and a refinement batch (the schema's default, stated once in config/schema.yaml and
+in calibration.experiment.ExperimentSpec); the default run's summaries say so; and a measured experiment's
+closing-the-loop diagnosis starts from the workflow's own posterior (one base posterior per run).
 
-The measured experiments keep `posterior: ensemble` for now: run on the default run's marble, the harness's form
-self-calibrated its likelihood by a factor of 97 and returned the prior box (sigma_t 70 MPa [25, 113]) where the last
-ensemble gave 37 MPa [35, 39] (CHANGELOG). The heteroscedastic emulator error's log-determinant did it, not the fit
-(studies/posterior_forms_measured.py); the AR(1) form, planned for every experiment, is being benchmarked
-(benchmarks/coverage_plan_one_posterior.json)."""
+The heteroscedastic emulator error, the twins' form before, returned the prior box on the default run's
+measured marble: its log-determinant, not the fit, set the self-calibration factor
+(studies/posterior_forms_measured.py)."""
 from __future__ import annotations
 
 import json
@@ -17,35 +16,8 @@ import pytest
 from _shipped import REPO, shipped_experiments
 from calibration.closing import base_posterior_mismatches
 
-HARNESS_FORM = {"posterior": "emulator_mcmc", "self_calibrate": True, "emulator_error": "heteroscedastic"}
+HARNESS_FORM = {"posterior": "emulator_mcmc", "self_calibrate": True, "emulator_error": "ar1", "refine_runs": 25}
 RUN = REPO / "benchmarks" / "results" / "default_run"
-
-
-def _form(exp: dict) -> dict:
-    em = exp.get("emulated") or {}
-    return {"posterior": exp.get("posterior"), "self_calibrate": em.get("self_calibrate"),
-            "emulator_error": em.get("emulator_error")}
-
-
-def test_every_shipped_twin_reports_the_harness_form():
-    twins = {k: exp for k, (_, exp) in shipped_experiments().items() if exp["kind"] == "twin"}
-    assert len(twins) >= 5
-    for key, exp in twins.items():
-        assert _form(exp) == HARNESS_FORM, key
-        assert exp["emulated"]["refine_runs"] >= len(exp["parameters"]) + 2, key
-
-
-@pytest.mark.parametrize(("exp", "method"), [("twin_ref", "emulator_mcmc"), ("marble_loop", "ensemble")])
-def test_the_default_runs_summaries_name_their_posterior(exp, method):
-    summary = json.loads((RUN / exp / "summary.json").read_text())
-    assert summary["posterior_method"] == method
-
-
-def test_the_default_runs_diagnosis_base_model_is_its_posterior():
-    summary = json.loads((RUN / "marble_loop" / "summary.json").read_text())
-    report = json.loads((RUN / "marble_loop" / "diagnosis" / "report.json").read_text())
-    assert report["base_posterior"] == "workflow"
-    assert base_posterior_mismatches(summary, report) == []
 
 
 def _spec(key):
@@ -55,9 +27,51 @@ def _spec(key):
     return ExperimentSpec.from_config(name, exp), exp
 
 
+def _form(spec) -> dict:
+    return {"posterior": spec.posterior, "self_calibrate": spec.self_calibrate,
+            "emulator_error": spec.emulator_error, "refine_runs": spec.refine_runs}
+
+
+def test_every_shipped_experiment_reports_the_harness_form():
+    keys = [k for k, (_, exp) in shipped_experiments().items() if exp.get("parameters") != "auto"]
+    kinds = {shipped_experiments()[k][1]["kind"] for k in keys}
+    assert len(keys) >= 10 and kinds == {"twin", "measured"}
+    for key in keys:
+        assert _form(_spec(key)[0]) == HARNESS_FORM, key
+
+
+def test_the_schema_and_the_spec_state_the_same_default_form():
+    """The form is stated twice, for the config (the schema's defaults) and for code that builds a spec
+    from a bare experiment dict: both say the same."""
+    from calibration.experiment import ExperimentSpec
+    from calibration.workflow_io import load_yaml
+
+    props = load_yaml(REPO / "config" / "schema.yaml")["properties"]["experiments"]["additionalProperties"]["properties"]
+    em = props["emulated"]["properties"]
+    assert {"posterior": props["posterior"]["default"], "self_calibrate": em["self_calibrate"]["default"],
+            "emulator_error": em["emulator_error"]["default"], "refine_runs": em["refine_runs"]["default"]} == HARNESS_FORM
+    assert _form(ExperimentSpec) == HARNESS_FORM
+    assert em["refine_temper"]["default"] == ExperimentSpec.refine_temper
+
+
+@pytest.mark.parametrize("exp", ["twin_ref", "marble_loop"])
+def test_the_default_runs_summaries_name_their_posterior(exp):
+    summary = json.loads((RUN / exp / "summary.json").read_text())
+    assert summary["posterior_method"] == "emulator_mcmc"
+    assert {k: summary["posterior_form"][k] for k in HARNESS_FORM} == HARNESS_FORM
+
+
+def test_the_default_runs_diagnosis_base_model_is_its_posterior():
+    summary = json.loads((RUN / "marble_loop" / "summary.json").read_text())
+    report = json.loads((RUN / "marble_loop" / "diagnosis" / "report.json").read_text())
+    assert report["base_posterior"] == "workflow"
+    assert base_posterior_mismatches(summary, report) == []
+
+
 def test_each_scored_form_is_its_benchmarks_and_the_default_twins():
     """calibration.scored.SCORED names the form and loop its benchmark JSON scored: the JSON records the
-    same form and loop settings, and the loop is config/config.yaml's twin_ref (the harness's twin)."""
+    same form and loop settings, and the loop is config/config.yaml's twin_ref (the harness's twin), whose
+    summary names the benchmark of the form it reports."""
     from calibration.scored import SCORED, posterior_form
 
     spec, exp = _spec("config.yaml:twin_ref")
@@ -69,27 +83,35 @@ def test_each_scored_form_is_its_benchmarks_and_the_default_twins():
         loop = entry["loop"]
         assert (bench["method"], bench["ensemble_size"], bench["window_s"]) == (
             loop["method"], loop["ensemble_size"], loop["window_s"])
-    assert posterior_form(spec, exp)["scored_by"] == SCORED[0]["benchmark"]
+    shipped = [s for s in SCORED if s["form"] == HARNESS_FORM]
+    assert len(shipped) == 1
+    assert posterior_form(spec, exp)["scored_by"] == shipped[0]["benchmark"]
 
 
 def test_a_summary_says_whether_its_form_was_scored():
     """Another ensemble size, another prior box, another preset or another form is not the scored loop:
-    its summary says so (scored_by None), as does every measured experiment's ensemble posterior."""
+    its summary says so (scored_by None) and names where the same form was scored, as every measured
+    experiment's does."""
     from dataclasses import replace
 
-    from calibration.scored import posterior_form
+    from calibration.scored import SCORED, posterior_form
 
+    shipped = next(s for s in SCORED if s["form"] == HARNESS_FORM)
     spec, exp = _spec("config.yaml:twin_ref")
     other = posterior_form(replace(spec, ensemble_size=24), exp)
-    assert other["scored_by"] is None and other["form_scored_on"]["benchmark"] == "benchmarks/results/coverage_well_specified.json"
+    assert other["scored_by"] is None and other["form_scored_on"]["benchmark"] == shipped["benchmark"]
     assert other["form_scored_on"]["loop"]["ensemble_size"] == 25
     assert posterior_form(spec, exp)["form_scored_on"] is None
     assert posterior_form(replace(spec, upper=spec.upper * 1.1), exp)["scored_by"] is None
     assert posterior_form(spec, {**exp, "preset": "standard"})["scored_by"] is None
-    assert posterior_form(replace(spec, emulator_error="ar1"), exp)["scored_by"] is None
     assert posterior_form(replace(spec, refine_runs=0), exp)["scored_by"] is None
+    assert posterior_form(replace(spec, emulator_error="heteroscedastic"), exp)["scored_by"] == \
+        "benchmarks/results/coverage_well_specified.json"
+    assert posterior_form(replace(spec, posterior="ensemble"), exp) == {
+        "posterior": "ensemble", "scored_by": None, "form_scored_on": None}
     marble, mexp = _spec("config.yaml:marble_loop")
-    assert posterior_form(marble, mexp) == {"posterior": "ensemble", "scored_by": None, "form_scored_on": None}
+    assert posterior_form(marble, mexp) == {**HARNESS_FORM, "scored_by": None,
+                                            "form_scored_on": {"benchmark": shipped["benchmark"], "loop": shipped["loop"]}}
 
 
 def test_summary_html_says_whether_the_intervals_were_scored():

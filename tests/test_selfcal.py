@@ -121,7 +121,7 @@ def test_the_analyses_are_not_scaled():
     assert "self_calibrate" not in inspect.signature(emulated_esmda_update).parameters
 
 
-def test_the_config_switch_is_on_in_the_default_twin_and_needs_the_emulator_posterior():
+def test_the_config_switch_is_on_by_default_and_refused_beside_the_ensemble_posterior():
     from pathlib import Path
 
     from calibration.experiment import ExperimentSpec
@@ -140,7 +140,7 @@ def test_the_config_switch_is_on_in_the_default_twin_and_needs_the_emulator_post
         validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)
     cfg["experiments"]["twin_ref"]["emulated"] = {"self_calibrate": True}
     cfg["experiments"]["twin_ref"]["posterior"] = "ensemble"
-    with pytest.raises(Exception, match="self_calibrate.*needs posterior: emulator_mcmc"):
+    with pytest.raises(Exception, match="emulated.self_calibrate: a setting of the reported emulator posterior"):
         validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)
 
 
