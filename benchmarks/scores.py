@@ -180,3 +180,9 @@ def misspecified_verdict(scored: dict) -> dict:
                                     "met": bool(cov >= COVERAGE_90_MISSPECIFIED_MIN)}
     failed = [k for k, b in bars.items() if not b["met"]]
     return {"bars": bars, "met": [k for k in bars if k not in failed], "failed": failed, "passes": not failed}
+
+
+def set_verdict_of(name: str, scored: dict) -> dict:
+    """The bars of the harness's set ``name``: :func:`verdict` for the well-specified twins,
+    :func:`misspecified_verdict` for every misspecified set."""
+    return verdict(scored) if name == "well_specified" else misspecified_verdict(scored)

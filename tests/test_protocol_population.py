@@ -182,3 +182,15 @@ def test_the_heldout_prediction_never_reads_the_heldout_curve(planted):
     # the evaluation does read it (and only it does)
     ev = heldout_evaluation(again, corrupted, {r: OBS_T for r in K})["H"]
     assert ev["after"]["rmse"] > 10 * heldout_evaluation(sel, obs, {r: OBS_T for r in K})["H"]["after"]["rmse"]
+
+
+def test_the_per_record_name_is_spelt_alike_on_both_sides_of_the_layer():
+    """enkf may not import shpb (docs/architecture.md), so the separator of a per-record copy's name is
+    stated in both; the simulator's name and the inference's parse of it must agree."""
+    from enkf.diagnosis.population import RECORD_SEP, record_name, split_name
+    from shpb import effects
+
+    assert RECORD_SEP == effects.RECORD_SEP
+    name = effects.record_param("face_gap.gap_m", "CaMa_SHPB_004")
+    assert name == record_name("face_gap.gap_m", "CaMa_SHPB_004")
+    assert split_name(name) == ("face_gap.gap_m", "CaMa_SHPB_004")

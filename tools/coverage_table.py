@@ -26,7 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run as a script: the harness's bars are benchmarks.scores
 
 from benchmarks.scores import (COVERAGE_90_BAR, COVERAGE_90_MISSPECIFIED_MIN, SBC_ALPHA, WIS_BAR,  # noqa: E402
-                               misspecified_verdict, verdict)
+                               set_verdict_of)
 
 START, END = "<!-- coverage-table:start -->", "<!-- coverage-table:end -->"
 CENSORED_START, CENSORED_END = "<!-- censored-table:start -->", "<!-- censored-table:end -->"
@@ -106,7 +106,7 @@ def _row(bench: dict, name: str, source: str) -> str:
             f"| {both(_width)} "
             f"| {both(lambda q: _pct(q['coverage_90']['fraction']), e)} "
             f"| {both(_wis)} | {both(lambda q: _pct(q['uninformative_share']))} "
-            f"| {_failed(verdict(rep) if name == 'well_specified' else misspecified_verdict(rep))} |")
+            f"| {_failed(set_verdict_of(name, rep))} |")
 
 
 def _setting(bench: dict) -> tuple:

@@ -47,7 +47,8 @@ from .._rng import RngLike, as_generator
 
 __all__ = ["Population", "RECORD_SEP", "fit_population", "record_name", "split_name"]
 
-#: Separator of a per-record copy's name (the same as ``shpb.effects.RECORD_SEP``).
+#: Separator of a per-record copy's name, the same as ``shpb.effects.RECORD_SEP`` (enkf may not import shpb;
+#: tests/test_protocol_population.py keeps the two equal).
 RECORD_SEP = "@"
 SCALES = ("linear", "log")
 METHODS = ("reml", "dl")
