@@ -93,8 +93,9 @@ def _posterior_option_errors(config: Mapping) -> list[str]:
             continue
         for key in _EMULATOR_POSTERIOR_ONLY:
             if key in (exp.get("emulated") or {}):
-                errors.append(f"experiments.{name}.emulated.{key}: a setting of the reported emulator posterior, "
-                              f"which posterior: ensemble does not use; drop it or use posterior: emulator_mcmc")
+                errors.append(f"experiments.{name}.emulated.{key}: {exp['emulated'][key]!r} is a setting of the "
+                              f"reported emulator posterior, which posterior: ensemble does not use; drop it or use "
+                              f"posterior: emulator_mcmc")
     return errors
 
 

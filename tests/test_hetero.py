@@ -118,8 +118,8 @@ def test_a_twin_takes_it_on_request_and_bad_settings_are_named():
         validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)
     cfg["experiments"]["twin_ref"]["emulated"] = {"emulator_error": "heteroscedastic"}
     cfg["experiments"]["twin_ref"]["posterior"] = "ensemble"
-    with pytest.raises(Exception, match="emulated.emulator_error: a setting of the reported emulator posterior, "
-                                        "which posterior: ensemble does not use"):
+    with pytest.raises(Exception, match="emulated.emulator_error: 'heteroscedastic' is a setting of the reported emulator "
+                                        "posterior, which posterior: ensemble does not use"):
         validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)
 
 

@@ -140,7 +140,7 @@ def test_the_config_switch_is_on_by_default_and_refused_beside_the_ensemble_post
         validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)
     cfg["experiments"]["twin_ref"]["emulated"] = {"self_calibrate": True}
     cfg["experiments"]["twin_ref"]["posterior"] = "ensemble"
-    with pytest.raises(Exception, match="emulated.self_calibrate: a setting of the reported emulator posterior"):
+    with pytest.raises(Exception, match="emulated.self_calibrate: True is a setting of the reported emulator posterior"):
         validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)
 
 

@@ -211,7 +211,7 @@ def test_shipped_configs_are_valid():
      "experiments.twin.localization: emulated_esmda has no localization"),
     (lambda c: c["experiments"]["twin"].update(emulated={"temper_base": 0.5}), "experiments.twin.emulated.temper_base"),
     (lambda c: c["experiments"]["twin"].update(emulated={"refine_runs": 25}),
-     "experiments.twin.emulated.refine_runs: 25 runs refine the reported emulator posterior and needs posterior: emulator_mcmc (got ensemble)"),
+     "experiments.twin.emulated.refine_runs: 25 is a setting of the reported emulator posterior, which posterior: ensemble does not use"),
     (lambda c: c["experiments"]["twin"].update(posterior="emulator_mcmc", emulated={"refine_runs": 3}),
      "experiments.twin.emulated.refine_runs: 3 runs cannot measure the emulator's error over 2 parameters; use 0 (none) or at least 4"),
     (lambda c: c["experiments"]["twin"].update(emulated={"refine_temper": 0.5}), "experiments.twin.emulated.refine_temper"),
