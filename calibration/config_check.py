@@ -84,12 +84,14 @@ def _schema_errors(config, schema) -> list[str]:
 _EMULATOR_POSTERIOR_ONLY = ("self_calibrate", "emulator_error", "refine_runs", "refine_temper")
 
 
-def _posterior_option_errors(config: Mapping) -> list[str]:
+def _posterior_option_errors(config: Mapping, schema: Mapping) -> list[str]:
     """Settings of the emulator posterior written beside ``posterior: ensemble`` would silently do nothing.
-    Checked on the config as written, before the schema's defaults (which set them for every experiment)."""
+    Checked on the config as written, before the schema's defaults (which set them for every experiment);
+    an experiment without ``posterior`` gets the schema's default."""
+    default = schema["properties"]["experiments"]["additionalProperties"]["properties"]["posterior"]["default"]
     errors = []
     for name, exp in (config.get("experiments") or {}).items():
-        if exp.get("posterior", "emulator_mcmc") != "ensemble":
+        if exp.get("posterior", default) != "ensemble":
             continue
         for key in _EMULATOR_POSTERIOR_ONLY:
             if key in (exp.get("emulated") or {}):
@@ -355,7 +357,7 @@ def validate_config(config: Mapping, schema: Mapping | str | Path, *, base_dir: 
     # NaN passes a schema's minimum (every comparison with it is false): refused first, anywhere
     errors = nonfinite_errors(cfg) + _schema_errors(cfg, schema)
     if not errors:
-        errors = _posterior_option_errors(cfg)
+        errors = _posterior_option_errors(cfg, schema)
     if not errors:
         cfg = apply_defaults(cfg, schema)
         errors = _semantic_errors(cfg, Path(base_dir)) + range_errors(cfg)
