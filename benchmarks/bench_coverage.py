@@ -143,7 +143,8 @@ def run_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: str, ap
         # only what the loop does not read may differ from the runs' own settings
         spec = ExperimentSpec.from_config(EXPERIMENT, {**exp, "seed": seed})
         if not _same_spec(replace(kept, self_calibrate=spec.self_calibrate, emulator_error=spec.emulator_error,
-                                  refine_runs=spec.refine_runs, refine_temper=spec.refine_temper), spec):
+                                  tempering=spec.tempering, refine_runs=spec.refine_runs,
+                                  refine_temper=spec.refine_temper), spec):
             raise SystemExit(f"{keep}: its runs were made with another loop than this twin's")
     else:
         spec, params, responses, analyses, obs = simulate_twin(pool, exp, truth, seed, data_preset, approx, planted)
@@ -499,6 +500,8 @@ def main(argv=None) -> dict:
                          "counted: the form before 2026-11-28b, whose twins are in <cache>/approx-<n>/")
     ap.add_argument("--emulator-error", choices=["ar1", "heteroscedastic"], default=None,
                     help="override emulated.emulator_error (the reported posterior's emulator error, enkf.hetero)")
+    ap.add_argument("--tempering", choices=["power", "curvature"], default=None,
+                    help="override emulated.tempering (how the self-calibration widens the reported posterior)")
     ap.add_argument("--refine-runs", type=int, default=None,
                     help="override emulated.refine_runs (0: the reported posterior on the loop's runs alone)")
     ap.add_argument("--keep-runs", default=None,
@@ -529,6 +532,8 @@ def main(argv=None) -> dict:
         exp["emulated"] = {**exp.get("emulated", {}), "emulator_error": args.emulator_error}
     if args.refine_runs is not None:
         exp["emulated"] = {**exp.get("emulated", {}), "refine_runs": args.refine_runs}
+    if args.tempering is not None:
+        exp["emulated"] = {**exp.get("emulated", {}), "tempering": args.tempering}
     spec = ExperimentSpec.from_config(EXPERIMENT, exp)
     # a development run's overrides name its own cache folder, so that it never mixes with the default's
     tag = "_".join(f"{k}-{v}" for k, v in (("mesh", args.mesh), ("replicates", args.replicates),
@@ -539,7 +544,10 @@ def main(argv=None) -> dict:
                                             ("emulator_error", "heteroscedastic" if spec.emulator_error
                                              == "heteroscedastic" else None),
                                             # the refined form's twins in a folder of their own
-                                            ("refine", spec.refine_runs or None)) if v is not None)
+                                            ("refine", spec.refine_runs or None),
+                                            # the curvature form's twins in a folder of their own
+                                            ("tempering", "curvature" if spec.tempering == "curvature" else None))
+                      if v is not None)
     # the pairs' curves do not depend on coarse_variability: one file per seed in approx-<n>/, the counted
     # form's twins beside them (its folder from before the subtracted form), the subtracted form's in their own
     approx_tag = f"approx-{args.approximation_pairs}" if args.approximation_pairs else ""
@@ -602,6 +610,7 @@ def main(argv=None) -> dict:
            "emulator_smoothing": (exp.get("emulated") or {}).get("smoothing", "loo"),
            "self_calibrate": bool((exp.get("emulated") or {}).get("self_calibrate", False)),
            "emulator_error": (exp.get("emulated") or {}).get("emulator_error", "ar1"),
+           "tempering": spec.tempering,
            "refine_runs": spec.refine_runs, "refine_temper": spec.refine_temper if spec.refine_runs else None,
            "reported_posterior": exp.get("posterior", "ensemble"), "cores": os.cpu_count(),
            "approximation_pairs": args.approximation_pairs,

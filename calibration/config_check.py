@@ -81,7 +81,7 @@ def _schema_errors(config, schema) -> list[str]:
 
 
 #: settings that only the reported emulator posterior reads (posterior: emulator_mcmc)
-_EMULATOR_POSTERIOR_ONLY = ("self_calibrate", "emulator_error", "refine_runs", "refine_temper")
+_EMULATOR_POSTERIOR_ONLY = ("self_calibrate", "emulator_error", "tempering", "refine_runs", "refine_temper")
 
 
 def _posterior_option_errors(config: Mapping, schema: Mapping) -> list[str]:

@@ -61,7 +61,8 @@ def sample_posterior(spec: ExperimentSpec, params: Sequence[pd.DataFrame], respo
                               rng=rng_for(spec.seed, "posterior"), start=X[latest], names=list(spec.names),
                               smoothing=spec.smoothing, loo_scale=terms.likelihood().std,
                               self_calibrate=spec.self_calibrate,
-                              heteroscedastic=spec.emulator_error == "heteroscedastic", temper=temper)
+                              heteroscedastic=spec.emulator_error == "heteroscedastic", temper=temper,
+                              tempering=spec.tempering)
 
 
 def refine_batch(spec: ExperimentSpec, params: pd.DataFrame, status: pd.DataFrame, Y: np.ndarray) -> tuple:

@@ -18,6 +18,22 @@ uniform box of the calibration (the LHS prior). With ``heteroscedastic`` the emu
 ``a(theta) C_em``, scaled by the runs' own local misfit (:mod:`enkf.hetero`): the simulator's
 scatter differs across the box.
 
+The self-calibration's factor ``lambda`` (:mod:`enkf.selfcal`) widens the likelihood in one of two ways
+(``tempering``). ``power``: the log-likelihood divided by ``lambda`` (a generalized posterior's learning
+rate, Syring & Martin 2019). ``curvature``: the likelihood's shape kept and stretched by ``sqrt(lambda)``
+about its maximum ``theta_hat`` in the box, ``L(theta_hat + (theta - theta_hat) / sqrt(lambda))`` (the
+curvature adjustment of Chandler & Bate 2007 and Ribatet et al. 2012). Both widen a quadratic
+log-likelihood alike; they part where it is not quadratic. The disc's likelihood rises steeply towards
+low ``sigma_t`` (the specimen fails early and the whole post-peak moves) and slowly towards high: the
+power form flattens that slow side into a long tail, so the median moves away from the maximum (on
+development twins ``sigma_t``'s median sat 2-4 % above the truth with it and at the truth without the
+factor: ``studies/tempering_forms.py``); the curvature form keeps the tail as long, relative to the
+width, as the untempered likelihood's. Stretching about ``theta_hat`` maps the box into itself, so the
+emulator is never asked outside it. The power form is the reported one: on the same development twins
+the curvature form removed the shift but doubled ``sigma_t``'s interval score, because where the curve
+is still rising at the window's end the likelihood's maximum can sit on a spurious mode, and a posterior
+stretched about it misses the truth by far.
+
 Sampler: ``emcee``'s affine-invariant ensemble sampler (Foreman-Mackey et al. 2013), in unit-box
 coordinates (so no parameter's units dominate), walkers started from the last ensemble. The chain is
 checked, not trusted: the integrated autocorrelation time ``tau`` is estimated and the run is extended
@@ -40,9 +56,13 @@ from .diagnostics import default_names, jsonable
 from .emulated import emulator_error_model
 from .emulator import design_arrays, smoothed_emulator
 from .hetero import emulated_deviance
-from .selfcal import self_calibration
+from .sampling import latin_hypercube
+from .selfcal import box_minimum, self_calibration
 
-__all__ = ["EmulatorPosterior", "emulator_posterior", "interval_summary", "QUANTILES"]
+__all__ = ["EmulatorPosterior", "emulator_posterior", "interval_summary", "QUANTILES", "TEMPERINGS"]
+
+#: How the self-calibration's factor widens the likelihood (module docstring).
+TEMPERINGS = ("power", "curvature")
 
 #: Quantiles reported per parameter: the 90 % and 50 % central intervals and the median.
 QUANTILES = {"q05": 0.05, "q25": 0.25, "q50": 0.5, "q75": 0.75, "q95": 0.95}
@@ -75,13 +95,44 @@ class EmulatorPosterior:
         return jsonable({"posterior": self.summary, **self.diagnostics})
 
 
+def _loglik(em, obs_error, emu_err, X, lo, hi, d, heteroscedastic: bool, emu_info: dict, scale: float = 1.0):
+    """``P (k, n) -> (log L + const) / scale`` of the emulated likelihood, vectorised over points (written
+    as the power form always computed it, so that its arithmetic is unchanged)."""
+    if heteroscedastic:
+        deviance, het = emulated_deviance(em, obs_error.dense(), emu_err.dense(), X, lo, hi)
+        emu_info["heteroscedastic"] = het.describe()
+        return lambda P: -0.5 * deviance(P, d) / scale
+    C = DenseError(scale * (obs_error.dense() + (0.0 if emu_err is None else emu_err.dense())), _symmetric=True)
+    # L^-1 once: the likelihood is then one matrix product per batch of walkers (a triangular solve
+    # per call costs more in SciPy's wrapper than the product)
+    Linv_T = linalg.solve_triangular(C.cholesky, np.eye(C.m), lower=True).T
+
+    def loglik(P):
+        w = (em(np.atleast_2d(P)) - d) @ Linv_T
+        return -0.5 * np.einsum("ij,ij->i", w, w)
+    return loglik
+
+
+def _tempered(loglik, lam: float, tempering: str, lo, hi, starts):
+    """``(loglik, theta_hat)``: the log-likelihood widened by ``lam`` (module docstring); ``loglik(scale)``
+    the likelihood's ``P -> log L / scale``; ``theta_hat`` the untempered likelihood's maximum in the box
+    for ``curvature`` (None for ``power``), searched from ``starts()`` (drawn only here, so that the power
+    form's random stream is what it was)."""
+    if tempering == "power" or lam == 1.0:
+        return loglik(lam), None
+    base = loglik(1.0)
+    _, theta_hat = box_minimum(lambda P: -2.0 * base(P), lo, hi, starts())
+    shrink = 1.0 / math.sqrt(lam)
+    return (lambda P: base(theta_hat + (P - theta_hat) * shrink)), theta_hat
+
+
 def emulator_posterior(design_params, design_responses, latest, obs, obs_error: ObservationError, *,
                        lower, upper, times, groups=None, rng: RngLike, start=None,
                        names: Sequence[str] | None = None, walkers: int = 32, min_steps: int = 2000,
                        max_steps: int = 40000, min_tau_multiple: float = 50.0, burn_tau: float = 5.0,
                        emulator_error: bool = True, smoothing="loo", loo_scale=None,
                        self_calibrate: bool = False, heteroscedastic: bool = False,
-                       temper: float = 1.0) -> EmulatorPosterior:
+                       temper: float = 1.0, tempering: str = "power") -> EmulatorPosterior:
     """Sample ``p(theta | d)`` on the emulator of every run (module docstring).
 
     design_params, design_responses : (k, n) / (k, m) every successful run so far (finite curves).
@@ -98,11 +149,15 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
     heteroscedastic : ``C_em`` scaled by ``a(theta)``, the runs' local leave-one-out misfit
         (:class:`enkf.hetero.HeteroscedasticError`; the log-determinant enters the likelihood, and with
         ``self_calibrate`` the whole log-likelihood is divided by ``lambda``: a learning rate).
-    temper : the log-likelihood divided by this factor besides ``lambda``: a tempered posterior, wider
+    temper : the likelihood widened by this factor besides ``lambda``: a tempered posterior, wider
         than the reported one (where :func:`enkf.refine.refinement_design` puts the refinement runs).
+    tempering : how ``lambda * temper`` widens the likelihood: ``"power"`` or ``"curvature"`` (module
+        docstring).
     """
     if not temper >= 1.0:
         raise ValueError(f"temper must be at least 1, got {temper}")
+    if tempering not in TEMPERINGS:
+        raise ValueError(f"tempering must be one of {TEMPERINGS}, got {tempering!r}")
     X, Y, latest, d = design_arrays(design_params, design_responses, latest, obs)
     lo, hi = np.asarray(lower, float), np.asarray(upper, float)
     n = lo.size
@@ -125,24 +180,12 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
             emu_info["self_calibration"] = self_calibration(
                 X, Y, latest, obs_error, lower=lo, upper=hi, smoothing=smoothing_info["smoothing"],
                 error_model=lambda r: emulator_error_model(r, times, groups)[0], rng=rng,
-                heteroscedastic=heteroscedastic)
+                heteroscedastic=heteroscedastic, tempering=tempering)
             lam = emu_info["self_calibration"]["lambda"]
     lam *= float(temper)
-    if heteroscedastic:
-        deviance, het = emulated_deviance(em, obs_error.dense(), emu_err.dense(), X, lo, hi)
-        emu_info["heteroscedastic"] = het.describe()
-
-        def loglik(P):
-            return -0.5 * deviance(P, d) / lam
-    else:
-        C = DenseError(lam * (obs_error.dense() + (0.0 if emu_err is None else emu_err.dense())), _symmetric=True)
-        # L^-1 once: the likelihood is then one matrix product per batch of walkers (a triangular solve
-        # per call costs more in SciPy's wrapper than the product)
-        Linv_T = linalg.solve_triangular(C.cholesky, np.eye(C.m), lower=True).T
-
-        def loglik(P):
-            w = (em(P) - d) @ Linv_T
-            return -0.5 * np.einsum("ij,ij->i", w, w)
+    loglik, theta_hat = _tempered(
+        lambda scale: _loglik(em, obs_error, emu_err, X, lo, hi, d, heteroscedastic, emu_info, scale), lam,
+        tempering, lo, hi, lambda: np.vstack([latin_hypercube(lo, hi, 1000, rng), X[latest]]))
 
     def log_prob(U):
         # U: (walkers, n) in the unit box; vectorised over walkers. Outside the box: prior zero.
@@ -183,7 +226,9 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
     diagnostics = {
         "method": "emcee on the emulator (calibrate-emulate-sample)",
         "design_points": int(X.shape[0]), "latest_points": int(latest.sum()),
-        "emulator_error": emu_info, "emulator": smoothing_info, "temper": float(temper), "walkers": walkers, "steps": steps, "burn_in": burn, "thin": thin,
+        "emulator_error": emu_info, "emulator": smoothing_info, "temper": float(temper), "tempering": tempering,
+        "likelihood_maximum": None if theta_hat is None else dict(zip(names, theta_hat.tolist())),
+        "walkers": walkers, "steps": steps, "burn_in": burn, "thin": thin,
         "autocorr_time": dict(zip(names, tau.tolist())),
         "converged_chain": bool(steps >= min_tau_multiple * tau_max),
         "acceptance_fraction": float(np.mean(sampler.acceptance_fraction)),

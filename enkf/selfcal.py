@@ -26,6 +26,7 @@ deviance's, log-determinant included, and ``1 / lambda`` multiplies the whole lo
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -37,16 +38,19 @@ from .emulator import CurveEmulator
 from .hetero import emulated_deviance
 from .sampling import latin_hypercube
 
-__all__ = ["pseudo_runs", "self_calibration"]
+__all__ = ["box_minimum", "pseudo_runs", "self_calibration"]
 
 
-def _min_chi2(chi2: Callable[[np.ndarray], np.ndarray], lo, hi, starts: np.ndarray) -> float:
-    """The least ``chi2`` over the box: the best of ``starts``, polished by L-BFGS-B in the unit box."""
+def box_minimum(chi2: Callable[[np.ndarray], np.ndarray], lo, hi, starts: np.ndarray) -> tuple[float, np.ndarray]:
+    """The least ``chi2`` over the box and where it is: the best of ``starts``, polished by L-BFGS-B in the
+    unit box."""
     values = chi2(starts)
-    x0 = (starts[int(np.argmin(values))] - lo) / (hi - lo)
-    res = optimize.minimize(lambda u: float(chi2(lo + u[None, :] * (hi - lo))[0]), x0, method="L-BFGS-B",
-                            bounds=[(0.0, 1.0)] * lo.size)
-    return float(min(values.min(), res.fun))
+    best = starts[int(np.argmin(values))]
+    res = optimize.minimize(lambda u: float(chi2(lo + u[None, :] * (hi - lo))[0]), (best - lo) / (hi - lo),
+                            method="L-BFGS-B", bounds=[(0.0, 1.0)] * lo.size)
+    if res.fun < values.min():
+        return float(res.fun), lo + np.clip(res.x, 0.0, 1.0) * (hi - lo)
+    return float(values.min()), np.array(best, float)
 
 
 def pseudo_runs(X, Y, latest, obs_error: ObservationError, *, lower, upper, smoothing: float,
@@ -84,7 +88,8 @@ def _deviance(em, C, R, C_em, X_keep, lo, hi, heteroscedastic: bool):
 
 def self_calibration(X, Y, latest, obs_error: ObservationError, *, lower, upper, smoothing: float,
                      error_model: Callable[[np.ndarray], ObservationError], rng: RngLike,
-                     search_points: int = 1000, heteroscedastic: bool = False, pseudo=None) -> dict:
+                     search_points: int = 1000, heteroscedastic: bool = False, pseudo=None,
+                     tempering: str = "power") -> dict:
     """``lambda`` and its evidence (module docstring).
 
     X, Y : (k, n) / (k, m) every run of the emulator's design; ``latest`` (k,) bool: the runs used as
@@ -99,6 +104,9 @@ def self_calibration(X, Y, latest, obs_error: ObservationError, *, lower, upper,
     pseudo : (k,) bool, other runs as the pseudo-data (default ``latest``; ``C_em`` is still measured at
         ``latest``), e.g. the prior's hypercube for truths from the whole box
         (``studies/posterior_candidates.py``).
+    tempering : the form ``lambda`` widens the likelihood in (:mod:`enkf.ces`): ``power`` divides
+        ``delta`` by it; ``curvature`` brings each run's parameters ``sqrt(lambda)`` times closer to its
+        likelihood's maximum, and ``lambda`` is the least for which the median ``delta`` is the reference.
     """
     X, Y = np.asarray(X, float), np.asarray(Y, float)
     latest = np.asarray(latest, bool)
@@ -111,7 +119,9 @@ def self_calibration(X, Y, latest, obs_error: ObservationError, *, lower, upper,
         raise ValueError(f"self-calibration needs at least 3 pseudo-data runs and {n + 3} runs; got {idx.size} "
                          f"and {X.shape[0]}")
     starts = np.vstack([latin_hypercube(lo, hi, search_points, rng), X[latest]])
-    deltas, R = [], obs_error.dense()
+    if tempering not in ("power", "curvature"):
+        raise ValueError(f"tempering must be power or curvature, got {tempering!r}")
+    deltas, stretched, R = [], [], obs_error.dense()
     for i, em, C, y in pseudo_runs(X, Y, latest, obs_error, lower=lo, upper=hi, smoothing=smoothing,
                                    error_model=error_model, rng=rng, pseudo=pseudo):
         keep = np.arange(X.shape[0]) != i
@@ -121,11 +131,39 @@ def self_calibration(X, Y, latest, obs_error: ObservationError, *, lower, upper,
         def chi2(P, dev=dev, y=y):
             return dev(P, y)
 
-        deltas.append(max(0.0, float(chi2(X[i])[0]) - _min_chi2(chi2, lo, hi, starts)))
+        least, at = box_minimum(chi2, lo, hi, starts)
+        deltas.append(max(0.0, float(chi2(X[i])[0]) - least))
+        stretched.append(lambda lam, chi2=chi2, x=X[i], at=at, least=least:
+                         max(0.0, float(chi2(at + (x - at) / np.sqrt(lam))[0]) - least))
     deltas = np.array(deltas)
-    lam = max(1.0, float(np.median(deltas) / stats.chi2.median(n)))
-    return {"lambda": lam, "runs": int(idx.size), "median_delta_chi2": float(np.median(deltas)),
-            "reference_median": float(stats.chi2.median(n)),
+    if tempering == "power":
+        lam = max(1.0, float(np.median(deltas) / stats.chi2.median(n)))
+        adjusted = deltas / lam
+    else:
+        lam = _curvature_lambda(stretched, stats.chi2.median(n))
+        adjusted = np.array([f(lam) for f in stretched])
+    return {"lambda": lam, "tempering": tempering, "runs": int(idx.size),
+            "median_delta_chi2": float(np.median(deltas)), "reference_median": float(stats.chi2.median(n)),
             "fraction_inside_90": float(np.mean(deltas <= stats.chi2.ppf(0.90, n))),
-            "fraction_inside_90_at_lambda": float(np.mean(deltas / lam <= stats.chi2.ppf(0.90, n))),
+            "fraction_inside_90_at_lambda": float(np.mean(adjusted <= stats.chi2.ppf(0.90, n))),
             "delta_chi2": deltas.tolist()}
+
+
+def _curvature_lambda(stretched, reference: float) -> float:
+    """The least ``lambda >= 1`` at which the median over the pseudo-runs of ``delta_i(lambda)``, run
+    ``i``'s deviance at its own parameters brought ``sqrt(lambda)`` times closer to its maximum, is
+    ``reference`` (bisection in ``log lambda``; ``delta_i`` falls as ``lambda`` grows)."""
+    def excess(lam):
+        return float(np.median([f(lam) for f in stretched])) - reference
+
+    if excess(1.0) <= 0.0:
+        return 1.0
+    lo, hi = 0.0, 1.0
+    while excess(math.exp(hi)) > 0.0:
+        lo, hi = hi, 2.0 * hi
+        if hi > 40.0:
+            return math.exp(hi)
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if excess(math.exp(mid)) > 0.0 else (lo, mid)
+    return math.exp(hi)

@@ -105,6 +105,9 @@ def test_a_summary_says_whether_its_form_was_scored():
     assert posterior_form(replace(spec, upper=spec.upper * 1.1), exp)["scored_by"] is None
     assert posterior_form(spec, {**exp, "preset": "standard"})["scored_by"] is None
     assert posterior_form(replace(spec, refine_runs=0), exp)["scored_by"] is None
+    # the curvature tempering was scored on development twins only: no benchmark's form
+    assert posterior_form(replace(spec, tempering="curvature"), exp) == {
+        **HARNESS_FORM, "tempering": "curvature", "scored_by": None, "form_scored_on": None}
     assert posterior_form(replace(spec, emulator_error="heteroscedastic"), exp)["scored_by"] == \
         "benchmarks/results/coverage_well_specified.json"
     assert posterior_form(replace(spec, posterior="ensemble"), exp) == {

@@ -156,3 +156,32 @@ def test_other_runs_as_pseudo_data_are_the_runs_it_takes():
     assert spread["runs"] == 30 and len(spread["delta_chi2"]) == 30
     with pytest.raises(ValueError, match="at least 3 pseudo-data runs"):
         self_calibration(X, Y, latest, R, rng=7, pseudo=np.r_[np.ones(2, bool), np.zeros(40, bool)], **kw)
+
+
+
+def test_the_curvature_forms_factor_solves_its_median_equation():
+    """``enkf.selfcal._curvature_lambda``: the least lambda >= 1 at which the pseudo-runs' median delta is the
+    reference. A quadratic likelihood's delta falls as 1/lambda when the run is brought sqrt(lambda) closer
+    to the maximum (lambda = median delta / reference, the power form's); one with a kink at its maximum
+    (a box end) as 1/sqrt(lambda) (lambda = that ratio squared); deltas already below the reference give 1."""
+    from enkf.selfcal import _curvature_lambda
+
+    deltas = np.array([3.0, 9.0, 12.0, 20.0, 40.0])
+    ref = stats.chi2.median(2)
+    quadratic = [lambda lam, d=d: d / lam for d in deltas]
+    kink = [lambda lam, d=d: d / np.sqrt(lam) for d in deltas]
+    assert _curvature_lambda(quadratic, ref) == pytest.approx(12.0 / ref, rel=1e-9)
+    assert _curvature_lambda(kink, ref) == pytest.approx((12.0 / ref) ** 2, rel=1e-9)
+    assert _curvature_lambda([lambda lam: 0.5] * 3, ref) == 1.0
+
+
+def test_the_self_calibration_names_its_form_and_refuses_an_unknown_one():
+    X, Y, latest, d, truth, rng = stand_in(3, 0.3)
+    kw = dict(lower=LO, upper=HI, smoothing=SMOOTHING, error_model=error_model)
+    R = DiagonalError(np.full(M, NOISE))
+    curvature = self_calibration(X, Y, latest, R, rng=5, tempering="curvature", **kw)
+    assert curvature["tempering"] == "curvature" and curvature["lambda"] > 1.0
+    # at lambda the median delta is the chi-square median, so at least half lie inside the 90 % region
+    assert curvature["fraction_inside_90_at_lambda"] >= 0.5
+    with pytest.raises(ValueError, match="tempering must be power or curvature, got 'sqrt'"):
+        self_calibration(X, Y, latest, R, rng=5, tempering="sqrt", **kw)
