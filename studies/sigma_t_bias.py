@@ -172,6 +172,24 @@ def emulator_reading(spec, params, responses, analyses, obs, refine, truth, mean
             "rms_over_noise_at_truth": float(np.sqrt(misfit(1.0))), "sigma_t_ratio_closest_to_mean_curve": float(best.x)}
 
 
+def each_twin(args):
+    """``(i, seed, exp, names, truth, pool)`` of each development twin of ``args.seed``, as the benchmark
+    draws them, with a pool of ``args.cores`` workers."""
+    exp = twin_experiment()
+    spec = ExperimentSpec.from_config("twin_ref", exp)
+    with get_context("spawn").Pool(args.cores) as pool:
+        for i, truth in enumerate(truths(args.twins, spec.lower, spec.upper, args.seed)):
+            seed = 1000 * args.seed + i
+            yield i, seed, {**exp, "seed": seed}, list(spec.names), truth, pool
+
+
+def write(out: dict, path) -> dict:
+    """``out`` written as JSON to ``path`` (if given); returned."""
+    if path:
+        Path(path).write_text(json.dumps(out, indent=1))
+    return out
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cores", type=int, default=2)
@@ -183,17 +201,12 @@ def main(argv=None) -> dict:
     args = ap.parse_args(argv)
     if args.posterior:
         return main_posterior(args)
-    exp = twin_experiment()
-    spec = ExperimentSpec.from_config("twin_ref", exp)
-    names = list(spec.names)
     started, rows = time.time(), []
-    with get_context("spawn").Pool(args.cores) as pool:
-        for i, truth in enumerate(truths(args.twins, spec.lower, spec.upper, args.seed)):
-            rows.append(study_twin({**exp, "seed": 1000 * args.seed + i}, names, truth, 1000 * args.seed + i,
-                                   pool, args.meshes))
-            print(f"{i + 1}/{args.twins} sigma_t {truth[0] / 1e6:.1f} MPa: mean-curve ratio "
-                  f"{rows[-1]['ratio_mean_curve']:.3f}, single-mesh median {rows[-1]['ratio_single_mesh_median']:.3f}",
-                  file=sys.stderr, flush=True)
+    for i, seed, exp, names, truth, pool in each_twin(args):
+        rows.append(study_twin(exp, names, truth, seed, pool, args.meshes))
+        print(f"{i + 1}/{args.twins} sigma_t {truth[0] / 1e6:.1f} MPa: mean-curve ratio "
+              f"{rows[-1]['ratio_mean_curve']:.3f}, single-mesh median {rows[-1]['ratio_single_mesh_median']:.3f}",
+              file=sys.stderr, flush=True)
     below = [r for r in rows if r["truth"]["sigma_t"] < 45e6]
     out = {"study": "sigma_t_bias", "what": __doc__.split("\n\n")[1].replace("\n", " "), "seed": args.seed,
            "cores": args.cores, "ratios": list(RATIOS), "meshes": args.meshes, "wall_s": time.time() - started,
@@ -202,27 +215,19 @@ def main(argv=None) -> dict:
            "median_data_peak_over_mean_curve_peak": float(np.median([r["data_peak_over_mean_curve_peak"]
                                                                      for r in rows])),
            "twins": rows}
-    if args.out:
-        Path(args.out).write_text(json.dumps(out, indent=1))
-    return out
+    return write(out, args.out)
 
 
 def main_posterior(args) -> dict:
-    exp = twin_experiment()
-    spec = ExperimentSpec.from_config("twin_ref", exp)
-    names = list(spec.names)
     started, rows = time.time(), []
-    with get_context("spawn").Pool(args.cores) as pool:
-        for i, truth in enumerate(truths(args.twins, spec.lower, spec.upper, args.seed)):
-            seed = 1000 * args.seed + i
-            row = {"seed": seed, "truth": dict(zip(names, map(float, truth))),
-                   **posterior_arms({**exp, "seed": seed}, names, truth, seed, pool, Path(args.posterior), args.meshes)}
-            rows.append(row)
-            print(f"{i + 1}/{args.twins} sigma_t {truth[0] / 1e6:.1f} MPa: median/truth "
-                  + ", ".join(f"{a} {row[a]['sigma_t']:.3f}" for a in ("own_realization", "fresh_realization",
-                                                                       "mean_curve"))
-                  + f"; emulator's sigma_t for the mean curve {row['emulator']['sigma_t_ratio_closest_to_mean_curve']:.3f}",
-                  file=sys.stderr, flush=True)
+    for i, seed, exp, names, truth, pool in each_twin(args):
+        row = {"seed": seed, "truth": dict(zip(names, map(float, truth))),
+               **posterior_arms(exp, names, truth, seed, pool, Path(args.posterior), args.meshes)}
+        rows.append(row)
+        print(f"{i + 1}/{args.twins} sigma_t {truth[0] / 1e6:.1f} MPa: median/truth "
+              + ", ".join(f"{a} {row[a]['sigma_t']:.3f}" for a in ("own_realization", "fresh_realization", "mean_curve"))
+              + f"; emulator's sigma_t for the mean curve {row['emulator']['sigma_t_ratio_closest_to_mean_curve']:.3f}",
+              file=sys.stderr, flush=True)
     below = [r for r in rows if r["truth"]["sigma_t"] < 45e6]
     out = {"study": "sigma_t_bias_posterior", "what": __doc__.split("\n\n")[2].replace("\n", " "),
            "seed": args.seed, "cores": args.cores, "meshes": args.meshes, "wall_s": time.time() - started,
@@ -238,9 +243,7 @@ def main_posterior(args) -> dict:
                [r["ridge"]["sigma_t_ratio_E_t_near_truth"] for r in below
                 if r["ridge"]["sigma_t_ratio_E_t_near_truth"] is not None])),
            "twins": rows}
-    if args.out:
-        Path(args.out).write_text(json.dumps(out, indent=1))
-    return out
+    return write(out, args.out)
 
 
 if __name__ == "__main__":

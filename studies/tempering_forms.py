@@ -60,6 +60,7 @@ from calibration.model_error import stored_error  # noqa: E402
 from enkf.emulated import emulator_error_model  # noqa: E402
 from enkf.emulator import design_arrays, smoothed_emulator  # noqa: E402
 from enkf.selfcal import self_calibration  # noqa: E402
+from studies.sigma_t_bias import write  # noqa: E402
 
 GRID = 161
 RATIOS = (0.85, 0.9, 0.95, 1.0, 1.05, 1.1, 1.15)
@@ -147,9 +148,7 @@ def main(argv=None) -> dict:
     args = ap.parse_args(argv)
     if args.compare:
         out = {"study": "tempering_forms_scores", "seed": args.seed, "forms": compare(args.compare)}
-        if args.out:
-            Path(args.out).write_text(json.dumps(out, indent=1))
-        return out
+        return write(out, args.out)
     spec = ExperimentSpec.from_config("twin_ref", twin_experiment())
     rows = []
     for i, truth in enumerate(truths(args.twins, spec.lower, spec.upper, args.seed)):
@@ -167,9 +166,7 @@ def main(argv=None) -> dict:
            "median_maximum_over_truth_below_45MPa": float(np.median([r["maximum_over_truth"] for r in below])),
            "twins_below_45MPa_steeper_at_0.85_than_at_1.15": f"{sum(steep_low)} of {len(below)}",
            "twins": rows}
-    if args.out:
-        Path(args.out).write_text(json.dumps(out, indent=1))
-    return out
+    return write(out, args.out)
 
 
 if __name__ == "__main__":
