@@ -88,6 +88,7 @@ from scipy.stats import qmc
 from calibration.experiment import (ExperimentSpec, analysis_record, build_process, mesh_seed, params_frame,
                                     reported_ensemble, rng_for, run_mesh_seed)
 from enkf import prediction_interval_dict
+from enkf.selfcal import TEMPERINGS
 from calibration.posterior import refine_design, sample_posterior
 from shpb.atomic import atomic_write_bytes, atomic_write_text, emit_json
 from calibration.observations import curve_on_grid, observation_grid, twin_observations, with_approximation_error
@@ -500,7 +501,7 @@ def main(argv=None) -> dict:
                          "counted: the form before 2026-11-28b, whose twins are in <cache>/approx-<n>/")
     ap.add_argument("--emulator-error", choices=["ar1", "heteroscedastic"], default=None,
                     help="override emulated.emulator_error (the reported posterior's emulator error, enkf.hetero)")
-    ap.add_argument("--tempering", choices=["power", "curvature"], default=None,
+    ap.add_argument("--tempering", choices=list(TEMPERINGS), default=None,
                     help="override emulated.tempering (how the self-calibration widens the reported posterior)")
     ap.add_argument("--refine-runs", type=int, default=None,
                     help="override emulated.refine_runs (0: the reported posterior on the loop's runs alone)")

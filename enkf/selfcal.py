@@ -38,7 +38,13 @@ from .emulator import CurveEmulator
 from .hetero import emulated_deviance
 from .sampling import latin_hypercube
 
-__all__ = ["box_minimum", "pseudo_runs", "self_calibration"]
+__all__ = ["TEMPERINGS", "box_minimum", "pseudo_runs", "self_calibration"]
+
+#: How the factor widens the reported posterior's likelihood (:mod:`enkf.ces`).
+TEMPERINGS = ("power", "curvature")
+#: The largest factor the curvature form's search returns: a median delta still above the reference
+#: there means the runs sit nowhere near their own likelihood's maximum.
+LAMBDA_MAX = 1e12
 
 
 def box_minimum(chi2: Callable[[np.ndarray], np.ndarray], lo, hi, starts: np.ndarray) -> tuple[float, np.ndarray]:
@@ -119,8 +125,8 @@ def self_calibration(X, Y, latest, obs_error: ObservationError, *, lower, upper,
         raise ValueError(f"self-calibration needs at least 3 pseudo-data runs and {n + 3} runs; got {idx.size} "
                          f"and {X.shape[0]}")
     starts = np.vstack([latin_hypercube(lo, hi, search_points, rng), X[latest]])
-    if tempering not in ("power", "curvature"):
-        raise ValueError(f"tempering must be power or curvature, got {tempering!r}")
+    if tempering not in TEMPERINGS:
+        raise ValueError(f"tempering must be one of {TEMPERINGS}, got {tempering!r}")
     deltas, stretched, R = [], [], obs_error.dense()
     for i, em, C, y in pseudo_runs(X, Y, latest, obs_error, lower=lo, upper=hi, smoothing=smoothing,
                                    error_model=error_model, rng=rng, pseudo=pseudo):
@@ -152,18 +158,17 @@ def self_calibration(X, Y, latest, obs_error: ObservationError, *, lower, upper,
 def _curvature_lambda(stretched, reference: float) -> float:
     """The least ``lambda >= 1`` at which the median over the pseudo-runs of ``delta_i(lambda)``, run
     ``i``'s deviance at its own parameters brought ``sqrt(lambda)`` times closer to its maximum, is
-    ``reference`` (bisection in ``log lambda``; ``delta_i`` falls as ``lambda`` grows)."""
+    ``reference`` (bisection in ``log lambda``, at most :data:`LAMBDA_MAX`; ``delta_i`` falls as
+    ``lambda`` grows)."""
     def excess(lam):
         return float(np.median([f(lam) for f in stretched])) - reference
 
     if excess(1.0) <= 0.0:
         return 1.0
-    lo, hi = 0.0, 1.0
-    while excess(math.exp(hi)) > 0.0:
-        lo, hi = hi, 2.0 * hi
-        if hi > 40.0:
-            return math.exp(hi)
-    for _ in range(40):
+    lo, hi = 0.0, math.log(LAMBDA_MAX)
+    if excess(LAMBDA_MAX) > 0.0:
+        return LAMBDA_MAX
+    for _ in range(60):
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if excess(math.exp(mid)) > 0.0 else (lo, mid)
     return math.exp(hi)

@@ -52,6 +52,9 @@ def test_the_schema_and_the_spec_state_the_same_default_form():
             "emulator_error": em["emulator_error"]["default"], "refine_runs": em["refine_runs"]["default"]} == HARNESS_FORM
     assert _form(ExperimentSpec) == HARNESS_FORM
     assert em["refine_temper"]["default"] == ExperimentSpec.refine_temper
+    from enkf.selfcal import TEMPERINGS
+
+    assert em["tempering"]["enum"] == list(TEMPERINGS) and em["tempering"]["default"] == ExperimentSpec.tempering
 
 
 @pytest.mark.parametrize("exp", ["twin_ref", "marble_loop"])
