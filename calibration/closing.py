@@ -37,9 +37,10 @@ from enkf.covariance import DenseError, ObservationError
 from enkf.diagnosis import group_text, heldout_evaluation, box_draws, replicate_curve_errors, replicated
 from enkf.diagnosis.band import replicate_variance, residual_discrepancy, run_band
 from enkf.diagnosis.crossval import seed_for
+from enkf.emulator import AnchoredEmulator
 from shpb import effects as fx
 
-from .diagnose import EmulatedSHPB, emulators_from_design
+from .diagnose import EmulatedSHPB, anchored_emulators, emulators_from_design
 # light, for the Snakefile's parse: re-exported here, where the rest of closing the loop lives
 from .diagnosis_config import FOLD_SEPARATOR, candidate_effects, loro_folds  # noqa: F401
 from .model_error import stored_error
@@ -64,10 +65,20 @@ def blind(heldout: Observations | None) -> Observations | None:
 
 
 def emulated_model(X, names: Sequence[str], lower, upper, curves: Mapping[str, Sequence], model_times,
-                   obs_times: Mapping[str, np.ndarray], label: str) -> tuple[EmulatedSHPB, dict]:
-    """The emulated FDEM model of every record (:func:`calibration.diagnose.emulators_from_design`)."""
-    emulators, n_failed = emulators_from_design(X, curves, model_times, lower, upper, names, label=label)
+                   obs_times: Mapping[str, np.ndarray], label: str, axis=None) -> tuple[EmulatedSHPB, dict]:
+    """The selection's model of every record: with ``axis`` (the anchored design's, design.json) the
+    anchored one (:func:`calibration.diagnose.anchored_emulators`), else the RBF emulator of a
+    space-filling design (:func:`calibration.diagnose.emulators_from_design`)."""
+    if axis is not None:
+        emulators, n_failed = anchored_emulators(X, axis, curves, model_times, lower, upper, names, label=label)
+    else:
+        emulators, n_failed = emulators_from_design(X, curves, model_times, lower, upper, names, label=label)
     return EmulatedSHPB(emulators, list(names), model_times, dict(obs_times)), n_failed
+
+
+def anchored(model: EmulatedSHPB) -> bool:
+    """Whether ``model`` is the anchored selection model (no emulator error of its own to measure)."""
+    return all(isinstance(e, AnchoredEmulator) for e in model.emulators.values())
 
 
 def _per_record(C: np.ndarray, obs: Observations) -> dict[str, np.ndarray]:
@@ -123,8 +134,9 @@ def select_effects(model: EmulatedSHPB, *, base_names: Sequence[str], candidates
     calibration records' observations only. With ``per_run`` meshes the design runs each carry their
     own realization, so the emulator's leave-one-out error already holds ``S``: it is not added again on
     the emulator's side (only for a ``shared`` mesh). ``base_fit``: the workflow's posterior as the base
-    model (:func:`calibration.protocol.workflow_base`)."""
-    if mesh_mode != "shared":
+    model (:func:`calibration.protocol.workflow_base`). The anchored model's runs share one mesh per
+    record, so it holds no mesh scatter and ``S`` is added (its own error is not measured: none)."""
+    if mesh_mode != "shared" and not anchored(model):
         simulator = {}
     return select(model, base_names=list(base_names), candidates=[fx.get_effect(c) for c in candidates],
                   calib_records=list(obs.records), obs={r: obs.values[obs.record_slice(r)] for r in obs.records},

@@ -31,12 +31,12 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 from scipy.stats import qmc
 
-from enkf.emulator import CurveEmulator
+from enkf.emulator import AnchoredEmulator, CurveEmulator
 from shpb import effects as fx
 
 from .observations import curve_on_grid
 
-__all__ = ["EmulatedSHPB", "base_design_box", "curve_on_model_grid", "design_points", "emulators_from_design",
+__all__ = ["EmulatedSHPB", "anchored_design", "anchored_emulators", "base_design_box", "curve_on_model_grid", "design_points", "emulators_from_design",
            "interpolation_matrix", "measured_curve", "model_grid", "physical_design_ranges", "record_params",
            "workflow_sample"]
 
@@ -221,6 +221,57 @@ def emulators_from_design(X, curves: Mapping[str, Sequence], model_times, lower,
                                f"the emulator needs at least {len(names) + 2}")
         emulators[rec] = CurveEmulator(X[ok], np.array([y for y in Y if y is not None]), lower, upper,
                                        names=list(names))
+    return emulators, n_failed
+
+
+def anchored_design(base_anchor, base_lower, base_upper, physical_nulls, physical_upper, *, base_step: float,
+                    sweep: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(X, axis)``: the one-at-a-time design of the anchored selection model
+    (:class:`enkf.emulator.AnchoredEmulator`). Row 0 is the anchor: the base parameters at
+    ``base_anchor`` (the workflow's posterior mean), every physical effect at its null. Then each base
+    parameter moved by ``-+ base_step`` of its design box's width (kept inside the box), and each
+    physical parameter moved from its null to ``k / sweep`` of its range, ``k = 1..sweep``, the others
+    at the anchor. ``axis[i]`` is the parameter row ``i`` moves (-1 for the anchor)."""
+    a = np.asarray(base_anchor, float)
+    bl, bu = np.asarray(base_lower, float), np.asarray(base_upper, float)
+    pn, pu = np.asarray(physical_nulls, float), np.asarray(physical_upper, float)
+    if not 0.0 < base_step <= 0.5 or int(sweep) < 1:
+        raise ValueError(f"base_step must lie in (0, 0.5] and sweep be >= 1, got {base_step}, {sweep}")
+    if np.any(a <= bl) or np.any(a >= bu):
+        raise ValueError(f"the anchor {a} is not inside the base design box {bl} .. {bu}")
+    x0 = np.concatenate([a, pn])
+    rows, axis = [x0], [-1]
+    for j in range(a.size):
+        h = base_step * (bu[j] - bl[j])
+        for v in (max(a[j] - h, 0.5 * (bl[j] + a[j])), min(a[j] + h, 0.5 * (a[j] + bu[j]))):
+            rows.append(np.where(np.arange(x0.size) == j, v, x0)), axis.append(j)
+    for j in range(pn.size):
+        for k in range(1, int(sweep) + 1):
+            v = pn[j] + k / int(sweep) * (pu[j] - pn[j])
+            rows.append(np.where(np.arange(x0.size) == a.size + j, v, x0)), axis.append(a.size + j)
+    return np.array(rows), np.array(axis, dtype=int)
+
+
+def anchored_emulators(X, axis, curves: Mapping[str, Sequence], model_times, lower, upper, names: Sequence[str],
+                       *, label: str = "diagnosis") -> tuple[dict, dict]:
+    """One :class:`enkf.emulator.AnchoredEmulator` per record from the one-at-a-time design ``(X, axis)``
+    (:func:`anchored_design`) and, per record, its runs' curves in the order of ``X``; a failed run is left
+    out of its axis (an axis with none left is held at the anchor). Returns ``(emulators, n_failed)``;
+    RuntimeError when a record's anchor run failed."""
+    X, axis = np.asarray(X, float), np.asarray(axis, int)
+    if axis[0] != -1 or np.any(axis[1:] < 0):
+        raise ValueError("the anchored design's first row must be its anchor and only that row")
+    emulators, n_failed = {}, {}
+    for rec, runs in curves.items():
+        Y = [curve_on_model_grid(c, model_times) for c in runs]
+        n_failed[rec] = sum(y is None for y in Y)
+        if Y[0] is None:
+            raise RuntimeError(f"{label}: the anchor run of {rec} failed; the anchored model needs it")
+        axes = {}
+        for j in sorted(set(axis[1:].tolist())):
+            ok = [i for i in np.flatnonzero(axis == j) if Y[i] is not None]
+            axes[j] = (X[ok, j], [Y[i] for i in ok])
+        emulators[rec] = AnchoredEmulator(X[0], Y[0], axes, lower, upper, names=list(names))
     return emulators, n_failed
 
 

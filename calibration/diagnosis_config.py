@@ -16,7 +16,13 @@ from shpb import effects as fx
 
 from .contracts import experiment_records, record_name
 
-__all__ = ["FOLD_SEPARATOR", "candidate_effects", "diagnosis_settings", "loro_folds", "series_position"]
+__all__ = ["FOLD_SEPARATOR", "SELECTION_MODELS", "candidate_effects", "design_size", "diagnosis_settings", "loro_folds",
+           "series_position"]
+
+#: What the selection re-calibrates on (``diagnosis.selection_model``): ``anchored``, one-at-a-time real
+#: FDEM runs from the posterior mean (:func:`calibration.diagnose.anchored_design`); ``emulator``, an RBF
+#: emulator of a space-filling design (:func:`calibration.diagnose.design_points`).
+SELECTION_MODELS = ("anchored", "emulator")
 
 #: Between an experiment's name and a held-out record's in a leave-one-record-out fold's name.
 FOLD_SEPARATOR = "__"
@@ -36,6 +42,26 @@ def candidate_effects(diagnosis: Mapping) -> list[str]:
     further where given)."""
     names = list(diagnosis.get("candidates") or [e.name for e in fx.effects()])
     return [n for n in names if n not in set(diagnosis.get("exclude") or [])]
+
+
+def design_size(exp: Mapping) -> int:
+    """The number of runs per record of a diagnosed experiment's design (the Snakefile's design points):
+    ``design_points`` for the emulator; for the anchored model the anchor, two runs per estimated
+    parameter and ``sweep_points`` per physical candidate's parameter (:func:`calibration.diagnose.
+    anchored_design`)."""
+    d = diagnosis_settings(exp)
+    model = d.get("selection_model", "anchored")
+    if model not in SELECTION_MODELS:
+        raise ValueError(f"diagnosis.selection_model must be one of {SELECTION_MODELS}, got {model!r}")
+    if model == "emulator":
+        return int(d["design_points"])
+    base = exp.get("parameters")
+    if not isinstance(base, Mapping):
+        raise ValueError(f"diagnosis.selection_model: anchored needs the estimated parameters listed, got "
+                         f"parameters: {base!r} (set diagnosis.selection_model: emulator, or list them)")
+    physical = [p for c in candidate_effects(d) for p in fx.get_effect(c).params
+                if fx.get_effect(c).kind == "physical"]
+    return 1 + 2 * len(base) + int(d.get("sweep_points", 3)) * len(physical)
 
 
 def loro_folds(name: str, exp: Mapping) -> dict[str, dict]:

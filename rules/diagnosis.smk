@@ -61,7 +61,7 @@ rule diagnosis_member:
             EXPERIMENTS[wc.exp],
             "design",
             0,
-            int(wc.point),
+            design_mesh_point(wc.exp, wc.point),
             list(design_records(wc.exp)).index(wc.record),
         ),
         run=lambda wc: {"design_point": int(wc.point), "record": wc.record},
@@ -85,7 +85,7 @@ checkpoint diagnosis_select:
         exp=lambda wc: EXPERIMENTS[wc.exp],
         candidates=lambda wc: candidate_effects(diagnosis_cfg(wc.exp)),
         design_records=lambda wc: list(design_records(wc.exp)),
-        points=lambda wc: member_ids(diagnosis_cfg(wc.exp)["design_points"]),
+        points=lambda wc: member_ids(design_size(EXPERIMENTS[wc.exp])),
     script:
         "../scripts/diagnosis.py"
 

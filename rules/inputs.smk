@@ -3,7 +3,11 @@
 # Included by rules/common.smk after the names they use.
 from snakemake.exceptions import WorkflowError as _SensitivityWorkflowError
 
-from calibration.diagnosis_config import candidate_effects, diagnosis_settings
+from calibration.diagnosis_config import (
+    candidate_effects,
+    design_size,
+    diagnosis_settings,
+)
 from calibration.sensitivity import SensitivitySpec
 from calibration.workflow_io import record_name
 
@@ -100,7 +104,7 @@ def stage_runs(exp, stage, key):
         s = sensitivity_spec(exp)
         return [{"sample": m, "record": s.record} for m in member_ids(s.n_simulations)]
     if stage == "diagnosis_member":
-        ids = member_ids(diagnosis_cfg(exp)["design_points"])
+        ids = member_ids(design_size(EXPERIMENTS[exp]))
         return [{"point": p, "record": r} for p in ids for r in design_records(exp)]
     if stage == "diagnosis_check_member":
         return [{"row": str(i)} for i in range(len(check_rows_of(exp)))]
@@ -356,11 +360,19 @@ def design_records(exp):
     return {r: stored_record(exp, r) for r in {**records(exp), **heldout_records(exp)}}
 
 
+def design_mesh_point(exp, point):
+    """The design point whose mesh realization a design run takes: its own in a space-filling design;
+    the anchor's (point 0) for every run of an anchored one, so that a record's runs differ by their
+    parameters only (calibration.diagnose.anchored_design)."""
+    anchored = diagnosis_cfg(exp).get("selection_model", "anchored") == "anchored"
+    return 0 if anchored else int(point)
+
+
 def design_files(exp, name):
     return expand(
         "results/{exp}/diagnosis/design/{point}/{record}/{name}",
         exp=exp,
-        point=member_ids(diagnosis_cfg(exp)["design_points"]),
+        point=member_ids(design_size(EXPERIMENTS[exp])),
         record=list(design_records(exp)),
         name=name,
     )

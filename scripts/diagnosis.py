@@ -1,5 +1,5 @@
 """diagnosis/selection.pkl + check_runs.json: effects chosen by cross-validation within the calibration
-records on the emulator of the FDEM design (calibration.closing; the held-out records' curves are not read)."""
+records on the selection model of the FDEM design (anchored or emulator) (calibration.closing; the held-out records' curves are not read)."""
 from calibration.job_log import log_to
 
 log_to(snakemake.log[0])  # the job's output goes to its log (rules/*.smk)
@@ -35,7 +35,7 @@ curves = {rec: [read_curve(root / p / rec / "curve.csv") for p in snakemake.para
 obs_times = {r: obs.grid(r) for r in obs.records}
 obs_times.update({r: held.grid(r) for r in (held.records if held is not None else [])})
 model, n_failed = emulated_model(X, names, meta["lower"], meta["upper"], curves, model_grid(e["simulation"]),
-                                 obs_times, label=f"diagnosis of {snakemake.wildcards.exp}")
+                                 obs_times, label=f"diagnosis of {snakemake.wildcards.exp}", axis=meta.get("axis"))
 noise, simulator = protocol_errors(obs, analysis, held)
 # the base model is the workflow's posterior (posterior.csv, summary.json), not a second fit on the emulator
 base = workflow_base(model, meta["base_names"], obs.records, pd.read_csv(inp.posterior), summary, file=inp.posterior)

@@ -75,8 +75,9 @@ def _diagnosis_lines(heldout_path: str, seed: int) -> list[str]:
             line(6, "exclude", ["damping", "seating"], "as config/diagnosis.yaml: damping did nothing for the "
                  "post-peak; a linear seating layer cannot carry a record's closure (face_gap and closure do)"),
             line(6, "base_min_rel_width", 0.45, "as config/diagnosis.yaml"),
-            line(6, "design_points", 24, "FDEM runs per record in the emulator's design (config/diagnosis.yaml): a "
-                 "coarse emulator, which only proposes; the real FDEM runs confirm"),
+            line(6, "selection_model", "anchored", "the selection re-calibrates on real FDEM runs moved one "
+                 "parameter at a time from the posterior mean (docs/closing-the-loop.md); the real runs of the check "
+                 "confirm"),
             line(6, "physical_upper", {"rate_strength.k": 0.6, "interface_friction.mu": 0.5},
                  "as config/diagnosis.yaml"),
             line(6, "members", 60, "as config/diagnosis.yaml"),
