@@ -230,8 +230,8 @@ def anchored_design(base_anchor, base_lower, base_upper, physical_nulls, physica
     (:class:`enkf.emulator.AnchoredEmulator`). Row 0 is the anchor: the base parameters at
     ``base_anchor`` (the workflow's posterior mean), every physical effect at its null. Then each base
     parameter moved by ``-+ base_step`` of its design box's width (kept inside the box), and each
-    physical parameter moved from its null to ``k / sweep`` of its range, ``k = 1..sweep``, the others
-    at the anchor. ``axis[i]`` is the parameter row ``i`` moves (-1 for the anchor)."""
+    physical parameter moved from its null to ``k / (sweep + 1)`` of its range, ``k = 1..sweep`` (evenly
+    spaced inside it: some upper bounds are open), the others at the anchor. ``axis[i]`` is the parameter row ``i`` moves (-1 for the anchor)."""
     a = np.asarray(base_anchor, float)
     bl, bu = np.asarray(base_lower, float), np.asarray(base_upper, float)
     pn, pu = np.asarray(physical_nulls, float), np.asarray(physical_upper, float)
@@ -247,7 +247,7 @@ def anchored_design(base_anchor, base_lower, base_upper, physical_nulls, physica
             rows.append(np.where(np.arange(x0.size) == j, v, x0)), axis.append(j)
     for j in range(pn.size):
         for k in range(1, int(sweep) + 1):
-            v = pn[j] + k / int(sweep) * (pu[j] - pn[j])
+            v = pn[j] + k / (int(sweep) + 1) * (pu[j] - pn[j])  # inside the range: some bounds are open
             rows.append(np.where(np.arange(x0.size) == a.size + j, v, x0)), axis.append(a.size + j)
     return np.array(rows), np.array(axis, dtype=int)
 

@@ -54,7 +54,7 @@ def test_the_anchored_design_moves_one_parameter_per_run_inside_the_box():
     # below); E_t likewise
     assert sorted(X[axis == 0, 0]) == pytest.approx([25e6, 37.5e6])
     assert sorted(X[axis == 1, 1]) == pytest.approx([3e3, 5e3 + 0.25 * 1.9e4])
-    assert sorted(X[axis == 3, 3]) == pytest.approx([2e-4 / 3, 4e-4 / 3, 2e-4])
+    assert sorted(X[axis == 3, 3]) == pytest.approx([0.5e-4, 1e-4, 1.5e-4])  # inside: an upper bound may be open
     lo, hi = np.array([20e6, 1e3, 0.0, 0.0]), np.array([50e6, 2e4, 0.6, 2e-4])
     assert np.all(X >= lo) and np.all(X <= hi)
 
@@ -120,19 +120,19 @@ def test_on_the_anchored_model_the_selection_names_a_planted_face_gap():
     """Per-record gaps of 50-150 um (onsets 5-15 us late, against a 2 us rise foot), the anchor at the base
     parameters 5 % off the truth (a base calibration that absorbed part of the effect): the anchored model
     (1 + 4 + 3 x 2 = 11 runs per record) cross-validates face_gap, rate_strength and gauge_gain and chooses
-    the face gap: cross-validated RMSE 4.2 -> 2.2 MPa (rate_strength 4.0, gauge_gain 3.2; the rest of the
+    the face gap: cross-validated RMSE 4.2 -> 2.1 MPa (rate_strength 4.0, gauge_gain 3.2; the rest of the
     error is the unseen record's own gap, predicted from the others' spread). Seeds 3 and 4 measured alike;
-    6 runs per axis instead of 3 change the errors by 0.1 MPa."""
+    6 runs per axis instead of 3 change the errors by 0.05 MPa."""
     sel = _select(_anchored_standin(ANCHOR))
     assert sel.rounds[0]["chosen"] == "face_gap", sel.rounds[0]["trials"]
     trials = {t["effect"]: t for t in sel.rounds[0]["trials"]}
     assert trials["face_gap"]["cv_rmse"] < 0.6 * sel.rounds[0]["current_cv_rmse"], trials
     assert trials["face_gap"]["cv_rmse"] < 0.75 * min(trials["rate_strength"]["cv_rmse"], trials["gauge_gain"]["cv_rmse"])
-    # the fitted gaps of the calibration records come back within 15 um of the planted ones (the chords
-    # between the runs at 0, 133 and 267 um blend two onsets rather than move one)
+    # the fitted gaps of the calibration records come back 10-16 um short of the planted ones (the chords
+    # between the runs at 0, 100 and 200 um blend two onsets rather than move one): within 20 um
     post = sel.steps[1].final.posterior()
     for r in GAP_K:
-        assert abs(post[f"face_gap.gap_m@{r}"]["mean"] - GAPS[r]) < 15e-6, (r, post[f"face_gap.gap_m@{r}"])
+        assert abs(post[f"face_gap.gap_m@{r}"]["mean"] - GAPS[r]) < 20e-6, (r, post[f"face_gap.gap_m@{r}"])
 
 
 def test_a_space_filling_emulator_of_the_same_budget_names_the_wrong_effect():
