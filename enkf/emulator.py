@@ -174,7 +174,8 @@ class AnchoredEmulator:
                                  f"({v.size}, {self.f0.size}), parameter index below {n})")
             if v.size == 0:
                 continue
-            if np.any(np.isclose(v, self.anchor[j], rtol=0.0, atol=1e-12 * max(1.0, abs(self.anchor[j])))):
+            # relative to the box: a parameter's units may be 1e-12 (a compliance in m/Pa)
+            if np.any(np.abs(v - self.anchor[j]) <= 1e-9 * (self.upper[j] - self.lower[j])):
                 raise ValueError(f"axis {j} has a run at the anchor's own value {self.anchor[j]:g}")
             order = np.argsort(np.concatenate([[self.anchor[j]], v]))
             self._axes[int(j)] = (np.concatenate([[self.anchor[j]], v])[order],

@@ -39,6 +39,9 @@ def test_the_anchored_emulator_is_exact_at_its_runs_and_interpolates_each_axis_l
     # a parameter without runs is held at the anchor
     emu0 = AnchoredEmulator(a, _f(a), {0: axes[0]}, [0.0, 0.0], [2.0, 3.0])
     assert np.allclose(emu0(np.array([[1.0, 2.0]]))[0], _f(a))
+    # a parameter in tiny units (a seating compliance, m/Pa) is read on its own scale
+    tiny = AnchoredEmulator([0.0], np.zeros(7), {0: ([5e-13, 1e-12], [T, 2 * T])}, [0.0], [2e-12])
+    assert np.allclose(tiny(np.array([[7.5e-13]]))[0], 1.5 * T)
     with pytest.raises(ValueError, match="anchor's own value"):
         AnchoredEmulator(a, _f(a), {0: ([1.0], [_f(a)])}, [0.0, 0.0], [2.0, 3.0])
 
