@@ -271,6 +271,9 @@ QUOTES: list[Quote] = [
         "target": f"{_twin()['verdict']['chi2_per_obs']['stop_target']:.2f}"}),
     Quote("docs/workflow.md", "its predictive coverage is {cov}", lambda J: {
         "cov": f"{_twin()['predictive_coverage_90']['synthetic']:.2f}"}),
+    Quote(CL, "A cylinder series costs {lo:.0f}-{hi:.0f} s on 2 cores", lambda J: {
+        "lo": min(J(str(f.relative_to(ROOT)))["wall_s"] for f in (ROOT / "benchmarks/results/bench_planted_records").glob("*.json")),
+        "hi": max(J(str(f.relative_to(ROOT)))["wall_s"] for f in (ROOT / "benchmarks/results/bench_planted_records").glob("*.json"))}),
     Quote(CL, "(per-record gaps of 50-150 um)",
           by="tests/test_anchored_selection.py::test_on_the_anchored_model_the_selection_names_a_planted_face_gap"),
     Quote("docs/workflow.md", "Both intervals hold their truths; `E_t`'s spans {frac} of its box, so the verdict is "
