@@ -16,8 +16,8 @@ from shpb import effects as fx
 
 from .contracts import experiment_records, record_name
 
-__all__ = ["FOLD_SEPARATOR", "SELECTION_MODELS", "candidate_effects", "design_size", "diagnosis_settings", "loro_folds",
-           "series_position"]
+__all__ = ["FOLD_SEPARATOR", "SELECTION_MODELS", "candidate_effects", "design_mesh_point", "design_size", "diagnosis_settings", "loro_folds",
+           "selection_model", "series_position"]
 
 #: What the selection re-calibrates on (``diagnosis.selection_model``): ``anchored``, one-at-a-time real
 #: FDEM runs from the posterior mean (:func:`calibration.diagnose.anchored_design`); ``emulator``, an RBF
@@ -44,16 +44,28 @@ def candidate_effects(diagnosis: Mapping) -> list[str]:
     return [n for n in names if n not in set(diagnosis.get("exclude") or [])]
 
 
+def selection_model(diagnosis: Mapping) -> str:
+    """The ``diagnosis`` block's ``selection_model`` (default ``anchored``, the schema's), checked."""
+    model = diagnosis.get("selection_model", SELECTION_MODELS[0])
+    if model not in SELECTION_MODELS:
+        raise ValueError(f"diagnosis.selection_model must be one of {SELECTION_MODELS}, got {model!r}")
+    return model
+
+
+def design_mesh_point(exp: Mapping, point) -> int:
+    """The design point whose mesh realization a design run takes: its own in a space-filling design; the
+    anchor's (point 0) for every run of an anchored one, so that a record's runs differ by their
+    parameters only (:func:`calibration.diagnose.anchored_design`)."""
+    return 0 if selection_model(diagnosis_settings(exp)) == "anchored" else int(point)
+
+
 def design_size(exp: Mapping) -> int:
     """The number of runs per record of a diagnosed experiment's design (the Snakefile's design points):
     ``design_points`` for the emulator; for the anchored model the anchor, two runs per estimated
     parameter and ``sweep_points`` per physical candidate's parameter (:func:`calibration.diagnose.
     anchored_design`)."""
     d = diagnosis_settings(exp)
-    model = d.get("selection_model", "anchored")
-    if model not in SELECTION_MODELS:
-        raise ValueError(f"diagnosis.selection_model must be one of {SELECTION_MODELS}, got {model!r}")
-    if model == "emulator":
+    if selection_model(d) == "emulator":
         return int(d["design_points"])
     base = exp.get("parameters")
     if not isinstance(base, Mapping):

@@ -61,7 +61,7 @@ rule diagnosis_member:
             EXPERIMENTS[wc.exp],
             "design",
             0,
-            design_mesh_point(wc.exp, wc.point),
+            design_mesh_point(EXPERIMENTS[wc.exp], wc.point),
             list(design_records(wc.exp)).index(wc.record),
         ),
         run=lambda wc: {"design_point": int(wc.point), "record": wc.record},

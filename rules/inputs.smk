@@ -5,6 +5,7 @@ from snakemake.exceptions import WorkflowError as _SensitivityWorkflowError
 
 from calibration.diagnosis_config import (
     candidate_effects,
+    design_mesh_point,
     design_size,
     diagnosis_settings,
 )
@@ -358,14 +359,6 @@ def design_records(exp):
     """Every record a design point is simulated for, the calibration records then the held-out ones:
     {name: its reduced record's record.json} (rule reduced_record)."""
     return {r: stored_record(exp, r) for r in {**records(exp), **heldout_records(exp)}}
-
-
-def design_mesh_point(exp, point):
-    """The design point whose mesh realization a design run takes: its own in a space-filling design;
-    the anchor's (point 0) for every run of an anchored one, so that a record's runs differ by their
-    parameters only (calibration.diagnose.anchored_design)."""
-    anchored = diagnosis_cfg(exp).get("selection_model", "anchored") == "anchored"
-    return 0 if anchored else int(point)
 
 
 def design_files(exp, name):

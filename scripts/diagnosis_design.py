@@ -11,7 +11,7 @@ from calibration.experiment import ExperimentSpec, diagnosis_settings
 from calibration.closing import candidate_effects
 from calibration.diagnose import (anchored_design, base_design_box, design_points, physical_design_ranges,
                                   workflow_sample)
-from calibration.diagnosis_config import design_size
+from calibration.diagnosis_config import design_size, selection_model
 from calibration.workflow_io import atomic_write_csv, atomic_write_json
 
 e, exp = snakemake.params.exp, snakemake.wildcards.exp
@@ -22,7 +22,7 @@ sample = workflow_sample(post, spec.names)  # the draws summary.json's posterior
 blo, bhi = base_design_box(post, spec.names, spec.lower, spec.upper, width_sd=d["base_width_sd"],
                            min_rel_width=d["base_min_rel_width"])
 pnames, plo, phi = physical_design_ranges(candidate_effects(d), d["physical_upper"])
-model = d.get("selection_model", "anchored")
+model = selection_model(d)
 axis = None
 if model == "anchored":
     X, axis = anchored_design(sample.mean(axis=0), blo, bhi, plo, phi, base_step=float(d.get("anchor_step", 0.25)),
