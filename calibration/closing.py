@@ -77,7 +77,7 @@ def emulated_model(X, names: Sequence[str], lower, upper, curves: Mapping[str, S
 
 
 def anchored(model: EmulatedSHPB) -> bool:
-    """Whether ``model`` is the anchored selection model (no emulator error of its own to measure)."""
+    """Whether ``model`` is the anchored selection model (its runs share one mesh per record)."""
     return all(isinstance(e, AnchoredEmulator) for e in model.emulators.values())
 
 
@@ -135,7 +135,7 @@ def select_effects(model: EmulatedSHPB, *, base_names: Sequence[str], candidates
     own realization, so the emulator's leave-one-out error already holds ``S``: it is not added again on
     the emulator's side (only for a ``shared`` mesh). ``base_fit``: the workflow's posterior as the base
     model (:func:`calibration.protocol.workflow_base`). The anchored model's runs share one mesh per
-    record, so it holds no mesh scatter and ``S`` is added (its own error is not measured: none)."""
+    record, so it holds no mesh scatter and ``S`` is added beside its own error along its axes."""
     if mesh_mode != "shared" and not anchored(model):
         simulator = {}
     return select(model, base_names=list(base_names), candidates=[fx.get_effect(c) for c in candidates],

@@ -79,13 +79,12 @@ def protocol_model(model: EmulatedSHPB) -> ProtocolModel:
 
 
 def emulator_errors(model: EmulatedSHPB, records: Sequence[str]) -> dict[str, ObservationError]:
-    """Per record with an RBF emulator, the emulator's error at the record's observation times: the
-    leave-one-out residuals of its design (:meth:`enkf.emulator.CurveEmulator.loo_residuals`) interpolated to those times, as per-time
-    rms with AR(1) correlation (:func:`enkf.emulated.emulator_error_model`)."""
+    """Per record, its surrogate's error at the record's observation times: the leave-one-out residuals
+    of its runs (:meth:`enkf.emulator.CurveEmulator.loo_residuals`, or along each axis for the anchored
+    model, :meth:`enkf.emulator.AnchoredEmulator.loo_residuals`) interpolated to those times, as
+    per-time rms with AR(1) correlation (:func:`enkf.emulated.emulator_error_model`)."""
     out = {}
     for r in records:
-        if not hasattr(model.emulators[r], "loo_residuals"):
-            continue  # an anchored model: exact at its runs, its additive approximation's error unmeasured
         W = interpolation_matrix(model.model_times, model.obs_times[r])
         err, _ = emulator_error_model(np.asarray(model.emulators[r].loo_residuals()) @ W.T, model.obs_times[r])
         if err is None:

@@ -135,6 +135,14 @@ def design_arrays(design_params, design_responses, latest, obs):
     return X, Y, latest, d
 
 
+def _chords(v, D, x) -> np.ndarray:
+    """``(len(x), m)``: the piecewise-linear interpolant of rows ``D`` at sorted values ``v`` (at least
+    two), evaluated at ``x``; the end segments extend linearly past the outermost values."""
+    i = np.clip(np.searchsorted(v, x), 1, v.size - 1)
+    w = (x - v[i - 1]) / (v[i] - v[i - 1])
+    return D[i - 1] + w[:, None] * (D[i] - D[i - 1])
+
+
 class AnchoredEmulator:
     """``(N, n)`` parameters -> ``(N, m)`` curves: a first-order anchored surrogate (cut-HDMR),
 
@@ -195,8 +203,22 @@ class AnchoredEmulator:
             raise ValueError(f"expected {self.n_params} parameters per row, got {P.shape[1]}")
         Y = np.broadcast_to(self.f0, (P.shape[0], self.m)).copy()
         for j, (v, D) in self._axes.items():
-            # the segment of each row's value; the end segments extend linearly past the outermost runs
-            i = np.clip(np.searchsorted(v, P[:, j]), 1, v.size - 1)
-            w = (P[:, j] - v[i - 1]) / (v[i] - v[i - 1])
-            Y += D[i - 1] + w[:, None] * (D[i] - D[i - 1])
+            Y += _chords(v, D, P[:, j])
         return Y
+
+    def loo_residuals(self) -> np.ndarray:
+        """``(n_runs, m)``: each axis run's curve minus its prediction from the anchor and the other runs
+        of its axis (the same piecewise-linear rule, so an end run is extrapolated from its neighbours),
+        axis by axis in increasing parameter value. The anchor's own run is not left out: every term is
+        built from it. This measures the error of interpolating along an axis, at twice the spacing of
+        the runs (so it over-states the error between them); the first-order form's error away from the
+        axes (interactions) it does not see."""
+        out = []
+        for j, (v, D) in self._axes.items():
+            for i in range(v.size):
+                if v[i] == self.anchor[j]:
+                    continue
+                keep = np.arange(v.size) != i
+                # the anchor alone (an axis of one run) predicts no change
+                out.append(D[i] - (_chords(v[keep], D[keep], v[i:i + 1])[0] if keep.sum() > 1 else 0.0))
+        return np.array(out, dtype=float).reshape(-1, self.m)
