@@ -22,7 +22,7 @@ the repository; its ``results/<experiment>/diagnosis/report.json`` and ``check.j
 * wall time and cores per series; every miss with its reason.
 
 Writes ``--out`` (default benchmarks/results/bench_planted.json) after every series, so a stopped run
-keeps what it measured. The scoring functions (:func:`named`, :func:`parameter_coverage`, :func:`score`)
+keeps what it measured; ``--pool PART ...`` scores the parts of a run made in several sittings together. The scoring functions (:func:`named`, :func:`parameter_coverage`, :func:`score`)
 are pure: tests/test_bench_planted.py checks them on hand-made reports.
 """
 from __future__ import annotations
@@ -176,15 +176,22 @@ def acceptance(scores: dict, bars: dict) -> dict:
                                          bars["out_of_catalogue_unexplained_or_base_kept_share_min"])}
 
 
-def effect_size(truth: dict, mesh_sd_rel: float) -> dict:
-    """The planted effect's change of each test's peak (truth.json, same meshes with the effect off) against
-    the fast mesh's relative peak sd."""
+def effect_size(truth: dict, mesh_sd_rel: float, mesh_pre_peak_sd_rel: float | None = None) -> dict:
+    """The planted effect's change of each test (truth.json, same meshes with the effect off) against the
+    fast mesh's scatter: above it when the largest change of a peak exceeds SCATTER_MULTIPLE peak sd, or
+    the largest rms change of a curve up to its peak (``pre_peak_change_rms_rel``: an onset effect moves
+    the rise, not the peak) exceeds SCATTER_MULTIPLE of the mesh's rms sd before the peak."""
     changes = [t["peak_change_rel"] for t in truth.get("tests", []) if "peak_change_rel" in t]
     if not changes:
         return {"peak_change_rel": [], "above_scatter": None}
     big = max(abs(c) for c in changes)
-    return {"peak_change_rel": changes, "spread_rel": max(changes) - min(changes), "mesh_sd_rel": mesh_sd_rel,
-            "above_scatter": bool(big > SCATTER_MULTIPLE * mesh_sd_rel)}
+    out = {"peak_change_rel": changes, "spread_rel": max(changes) - min(changes), "mesh_sd_rel": mesh_sd_rel,
+           "above_scatter": bool(big > SCATTER_MULTIPLE * mesh_sd_rel)}
+    rise = [t["pre_peak_change_rms_rel"] for t in truth.get("tests", []) if "pre_peak_change_rms_rel" in t]
+    if rise and mesh_pre_peak_sd_rel is not None:
+        out.update(pre_peak_change_rms_rel=rise, mesh_pre_peak_sd_rel=mesh_pre_peak_sd_rel,
+                   above_scatter=out["above_scatter"] or bool(max(rise) > SCATTER_MULTIPLE * mesh_pre_peak_sd_rel))
+    return out
 
 
 # ---------------------------------------------------------------------------------------------- running
@@ -194,6 +201,13 @@ def mesh_sd_rel(geometry: str) -> float:
     d = json.loads((ROOT / "benchmarks/results/bench_sim_variability.json").read_text())
     case = d["cases"]["marble" if geometry == "cylinder" else "twin"]["mesh_variability"]["peak_stress_Pa"]
     return float(case["std"] / case["mean"])
+
+
+def mesh_pre_peak_sd_rel(geometry: str) -> float:
+    """The fast mesh's rms standard deviation of the curve before its peak, over the peak (the same file)."""
+    d = json.loads((ROOT / "benchmarks/results/bench_sim_variability.json").read_text())
+    return float(d["cases"]["marble" if geometry == "cylinder" else "twin"]["mesh_variability"]
+                 ["std_rms_pre_peak_over_peak"])
 
 
 def series_kwargs(plan: dict, case: dict, seed: int, preset: str, records: int | None) -> dict:
@@ -228,7 +242,7 @@ def run_series(plan: dict, case: dict, seed: int, work: Path, preset: str, recor
         kw = series_kwargs(plan, case, seed, preset, records)
         truth = make_series(folder / "series", **kw, command=f"benchmarks/bench_planted.py ({name})")
         row["make_wall_s"] = round(time.perf_counter() - t0, 1)
-        row["effect_size"] = effect_size(truth, mesh_sd_rel(kw["geometry"]))
+        row["effect_size"] = effect_size(truth, mesh_sd_rel(kw["geometry"]), mesh_pre_peak_sd_rel(kw["geometry"]))
         row["above_scatter"] = row["effect_size"]["above_scatter"]
         sheets = sorted(str(p) for p in (folder / "series").glob("*.yaml"))
         cfg = folder / "config.yaml"
@@ -264,6 +278,25 @@ def run_series(plan: dict, case: dict, seed: int, work: Path, preset: str, recor
     return row
 
 
+def pool(parts: list[str], plan: dict) -> dict:
+    """One result of a benchmark run in parts: every part's series scored together (a case x seed in two
+    parts is refused: a benchmark seed is run once)."""
+    docs = [json.loads(Path(p).read_text()) for p in parts]
+    series, seen = [], set()
+    for part, doc in zip(parts, docs):
+        for row in doc["series"]:
+            key = (row["case"]["case"], row["seed"])
+            if key in seen:
+                raise SystemExit(f"{part}: {key[0]} seed {key[1]} is already in an earlier part")
+            seen.add(key)
+            series.append(row)
+    scores = score(series)
+    return {"plan": docs[0]["plan"], "parts": [{"file": str(p), "wall_s": d["wall_s"], "cores": d["cores"],
+                                                 "series": len(d["series"])} for p, d in zip(parts, docs)],
+            "cores": docs[0]["cores"], "wall_s": round(sum(d["wall_s"] for d in docs), 1), "scores": scores,
+            "acceptance": acceptance(scores, plan["acceptance"]), "series": series}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--plan", default=str(PLAN))
@@ -276,8 +309,13 @@ def main(argv=None) -> int:
                     "(snakemake -n), score nothing")
     ap.add_argument("--work", default=str(ROOT / "results" / "bench_planted"))
     ap.add_argument("--out", default=str(OUT))
+    ap.add_argument("--pool", nargs="+", metavar="PART", help="score the series of these parts' JSON together "
+                    "(a benchmark run in parts) into --out; runs nothing")
     args = ap.parse_args(argv)
     plan = json.loads(Path(args.plan).read_text())
+    if args.pool:
+        Path(args.out).write_text(json.dumps(pool(args.pool, plan), indent=1, default=float) + "\n")
+        return 0
     cases = [c for c in plan["cases"] if not args.cases or c["case"] in args.cases.split(",")]
     if args.seeds in ("benchmark", "development"):
         seeds = plan["seeds"][args.seeds]["per_case"] if args.seeds == "benchmark" else plan["seeds"]["development"]

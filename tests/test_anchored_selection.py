@@ -167,27 +167,22 @@ def _gap_coverage(sel):
     return [post[f"face_gap.gap_m@{r}"]["q05"] <= GAPS[r] <= post[f"face_gap.gap_m@{r}"]["q95"] for r in GAP_K]
 
 
-@pytest.mark.parametrize("seed", [3, 4, 5])
-def test_the_anchored_models_own_error_makes_the_fitted_gaps_intervals_hold_the_planted_ones(seed):
+def test_the_anchored_models_own_error_makes_the_fitted_gaps_intervals_hold_the_planted_ones():
     """Without its own error the anchored model's 90 % intervals of the fitted gaps are 3-5 um wide and
     lie wholly 1-18 um below the planted gaps: none of the 12 (seeds 3, 4, 5) covers. With its
-    leave-one-out error along the axes (the workflow's form) they are 7-39 um wide and 11 of the 12 cover (seed 3's B,
-    140-149 um for 150, misses), and the choice and its cross-validated error stay as they were
-    (face_gap, 2.1 MPa)."""
+    leave-one-out error along the axes (the workflow's form) they are 7-39 um wide and 11 of the 12 cover
+    (seed 3's B, 140-149 um for 150, misses; asserted: at least 10, one more left to floating point), and
+    the choice and its cross-validated error stay as they were (face_gap, 2.1 MPa)."""
     model = _anchored_standin(ANCHOR)
-    sure = _select(model, seed)
-    assert sure.rounds[0]["chosen"] == "face_gap" and not any(_gap_coverage(sure))
-    sel = _select(model, seed, errors=_with_own_error(model))
-    assert sel.rounds[0]["chosen"] == "face_gap", sel.rounds[0]["trials"]
-    trials = {t["effect"]: t for t in sel.rounds[0]["trials"]}
-    assert trials["face_gap"]["cv_rmse"] < 0.6 * sel.rounds[0]["current_cv_rmse"], trials
-    assert sum(_gap_coverage(sel)) >= 3
-
-
-def test_a_space_filling_emulator_of_the_same_budget_names_the_wrong_effect():
-    """The check that the anchored model is what carries the choice: an RBF emulator of 11 space-filling
-    runs per record over the same four dimensions proposes gauge_gain (cross-validated RMSE 2.6 MPa against
-    face_gap's 2.9; seeds 3 and 4 alike); at 24 runs per record it chooses face_gap, its fitted gaps 10-20 um
-    short of the planted ones."""
-    sel = _select(_rbf_standin(ANCHOR, 11))
-    assert sel.rounds[0]["chosen"] == "gauge_gain", sel.rounds[0]["trials"]
+    errors = _with_own_error(model)
+    sure_covered, covered = 0, 0
+    for seed in (3, 4, 5):
+        sure = _select(model, seed)
+        assert sure.rounds[0]["chosen"] == "face_gap"
+        sure_covered += sum(_gap_coverage(sure))
+        sel = _select(model, seed, errors=errors)
+        assert sel.rounds[0]["chosen"] == "face_gap", sel.rounds[0]["trials"]
+        trials = {t["effect"]: t for t in sel.rounds[0]["trials"]}
+        assert trials["face_gap"]["cv_rmse"] < 0.6 * sel.rounds[0]["current_cv_rmse"], trials
+        covered += sum(_gap_coverage(sel))
+    assert sure_covered == 0 and covered >= 10

@@ -112,6 +112,12 @@ def test_score_gives_the_matrix_and_the_rates():
                    "out_of_catalogue": False}
     assert effect_size({"tests": [{"peak_change_rel": 0.05}, {"peak_change_rel": 0.01}]}, 0.017)["above_scatter"]
     assert not effect_size({"tests": [{"peak_change_rel": 0.02}]}, 0.017)["above_scatter"]
+    # an onset effect: the peak unmoved, the rise moved by 2.5 % of the peak rms against a 0.5 % scatter
+    onset = {"tests": [{"peak_change_rel": 0.004, "pre_peak_change_rms_rel": 0.025}]}
+    assert not effect_size(onset, 0.017)["above_scatter"]
+    assert effect_size(onset, 0.017, 0.005)["above_scatter"]
+    assert not effect_size({"tests": [{"peak_change_rel": 0.004, "pre_peak_change_rms_rel": 0.008}]},
+                           0.017, 0.005)["above_scatter"]
 
 
 def test_ar1_noise_and_per_record_draws():
@@ -182,3 +188,19 @@ def test_the_shipped_planted_series_is_what_its_provenance_says():
     size = effect_size(truth, mesh_sd_rel("cylinder"))
     assert size["above_scatter"] and min(size["peak_change_rel"]) > 2 * size["mesh_sd_rel"]
     assert size["peak_change_rel"] == pytest.approx([0.098, 0.119, 0.143, 0.171], abs=0.001)
+
+
+def test_parts_of_a_benchmark_pool_into_one_score_and_a_series_run_twice_is_refused(tmp_path):
+    from benchmarks.bench_planted import pool
+
+    rate = {"plant": {"rate_strength.k": 0.3}, "tests": []}
+    a = [_row("rate_strength", 1, _report("confirmed", ["rate_strength"], {"rate_strength.k": _q(0.2, 0.4)}), rate)]
+    b = [_row("null", 1, _report("confirmed", ["face_gap"]), {"plant": {}})]
+    for name, rows, wall in (("a", a, 900.0), ("b", b, 800.0)):
+        (tmp_path / f"{name}.json").write_text(json.dumps({"plan": "p", "cores": 2, "wall_s": wall, "series": rows}))
+    got = pool([str(tmp_path / "a.json"), str(tmp_path / "b.json")], PLAN)
+    assert got["wall_s"] == 1700.0 and got["scores"]["finished"] == 2
+    assert got["scores"]["null_false_positive_rate"] == 1.0 and got["scores"]["physical_named_top_share"] == 1.0
+    assert got["acceptance"]["null_adds_nothing"] is False
+    with pytest.raises(SystemExit, match="rate_strength seed 1"):
+        pool([str(tmp_path / "a.json"), str(tmp_path / "a.json")], PLAN)

@@ -284,11 +284,16 @@ def make_series(out, *, geometry: str, drivers: list[str], params: dict, plant: 
             off = {k: _null(k) for k in physical}
             base = simulate(geometry, preset, params={**params, **off}, t_end=t_end, sample_dt=DT_S / 2,
                             mesh_seed=mesh_seeds[i], **kw) if physical else sim
-            p_off = float(np.max(base.columns["stress_back_Pa"]))
-            p_on = float(np.max(apply_measurement(base.columns["time_s"], sim.columns["stress_back_Pa"],
-                                                  measurement)))
+            off_curve = np.asarray(base.columns["stress_back_Pa"], dtype=float)
+            on_curve = np.asarray(apply_measurement(base.columns["time_s"], sim.columns["stress_back_Pa"],
+                                                    measurement), dtype=float)
+            p_off, p_on = float(np.max(off_curve)), float(np.max(on_curve))
             test["effect_off_peak_stress_Pa"] = p_off
             test["peak_change_rel"] = p_on / p_off - 1.0
+            # an effect on the onset (a gap, a trigger) leaves the peak where it was: its size is the
+            # change of the curve up to the peak, where the mesh's own scatter is small
+            rise = slice(0, int(np.argmax(off_curve)) + 1)
+            test["pre_peak_change_rms_rel"] = float(np.sqrt(np.mean((on_curve[rise] - off_curve[rise]) ** 2)) / p_off)
         tests.append(test)
         print(f"{name}: {label}, peak {made['peak_stress_Pa'] / 1e6:.1f} MPa, reduced "
               f"{test['reduced']['peak_stress_Pa'] / 1e6:.1f} MPa at {test['reduced']['strain_rate_per_s']:.0f} 1/s"
