@@ -133,14 +133,17 @@ def select_effects(model: EmulatedSHPB, *, base_names: Sequence[str], candidates
     """:func:`calibration.protocol.select` with the experiment's ``diagnosis`` settings; reads the
     calibration records' observations only. With ``per_run`` meshes the design runs each carry their
     own realization, so the emulator's leave-one-out error already holds ``S``: it is not added again on
-    the emulator's side (only for a ``shared`` mesh). ``base_fit``: the workflow's posterior as the base
+    the emulator's side (only for a ``shared`` mesh, where it is common to two models' predictions). ``base_fit``: the workflow's posterior as the base
     model (:func:`calibration.protocol.workflow_base`). The anchored model's runs share one mesh per
-    record, so it holds no mesh scatter and ``S`` is added beside its own error along its axes."""
+    record, so it holds no mesh scatter and ``S`` is added beside its own error along its axes, common to
+    two models' predictions of a record (``simulator_correlation`` 1)."""
     if mesh_mode != "shared" and not anchored(model):
         simulator = {}
     return select(model, base_names=list(base_names), candidates=[fx.get_effect(c) for c in candidates],
                   calib_records=list(obs.records), obs={r: obs.values[obs.record_slice(r)] for r in obs.records},
                   noise=noise, heldout_records=list(heldout_records), simulator=simulator,
+                  # one mesh per record: two models' predictions of it share its departure
+                  simulator_correlation=1.0 if anchored(model) or mesh_mode == "shared" else 0.0,
                   scopes=settings.get("scopes") or None, max_additions=int(settings["max_additions"]),
                   alpha=float(settings["alpha"]), seed=int(settings["seed"]), n_members=int(settings["members"]),
                   esmda_steps=int(settings["esmda_steps"]), gate=str(settings.get("emulator_gate", "improvement")),

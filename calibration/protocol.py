@@ -95,17 +95,19 @@ def emulator_errors(model: EmulatedSHPB, records: Sequence[str]) -> dict[str, Ob
 
 def record_errors(model: EmulatedSHPB, noise: Mapping[str, ObservationError], *,
                   simulator: Mapping[str, ObservationError] | None = None,
-                  model_correlation: float = 0.0) -> RecordErrors:
+                  model_correlation: float = 0.0, simulator_correlation: float = 0.0) -> RecordErrors:
     """The protocol's error model per record: instrument ``noise`` (e.g. ``Observations.of_record(r).
     error_model()``), the emulator's time-correlated error (:func:`emulator_errors`) and the FDEM runs'
-    variability ``simulator`` if known (e.g. the scatter of runs with different mesh seeds)."""
-    return RecordErrors(dict(noise), emulator_errors(model, list(noise)), dict(simulator or {}), model_correlation)
+    variability ``simulator`` if known (e.g. the scatter of runs with different mesh seeds), with the
+    correlations of two predictions' errors (:class:`enkf.diagnosis.RecordErrors`)."""
+    return RecordErrors(dict(noise), emulator_errors(model, list(noise)), dict(simulator or {}), model_correlation,
+                        simulator_correlation)
 
 
 def select(model: EmulatedSHPB, *, base_names: Sequence[str], candidates: Sequence, calib_records: Sequence[str],
            obs: Mapping[str, np.ndarray], noise: Mapping[str, ObservationError], heldout_records: Sequence[str] = (),
            simulator: Mapping[str, ObservationError] | None = None, model_correlation: float = 0.0,
-           scopes: Mapping[str, str] | None = None, **select_kw) -> Selection:
+           simulator_correlation: float = 0.0, scopes: Mapping[str, str] | None = None, **select_kw) -> Selection:
     """:func:`enkf.diagnosis.select_effects` on the emulated records (module docstring). ``obs`` is read for
     the calibration records only; ``noise`` must cover calibration and held-out records (the held-out
     record's noise sets its predictive band, never its prediction). Physical candidates must be emulator
@@ -113,7 +115,8 @@ def select(model: EmulatedSHPB, *, base_names: Sequence[str], candidates: Sequen
     pm = protocol_model(model)
     for c in candidates:
         pm.box(list(c.param_names))  # raises for a physical candidate the emulator does not cover
-    errors = record_errors(model, noise, simulator=simulator, model_correlation=model_correlation)
+    errors = record_errors(model, noise, simulator=simulator, model_correlation=model_correlation,
+                           simulator_correlation=simulator_correlation)
     return select_effects(pm, base_names=base_names, candidates=candidates, calib_records=calib_records,
                           heldout_records=heldout_records, obs=obs, errors=errors, scopes=scopes, **select_kw)
 

@@ -43,18 +43,23 @@ def test_the_variance_of_a_squared_error_difference_matches_simulation():
     y = rng.normal(0, 1, 20)
     a, b = y + rng.normal(0, 0.5, 20), y + rng.normal(0, 0.4, 20)
     Pa, Pb = AR1Error(0.1, t, 4e-6).dense(), AR1Error(0.3, t, 8e-6).dense()  # the predictions' own spreads
-    for rho, P, Q in ((0.0, None, None), (0.6, None, None), (0.3, Pa, Pb)):
-        delta, var = squared_error_difference(y, a, b, R, E, S, rho, P, Q)
+    for rho, P, Q, rho_s in ((0.0, None, None, 0.0), (0.6, None, None, 0.0), (0.3, Pa, Pb, 0.0),
+                             (0.0, None, None, 1.0), (0.4, Pa, Pb, 1.0)):
+        delta, var = squared_error_difference(y, a, b, R, E, S, rho, P, Q, simulator_correlation=rho_s)
         n = 100_000
         Aa, Ab = E + S + (0 if P is None else P), E + S + (0 if Q is None else Q)
-        cov = np.block([[Aa, rho * E], [rho * E, Ab]])
+        C = rho * E + rho_s * S  # rho_s = 1: one mesh departure common to both predictions
+        cov = np.block([[Aa, C], [C, Ab]])
         ab = rng.standard_normal((n, 40)) @ np.linalg.cholesky(cov).T
         e = rng.standard_normal((n, 20)) @ np.linalg.cholesky(R).T
         u, v = (y - a) + e - ab[:, :20], (y - b) + e - ab[:, 20:]
         sim = np.sum(u * u, 1) - np.sum(v * v, 1)
         # the mean moves by the difference of the two predictions' error variances (none when A_a = A_b)
         assert sim.mean() == pytest.approx(delta + np.trace(Aa) - np.trace(Ab), abs=3 * sim.std() / math.sqrt(n))
-        assert sim.var() == pytest.approx(var, rel=0.03), rho
+        assert sim.var() == pytest.approx(var, rel=0.03), (rho, rho_s)
+    # a common mesh departure enters like the noise: 4 d'(R + S) d, the quadratic terms gone
+    assert squared_error_difference(y, a, b, R, S=S, simulator_correlation=1.0)[1] == pytest.approx(
+        4 * (b - a) @ (R + S) @ (b - a))
     # instrument noise alone: the difference is linear in the noise, Var = 4 d'R d exactly
     d = b - a
     assert squared_error_difference(y, a, b, R)[1] == pytest.approx(4 * d @ R @ d)

@@ -29,8 +29,11 @@ error and the log predictive density (a mixture over the draws, error covariance
 ``y`` by ``e ~ N(0, R)`` (instrument noise), ``a`` and ``b`` by model errors ``alpha``, ``beta`` with
 ``Cov(alpha) = A_a``, ``Cov(beta) = A_b``, ``A = E + S`` (emulator/model error ``E`` plus simulator
 variability ``S``, plus optionally each prediction's own calibration spread ``P``, below) and
-``Cov(alpha, beta) = C = rho E`` (``rho``: how alike the model errors of two nearby predictions are; 0,
-the default, treats them as independent, the cautious choice). Then ``u' = u + e - alpha``,
+``Cov(alpha, beta) = C = rho E + rho_S S`` (``rho``: how alike the model errors of two nearby predictions
+are; 0, the default, treats them as independent, the cautious choice; ``rho_S`` likewise for the
+simulator's variability: 1 where both predictions interpolate runs on one mesh realization, as the
+anchored selection model's do, so that its departure is common to both and enters like the noise,
+``4 d'Sd``). Then ``u' = u + e - alpha``,
 ``v' = v + e - beta`` and
 
     Delta' = Delta + [2 d.e - 2 u.alpha + 2 v.beta] + [|alpha|^2 - |beta|^2 - 2 e.(alpha - beta)]
@@ -150,13 +153,15 @@ class RecordErrors:
     """The error model per record: instrument ``noise``, ``model`` error (the emulator's, time-correlated)
     and ``simulator`` variability (run-to-run scatter of the real model at a point), each an
     :class:`~enkf.covariance.ObservationError` on the record's observation times (absent: zero).
-    ``model_correlation``: correlation of two predictions' model errors (module docstring). The dense
+    ``model_correlation``, ``simulator_correlation``: correlation of two predictions' model errors and of
+    their simulator variability (module docstring). The dense
     matrices are cached on first use: build a new one rather than change its parts."""
 
     noise: Mapping[str, ObservationError]
     model: Mapping[str, ObservationError] = field(default_factory=dict)
     simulator: Mapping[str, ObservationError] = field(default_factory=dict)
     model_correlation: float = 0.0
+    simulator_correlation: float = 0.0
     _cache: dict = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self):
@@ -164,8 +169,8 @@ class RecordErrors:
             if getattr(e, "kind", "") == "diagonal" and e.m > 1:
                 raise ValueError(f"model error of {rec} is diagonal: give a time-correlated one "
                                  "(enkf.emulated.emulator_error_model)")
-        if not 0.0 <= self.model_correlation <= 1.0:
-            raise ValueError("model_correlation must lie in [0, 1]")
+        if not 0.0 <= self.model_correlation <= 1.0 or not 0.0 <= self.simulator_correlation <= 1.0:
+            raise ValueError("model_correlation and simulator_correlation must lie in [0, 1]")
 
     def parts(self, rec: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Dense ``(R, E, S)`` of record ``rec``."""
@@ -418,17 +423,18 @@ def cross_validate(model: ForwardModel, spec: ModelSpec, records: Sequence[str],
 
 
 def squared_error_difference(y, a, b, R, E=None, S=None, correlation: float = 0.0, Pa=None,
-                             Pb=None) -> tuple[float, float]:
+                             Pb=None, simulator_correlation: float = 0.0) -> tuple[float, float]:
     """``(Delta, Var Delta)`` of ``Delta = |y - a|^2 - |y - b|^2`` under the Gaussian errors of the module
     docstring: noise ``R`` on ``y``; model error ``E`` (correlation ``correlation`` between the two
-    predictions) plus simulator variability ``S`` (independent) on each prediction, and each prediction's
-    own spread ``Pa``, ``Pb`` (independent) if given."""
+    predictions) plus simulator variability ``S`` (correlation ``simulator_correlation``: 1 when both
+    predictions come from runs on one mesh realization) on each prediction, and each prediction's own
+    spread ``Pa``, ``Pb`` (independent) if given."""
     y, a, b = (np.asarray(v, dtype=float) for v in (y, a, b))
     R = np.asarray(R, dtype=float)
     E = np.zeros_like(R) if E is None else np.asarray(E, dtype=float)
     S = np.zeros_like(R) if S is None else np.asarray(S, dtype=float)
     u, v, d = y - a, y - b, b - a
-    A, C = E + S, correlation * E
+    A, C = E + S, correlation * E + simulator_correlation * S
     Aa = A if Pa is None else A + Pa
     Ab = A if Pb is None else A + Pb
     delta = float(u @ u - v @ v)
@@ -450,7 +456,7 @@ def compare_cv(y: Mapping[str, np.ndarray], current: Mapping[str, np.ndarray], c
         R, E, S = errors.parts(j)
         d, v = squared_error_difference(y[j], current[j], candidate[j], R, E if use_model_error else None, S,
                                         errors.model_correlation, (spread_current or {}).get(j),
-                                        (spread_candidate or {}).get(j))
+                                        (spread_candidate or {}).get(j), errors.simulator_correlation)
         per[j] = {"delta": d, "sd": math.sqrt(v)}
         tot += d
         var += v
