@@ -228,6 +228,16 @@ def series_kwargs(plan: dict, case: dict, seed: int, preset: str, records: int |
             "null_peaks": bool(case.get("plant"))}     # a measurement effect's costs no run: the same curve
 
 
+def heldout_summary(check: dict) -> dict:
+    """Per held-out record of check.json: its RMSE before and after, the share of its curve inside the
+    predictive 90 % band the report shows (``predictive_coverage_90``) and inside the model band alone
+    (``band_coverage``: posterior members x population draws, no error model)."""
+    return {r: {"rmse_before_Pa": v["before"]["rmse"], "rmse_after_Pa": v["after"]["rmse"],
+                "predictive_coverage_90_after": v["after"].get("predictive_coverage_90"),
+                "band_coverage_after": v["after"].get("band_coverage")}
+            for r, v in (check.get("heldout") or {}).items()}
+
+
 def run_series(plan: dict, case: dict, seed: int, work: Path, preset: str, records: int | None,
                cores: int, dry_run: bool = False) -> dict:
     """Make, configure, run and score one series; returns its result row. ``dry_run``: the loop is only
@@ -269,9 +279,7 @@ def run_series(plan: dict, case: dict, seed: int, work: Path, preset: str, recor
         row["correct"] = is_correct(case, row["named"], report)
         row["coverage"] = parameter_coverage(report, truth)
         row["why"] = report.get("why", "")
-        row["heldout"] = {r: {"rmse_before_Pa": v["before"]["rmse"], "rmse_after_Pa": v["after"]["rmse"],
-                              "band_coverage_after": v["after"].get("band_coverage")}
-                          for r, v in (check.get("heldout") or {}).items()}
+        row["heldout"] = heldout_summary(check)
     except (subprocess.CalledProcessError, OSError, KeyError, ValueError, SystemExit) as exc:
         row["error"] = f"{type(exc).__name__}: {exc}"
     row["wall_s"] = round(time.perf_counter() - t0, 1)
