@@ -305,6 +305,24 @@ def pool(parts: list[str], plan: dict) -> dict:
             "acceptance": acceptance(scores, plan["acceptance"]), "series": series}
 
 
+def split(part: str, folder: str, plan: dict, note: str = "") -> list[Path]:
+    """One file per series of a part's JSON, ``<case>_<seed>.json`` in ``folder`` (each with its own
+    wall time and one-series scores, which are not the benchmark's: :func:`pool` scores them together)."""
+    doc = json.loads(Path(part).read_text())
+    out = []
+    for row in doc["series"]:
+        s = score([row])
+        path = Path(folder) / f"{row['case']['case']}_{row['seed']}.json"
+        if path.exists():
+            raise SystemExit(f"{path} exists: a benchmark series is run once")
+        path.write_text(json.dumps({"plan": doc["plan"], "seeds": str(row["seed"]), "cores": doc["cores"],
+                                    "cpu_count": doc.get("cpu_count"), "wall_s": row["wall_s"], "scores": s,
+                                    "acceptance": acceptance(s, plan["acceptance"]), "series": [row],
+                                    "note": note or doc.get("note", "")}, indent=1, default=float) + "\n")
+        out.append(path)
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--plan", default=str(PLAN))
@@ -319,8 +337,15 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(OUT))
     ap.add_argument("--pool", nargs="+", metavar="PART", help="score the series of these parts' JSON together "
                     "(a benchmark run in parts) into --out; runs nothing")
+    ap.add_argument("--split", nargs=2, metavar=("PART", "FOLDER"), help="write one file per series of a part's "
+                    "JSON into FOLDER (benchmarks/results/bench_planted_records); runs nothing")
+    ap.add_argument("--note", default="", help="with --split: what the part was (its commit, how it was stopped)")
     args = ap.parse_args(argv)
     plan = json.loads(Path(args.plan).read_text())
+    if args.split:
+        for path in split(*args.split, plan, args.note):
+            print(path)
+        return 0
     if args.pool:
         Path(args.out).write_text(json.dumps(pool(args.pool, plan), indent=1, default=float) + "\n")
         return 0

@@ -204,3 +204,19 @@ def test_parts_of_a_benchmark_pool_into_one_score_and_a_series_run_twice_is_refu
     assert got["acceptance"]["null_adds_nothing"] is False
     with pytest.raises(SystemExit, match="rate_strength seed 1"):
         pool([str(tmp_path / "a.json"), str(tmp_path / "a.json")], PLAN)
+
+
+def test_a_part_splits_into_one_file_per_series_and_never_overwrites_one(tmp_path):
+    from benchmarks.bench_planted import split
+
+    rate = {"plant": {"rate_strength.k": 0.3}, "tests": []}
+    rows = [dict(_row("rate_strength", 7, _report("base_kept"), rate), wall_s=900.0),
+            dict(_row("null", 7, _report("base_kept"), {"plant": {}}), wall_s=800.0)]
+    part = tmp_path / "part.json"
+    part.write_text(json.dumps({"plan": "p", "cores": 2, "wall_s": 1700.0, "series": rows}))
+    paths = split(str(part), str(tmp_path), PLAN, "a part")
+    assert [p.name for p in paths] == ["rate_strength_7.json", "null_7.json"]
+    one = json.loads(paths[1].read_text())
+    assert one["wall_s"] == 800.0 and one["scores"]["null_false_positive_rate"] == 0.0 and one["note"] == "a part"
+    with pytest.raises(SystemExit, match="run once"):
+        split(str(part), str(tmp_path), PLAN)
