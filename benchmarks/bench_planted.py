@@ -22,8 +22,10 @@ the repository; its ``results/<experiment>/diagnosis/report.json`` and ``check.j
 * wall time and cores per series; every miss with its reason.
 
 Writes ``--out`` (default benchmarks/results/bench_planted.json) after every series, so a stopped run
-keeps what it measured; ``--pool PART ...`` scores the parts of a run made in several sittings together. The scoring functions (:func:`named`, :func:`parameter_coverage`, :func:`score`)
-are pure: tests/test_bench_planted.py checks them on hand-made reports.
+keeps what it measured; ``--split PART FOLDER`` files a part's series one file each, and ``--pool PART
+...`` scores the parts of a run made in several sittings together. The scoring functions
+(:func:`named`, :func:`parameter_coverage`, :func:`score`) are pure: tests/test_bench_planted.py checks
+them on hand-made reports.
 """
 from __future__ import annotations
 
@@ -195,19 +197,22 @@ def effect_size(truth: dict, mesh_sd_rel: float, mesh_pre_peak_sd_rel: float | N
 
 
 # ---------------------------------------------------------------------------------------------- running
-def mesh_sd_rel(geometry: str) -> float:
-    """The fast mesh's peak standard deviation over its mean (benchmarks/results/bench_sim_variability.json:
-    the marble cylinder's or the twin disc's mesh realizations)."""
+def _mesh_variability(geometry: str) -> dict:
+    """The fast mesh's realizations of the marble cylinder or the twin disc
+    (benchmarks/results/bench_sim_variability.json)."""
     d = json.loads((ROOT / "benchmarks/results/bench_sim_variability.json").read_text())
-    case = d["cases"]["marble" if geometry == "cylinder" else "twin"]["mesh_variability"]["peak_stress_Pa"]
+    return d["cases"]["marble" if geometry == "cylinder" else "twin"]["mesh_variability"]
+
+
+def mesh_sd_rel(geometry: str) -> float:
+    """The fast mesh's peak standard deviation over its mean."""
+    case = _mesh_variability(geometry)["peak_stress_Pa"]
     return float(case["std"] / case["mean"])
 
 
 def mesh_pre_peak_sd_rel(geometry: str) -> float:
-    """The fast mesh's rms standard deviation of the curve before its peak, over the peak (the same file)."""
-    d = json.loads((ROOT / "benchmarks/results/bench_sim_variability.json").read_text())
-    return float(d["cases"]["marble" if geometry == "cylinder" else "twin"]["mesh_variability"]
-                 ["std_rms_pre_peak_over_peak"])
+    """The fast mesh's rms standard deviation of the curve before its peak, over the peak."""
+    return float(_mesh_variability(geometry)["std_rms_pre_peak_over_peak"])
 
 
 def series_kwargs(plan: dict, case: dict, seed: int, preset: str, records: int | None) -> dict:
@@ -286,6 +291,13 @@ def run_series(plan: dict, case: dict, seed: int, work: Path, preset: str, recor
     return row
 
 
+def result_doc(series: list[dict], bars: dict, **fields) -> dict:
+    """A result file: ``fields`` (plan, seeds, cores, wall time, ...), then the scores of ``series``
+    against the plan's ``bars`` (its ``acceptance`` block), then the series."""
+    scores = score(series)
+    return {**fields, "scores": scores, "acceptance": acceptance(scores, bars), "series": series}
+
+
 def pool(parts: list[str], plan: dict) -> dict:
     """One result of a benchmark run in parts: every part's series scored together (a case x seed in two
     parts is refused: a benchmark seed is run once)."""
@@ -298,11 +310,10 @@ def pool(parts: list[str], plan: dict) -> dict:
                 raise SystemExit(f"{part}: {key[0]} seed {key[1]} is already in an earlier part")
             seen.add(key)
             series.append(row)
-    scores = score(series)
-    return {"plan": docs[0]["plan"], "parts": [{"file": str(p), "wall_s": d["wall_s"], "cores": d["cores"],
-                                                 "series": len(d["series"])} for p, d in zip(parts, docs)],
-            "cores": docs[0]["cores"], "wall_s": round(sum(d["wall_s"] for d in docs), 1), "scores": scores,
-            "acceptance": acceptance(scores, plan["acceptance"]), "series": series}
+    return result_doc(series, plan["acceptance"], plan=docs[0]["plan"],
+                      parts=[{"file": str(p), "wall_s": d["wall_s"], "cores": d["cores"], "series": len(d["series"])}
+                             for p, d in zip(parts, docs)],
+                      cores=docs[0]["cores"], wall_s=round(sum(d["wall_s"] for d in docs), 1))
 
 
 def split(part: str, folder: str, plan: dict, note: str = "") -> list[Path]:
@@ -311,14 +322,12 @@ def split(part: str, folder: str, plan: dict, note: str = "") -> list[Path]:
     doc = json.loads(Path(part).read_text())
     out = []
     for row in doc["series"]:
-        s = score([row])
         path = Path(folder) / f"{row['case']['case']}_{row['seed']}.json"
         if path.exists():
             raise SystemExit(f"{path} exists: a benchmark series is run once")
-        path.write_text(json.dumps({"plan": doc["plan"], "seeds": str(row["seed"]), "cores": doc["cores"],
-                                    "cpu_count": doc.get("cpu_count"), "wall_s": row["wall_s"], "scores": s,
-                                    "acceptance": acceptance(s, plan["acceptance"]), "series": [row],
-                                    "note": note or doc.get("note", "")}, indent=1, default=float) + "\n")
+        one = result_doc([row], plan["acceptance"], plan=doc["plan"], seeds=str(row["seed"]), cores=doc["cores"],
+                         cpu_count=doc.get("cpu_count"), wall_s=row["wall_s"])
+        path.write_text(json.dumps({**one, "note": note or doc.get("note", "")}, indent=1, default=float) + "\n")
         out.append(path)
     return out
 
@@ -362,12 +371,11 @@ def main(argv=None) -> int:
             results.append(row)
             print(f"{case['case']} seed {seed}: {row.get('named', row.get('error'))} ({row['wall_s']:.0f} s)",
                   flush=True)
-            scores = score(results)
             plan_path = Path(args.plan).resolve()
-            out = {"plan": str(plan_path.relative_to(ROOT)) if plan_path.is_relative_to(ROOT) else str(plan_path),
-                   "seeds": args.seeds, "cores": args.cores, "cpu_count": os.cpu_count(),
-                   "wall_s": round(time.perf_counter() - t0, 1), "scores": scores,
-                   "acceptance": acceptance(scores, plan["acceptance"]), "series": results}
+            shown = plan_path.relative_to(ROOT) if plan_path.is_relative_to(ROOT) else plan_path
+            out = result_doc(results, plan["acceptance"], plan=str(shown),
+                             seeds=args.seeds, cores=args.cores, cpu_count=os.cpu_count(),
+                             wall_s=round(time.perf_counter() - t0, 1))
             Path(args.out).parent.mkdir(parents=True, exist_ok=True)
             Path(args.out).write_text(json.dumps(out, indent=1, default=float) + "\n")
     return 0

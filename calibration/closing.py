@@ -132,18 +132,19 @@ def select_effects(model: EmulatedSHPB, *, base_names: Sequence[str], candidates
                    heldout_records: Sequence[str], settings: Mapping, mesh_mode: str = "per_run", base_fit=None):
     """:func:`calibration.protocol.select` with the experiment's ``diagnosis`` settings; reads the
     calibration records' observations only. With ``per_run`` meshes the design runs each carry their
-    own realization, so the emulator's leave-one-out error already holds ``S``: it is not added again on
-    the emulator's side (only for a ``shared`` mesh, where it is common to two models' predictions). ``base_fit``: the workflow's posterior as the base
-    model (:func:`calibration.protocol.workflow_base`). The anchored model's runs share one mesh per
-    record, so it holds no mesh scatter and ``S`` is added beside its own error along its axes, common to
-    two models' predictions of a record (``simulator_correlation`` 1)."""
-    if mesh_mode != "shared" and not anchored(model):
+    own realization, so the emulator's leave-one-out error already holds ``S``: it is not added again.
+    Where every run of a record is on one mesh (a ``shared`` mesh, or the anchored model) ``S`` is added
+    beside the surrogate's own error, and it is common to two models' predictions of that record
+    (``simulator_correlation`` 1). ``base_fit``: the workflow's posterior as the base model
+    (:func:`calibration.protocol.workflow_base`)."""
+    one_mesh = anchored(model) or mesh_mode == "shared"
+    if not one_mesh:
         simulator = {}
     return select(model, base_names=list(base_names), candidates=[fx.get_effect(c) for c in candidates],
                   calib_records=list(obs.records), obs={r: obs.values[obs.record_slice(r)] for r in obs.records},
                   noise=noise, heldout_records=list(heldout_records), simulator=simulator,
                   # one mesh per record: two models' predictions of it share its departure
-                  simulator_correlation=1.0 if anchored(model) or mesh_mode == "shared" else 0.0,
+                  simulator_correlation=1.0 if one_mesh else 0.0,
                   scopes=settings.get("scopes") or None, max_additions=int(settings["max_additions"]),
                   alpha=float(settings["alpha"]), seed=int(settings["seed"]), n_members=int(settings["members"]),
                   esmda_steps=int(settings["esmda_steps"]), gate=str(settings.get("emulator_gate", "improvement")),

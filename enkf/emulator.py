@@ -209,16 +209,22 @@ class AnchoredEmulator:
     def loo_residuals(self) -> np.ndarray:
         """``(n_runs, m)``: each axis run's curve minus its prediction from the anchor and the other runs
         of its axis (the same piecewise-linear rule, so an end run is extrapolated from its neighbours),
-        axis by axis in increasing parameter value. The anchor's own run is not left out: every term is
-        built from it. This measures the error of interpolating along an axis, at twice the spacing of
-        the runs (so it over-states the error between them); the first-order form's error away from the
-        axes (interactions) it does not see."""
-        out = []
+        axis by axis in increasing parameter value (:meth:`loo_residuals_by_axis`, stacked). The anchor's
+        own run is not left out: every term is built from it. This measures the error of interpolating
+        along an axis, at twice the spacing of the runs (so it over-states the error between them); the
+        first-order form's error away from the axes (interactions) it does not see."""
+        return np.vstack([np.empty((0, self.m)), *self.loo_residuals_by_axis().values()])
+
+    def loo_residuals_by_axis(self) -> dict[str, np.ndarray]:
+        """``{parameter name: (k, m)}``: :meth:`loo_residuals` of each axis with runs."""
+        out = {}
         for j, (v, D) in self._axes.items():
+            rows = []
             for i in range(v.size):
                 if v[i] == self.anchor[j]:
                     continue
                 keep = np.arange(v.size) != i
                 # the anchor alone (an axis of one run) predicts no change
-                out.append(D[i] - (_chords(v[keep], D[keep], v[i:i + 1])[0] if keep.sum() > 1 else 0.0))
-        return np.array(out, dtype=float).reshape(-1, self.m)
+                rows.append(D[i] - (_chords(v[keep], D[keep], v[i:i + 1])[0] if keep.sum() > 1 else 0.0))
+            out[self.names[j]] = np.array(rows, dtype=float).reshape(-1, self.m)
+        return out

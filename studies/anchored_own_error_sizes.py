@@ -29,12 +29,8 @@ def sizes(selection_pkl: str) -> dict:
     out = {}
     for r in records:
         em = model.emulators[r]
-        per_axis, start = {}, 0
-        loo = em.loo_residuals()
-        for j, (v, _) in em._axes.items():
-            k = int(np.sum(v != em.anchor[j]))
-            per_axis[em.names[j]] = round(float(np.sqrt(np.mean(loo[start:start + k] ** 2))) / 1e6, 2)
-            start += k
+        per_axis = {name: round(float(np.sqrt(np.mean(res ** 2))) / 1e6, 2)
+                    for name, res in em.loo_residuals_by_axis().items()}
         sd = _rms_diag(E[r])
         out[r] = {"E_rms_MPa": round(float(np.sqrt(np.mean(sd ** 2))) / 1e6, 2),
                   "E_max_MPa": round(float(sd.max()) / 1e6, 2),
