@@ -45,7 +45,7 @@ from .diagnose import EmulatedSHPB, anchored_emulators, emulators_from_design
 from .diagnosis_config import FOLD_SEPARATOR, candidate_effects, loro_folds  # noqa: F401
 from .model_error import stored_error
 from .observations import Observations
-from .protocol import check_runs, confirm, real_curves, select
+from .protocol import check_runs, confirm, real_curves, real_group, select
 
 __all__ = ["FOLD_SEPARATOR", "blind", "candidate_effects", "emulated_model", "protocol_errors", "select_effects",
            "base_posterior_mismatches", "calibration_discrepancy", "check_rows", "covariate_table", "assemble",
@@ -148,7 +148,8 @@ def select_effects(model: EmulatedSHPB, *, base_names: Sequence[str], candidates
                   scopes=settings.get("scopes") or None, max_additions=int(settings["max_additions"]),
                   alpha=float(settings["alpha"]), seed=int(settings["seed"]), n_members=int(settings["members"]),
                   esmda_steps=int(settings["esmda_steps"]), gate=str(settings.get("emulator_gate", "improvement")),
-                  base_fit=base_fit)
+                  base_fit=base_fit, per_model=settings["own_error"] == "per_model",
+                  alternatives=int(settings["alternatives"]))
 
 
 def covariate_table(selection, model: EmulatedSHPB, obs: Observations):
@@ -258,7 +259,7 @@ def _cv_residuals(selection, real: Mapping, step: int, obs: Observations, noise:
         if runs is None:
             continue
         Y = np.array(runs, dtype=float, ndmin=2)
-        pred = selection.steps[step].cv.folds[r]["prediction"]
+        pred = selection.step(step).cv.folds[r]["prediction"]
         S, _ = replicate_variance([c[r] for c in real["cv"].values() if c.get(r) is not None])
         if S is None:
             S = np.diag(simulator[r].dense()) if r in simulator else np.zeros(Y.shape[1])
@@ -325,7 +326,7 @@ def predictive_bands(selection, real: Mapping, k: int, obs: Observations, heldou
         # every band is built before the record's curve is read below
         bands = {}
         for when, step in (("before", 0), ("after", k)):
-            st = selection.steps[step]
+            st = selection.step(step)
             pred = st.heldout[rec] if role == "heldout" else st.cv.folds[rec]["prediction"]
             D, source = _discrepancy_from(cv[step], rec if role == "cv" else None, window, fallback)
             terms = {"discrepancy": D, "noise": pooled_noise}
@@ -381,11 +382,30 @@ def fit_sources(selection) -> dict:
 
 
 def identification(selection, k: int) -> list[dict]:
-    """Per effect kept (the first ``k`` rounds chose them), its group: the candidates of its round that
-    the calibration records do not tell apart from it (:func:`enkf.diagnosis.identification_group`), with
-    the evidence and a sentence. The real-simulator walk confirms the chosen effect's model; it does not
-    compare it with the others of its group, so the group is what the data identify."""
-    return [{**rnd["group"], "text": group_text(rnd["group"])} for rnd in selection.rounds[:k] if rnd.get("group")]
+    """Per effect kept (the rounds that chose the shipped step ``k``'s effects), its group: the candidates
+    of its round that the calibration records do not tell apart from it
+    (:func:`enkf.diagnosis.identification_group`), with the evidence and a sentence. For an alternative
+    shipped, its own group in its round. This is the emulator's evidence; :func:`assemble` adds the real
+    FDEM runs' comparison of the kept effect with the other models of its round that were run (its
+    choice and alternatives, :func:`real_group_text`)."""
+    step = selection.step(k)
+    chain = step.index if step.alternative_to is None else step.alternative_to - 1
+    groups = [rnd["group"] for rnd in selection.rounds[:chain] if rnd.get("group")]
+    if step.alternative_to is not None:
+        groups.append(selection.rounds[step.alternative_to - 1]["alternative_groups"][step.spec.effect_names[-1]])
+    return [{**g, "text": group_text(g)} for g in groups]
+
+
+def real_group_text(name: str, evidence: Sequence[Mapping]) -> str:
+    """One sentence on the kept effect against the other models of its round run on real FDEM."""
+    told = [f"{e['effect']} (z = {e['z']:.2f})" for e in evidence if e["told_apart"]]
+    alike = [f"{e['effect']} (z = {e['z']:.2f})" for e in evidence if not e["told_apart"]]
+    parts = []
+    if told:
+        parts.append(f"on real FDEM runs {name} predicts better than {', '.join(told)}")
+    if alike:
+        parts.append(f"real FDEM runs do not tell it apart from {', '.join(alike)}")
+    return "; ".join(parts) + f" (one-sided, Bonferroni over {len(evidence)})"
 
 
 def base_posterior_mismatches(summary: Mapping, report: Mapping) -> list[str]:
@@ -424,15 +444,16 @@ def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: Emulated
     if replicated(real["cv"].get(0, {}), list(obs.records)):
         # replicated runs on common meshes: the walk measures the variability of the difference of two
         # steps (enkf.diagnosis.compare_replicated); the data carry only their instrument noise
-        conf = confirm(selection, real["cv"], y, {r: noise[r] for r in obs.records})
+        walk_noise, walk_sim = {r: noise[r] for r in obs.records}, {}
+        conf = confirm(selection, real["cv"], y, walk_noise)
     else:
         # one run per point: the data carry their own realization (S on the data, common to every step)
         # and each run its own; the runs of two steps share a mesh, but their departures are taken as
         # independent (nothing measures their correlation): cautious, a real gain can be refuted
         walk_noise = {r: DenseError(noise[r].dense() + (simulator[r].dense() if r in simulator else 0.0),
                                     _symmetric=True) for r in obs.records}
-        conf = confirm(selection, real["cv"], y, walk_noise,
-                       simulator={r: simulator[r] for r in obs.records if r in simulator})
+        walk_sim = {r: simulator[r] for r in obs.records if r in simulator}
+        conf = confirm(selection, real["cv"], y, walk_noise, simulator=walk_sim)
     k = int(conf["confirmed"])
     held = {}
     if heldout is not None and heldout.records:
@@ -449,7 +470,7 @@ def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: Emulated
         for w in ("before", "after"):
             held[h][w].update({key: bands[h][w][key] for key in ("predictive_coverage_90", "interval_score_over_box")
                                if key in bands[h][w]})
-    shipped = selection.steps[k]
+    shipped = selection.step(k)
     if k == 0:
         verdict = "base_kept"
         why = ("no addition survived: " + (conf["steps"][-1]["text"] if conf["steps"] else selection.why))
@@ -459,6 +480,10 @@ def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: Emulated
     errors = _errors_table(selection, conf, real, obs, held)
     risk = cv_risk(errors, k)
     ident = identification(selection, k)
+    real_ev = real_group(selection, real["cv"], y, walk_noise, k, simulator=walk_sim)
+    if ident and real_ev:
+        ident[-1] = {**ident[-1], "real_evidence": real_ev,
+                     "text": ident[-1]["text"] + "; " + real_group_text(ident[-1]["chosen"], real_ev)}
     report = {"protocol": "frozen (docs/closing-the-loop.md): effects chosen by cross-validation within the "
                           "calibration records on the emulator, confirmed on real FDEM runs at the "
                           "cross-validation points, the held-out records read last",

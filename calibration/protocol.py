@@ -36,14 +36,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from enkf.covariance import ObservationError
-from enkf.diagnosis import Fit, RecordErrors, Selection, confirm_additions, given_fit, select_effects
+from enkf.diagnosis import (Fit, RecordErrors, Selection, confirm_additions, given_fit, real_identification,
+                            select_effects)
 from enkf.emulated import emulator_error_model
 from shpb import effects as fx
 
 from .diagnose import EmulatedSHPB, interpolation_matrix, measured_curve, record_params, workflow_sample
 
-__all__ = ["MAX_BASE_DRAWS", "ProtocolModel", "check_runs", "confirm", "emulator_errors", "protocol_model",
-           "real_curves", "record_errors", "select", "workflow_base"]
+__all__ = ["MAX_BASE_DRAWS", "ProtocolModel", "check_runs", "confirm", "emulator_axis_errors", "emulator_errors", "protocol_model",
+           "real_curves", "real_group", "record_errors", "select", "workflow_base"]
 
 #: At most this many of the workflow's posterior draws predict with the base model (evenly spaced through
 #: the sample): an MCMC sample holds tens of thousands, and the 5 % and 95 % quantiles of a band from
@@ -93,30 +94,56 @@ def emulator_errors(model: EmulatedSHPB, records: Sequence[str]) -> dict[str, Ob
     return out
 
 
+def emulator_axis_errors(model: EmulatedSHPB, records: Sequence[str]) -> dict[str, dict[str, ObservationError]]:
+    """Per record whose surrogate is additive over its parameters (the anchored model), the error of each
+    parameter's own term: that axis's leave-one-out residuals
+    (:meth:`enkf.emulator.AnchoredEmulator.loo_residuals_by_axis`) at the record's observation times,
+    per-time rms with AR(1) correlation. A parameter without runs has no term (none is added for it).
+    Records with another surrogate are left out (their pooled error applies)."""
+    out = {}
+    for r in records:
+        emu = model.emulators[r]
+        if not hasattr(emu, "loo_residuals_by_axis"):
+            continue
+        W = interpolation_matrix(model.model_times, model.obs_times[r])
+        axes = {}
+        for name, res in emu.loo_residuals_by_axis().items():
+            err, _ = emulator_error_model(np.asarray(res) @ W.T, model.obs_times[r])
+            if err is not None:
+                axes[name] = err
+        out[r] = axes
+    return out
+
+
 def record_errors(model: EmulatedSHPB, noise: Mapping[str, ObservationError], *,
                   simulator: Mapping[str, ObservationError] | None = None,
-                  model_correlation: float = 0.0, simulator_correlation: float = 0.0) -> RecordErrors:
+                  model_correlation: float = 0.0, simulator_correlation: float = 0.0,
+                  per_model: bool = False) -> RecordErrors:
     """The protocol's error model per record: instrument ``noise`` (e.g. ``Observations.of_record(r).
     error_model()``), the emulator's time-correlated error (:func:`emulator_errors`) and the FDEM runs'
     variability ``simulator`` if known (e.g. the scatter of runs with different mesh seeds), with the
-    correlations of two predictions' errors (:class:`enkf.diagnosis.RecordErrors`)."""
-    return RecordErrors(dict(noise), emulator_errors(model, list(noise)), dict(simulator or {}), model_correlation,
-                        simulator_correlation)
+    correlations of two predictions' errors (:class:`enkf.diagnosis.RecordErrors`). ``per_model``: on an
+    additive surrogate, each model's own error from the axes it moves (:func:`emulator_axis_errors`)."""
+    records = list(noise)
+    return RecordErrors(dict(noise), emulator_errors(model, records), dict(simulator or {}), model_correlation,
+                        simulator_correlation, emulator_axis_errors(model, records) if per_model else {})
 
 
 def select(model: EmulatedSHPB, *, base_names: Sequence[str], candidates: Sequence, calib_records: Sequence[str],
            obs: Mapping[str, np.ndarray], noise: Mapping[str, ObservationError], heldout_records: Sequence[str] = (),
            simulator: Mapping[str, ObservationError] | None = None, model_correlation: float = 0.0,
-           simulator_correlation: float = 0.0, scopes: Mapping[str, str] | None = None, **select_kw) -> Selection:
+           simulator_correlation: float = 0.0, scopes: Mapping[str, str] | None = None, per_model: bool = False,
+           **select_kw) -> Selection:
     """:func:`enkf.diagnosis.select_effects` on the emulated records (module docstring). ``obs`` is read for
     the calibration records only; ``noise`` must cover calibration and held-out records (the held-out
     record's noise sets its predictive band, never its prediction). Physical candidates must be emulator
-    inputs (ValueError otherwise); per-record scopes come from the catalogue unless ``scopes`` says."""
+    inputs (ValueError otherwise); per-record scopes come from the catalogue unless ``scopes`` says;
+    ``per_model``: each model its own surrogate error (:func:`record_errors`)."""
     pm = protocol_model(model)
     for c in candidates:
         pm.box(list(c.param_names))  # raises for a physical candidate the emulator does not cover
     errors = record_errors(model, noise, simulator=simulator, model_correlation=model_correlation,
-                           simulator_correlation=simulator_correlation)
+                           simulator_correlation=simulator_correlation, per_model=per_model)
     return select_effects(pm, base_names=base_names, candidates=candidates, calib_records=calib_records,
                           heldout_records=heldout_records, obs=obs, errors=errors, scopes=scopes, **select_kw)
 
@@ -143,13 +170,14 @@ def check_runs(selection: Selection, replicates: int = 1) -> list[dict]:
     """The real FDEM runs the confirmation and the held-out evaluation need: per step and calibration
     record its cross-validation point (``role`` "cv"), per step and held-out record its prediction point
     ("heldout"), each ``replicates`` times (``replicate`` k: the record's k-th mesh realization, the same
-    for every step, so that two steps are compared on common meshes). ``simulator``: the parameters of
+    for every step, so that two steps are compared on common meshes); the rounds' alternatives too
+    (:attr:`enkf.diagnosis.Selection.alternatives`). ``simulator``: the parameters of
     the run (base and physical effects, the record's own copies under their plain names);
     ``measurement``: the chain applied to the run's curve afterwards."""
     if int(replicates) < 1:
         raise ValueError(f"check replicates must be >= 1, got {replicates}")
     rows = []
-    for step in selection.steps:
+    for step in (*selection.steps, *selection.alternatives):
         pts = step.check_points()
         for role in ("cv", "heldout"):
             for rec, point in pts[role].items():
@@ -182,6 +210,14 @@ def real_curves(rows: Sequence[Mapping], runs: Sequence, model: EmulatedSHPB) ->
             value = curves[0] if len(curves) == 1 else np.vstack(curves)
         out[role].setdefault(step, {})[rec] = value
     return out
+
+
+def real_group(selection: Selection, real_cv: Mapping[int, Mapping[str, np.ndarray | None]],
+               obs: Mapping[str, np.ndarray], noise: Mapping[str, ObservationError], step: int, *,
+               simulator: Mapping[str, ObservationError] | None = None) -> list[dict]:
+    """:func:`enkf.diagnosis.real_identification` with the error terms of :func:`confirm`: the kept step
+    against the other models of its round that have real runs."""
+    return real_identification(selection, real_cv, obs, RecordErrors(dict(noise), {}, dict(simulator or {})), step)
 
 
 def confirm(selection: Selection, real_cv: Mapping[int, Mapping[str, np.ndarray | None]],

@@ -10,6 +10,8 @@ exponential decay with time constant tau_d; the result times the gain g plus the
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from enkf import AR1Error
@@ -26,6 +28,33 @@ TRUTH = {"sigma_p": 40e6, "tau_d": 45e-6}
 SIGMA = 0.3e6          # instrument noise sd [Pa]
 NOISE_TAU = 3e-6       # its correlation time [s]
 EFFECT_PARAMS = ("face_gap.gap_m", "trigger_shift.dt_s", "gauge_gain.g", "baseline.offset_Pa", "rate_strength.k")
+
+
+def _diagnosis_default(key: str):
+    """The schema's default of ``diagnosis.<key>`` (config/schema.yaml): the tests walk as the workflow does."""
+    import yaml
+
+    def find(node):
+        if isinstance(node, dict):
+            if "diagnosis" in (node.get("properties") or {}):
+                return node["properties"]["diagnosis"]["properties"][key]["default"]
+            for v in node.values():
+                got = find(v)
+                if got is not None:
+                    return got
+        elif isinstance(node, list):
+            for v in node:
+                got = find(v)
+                if got is not None:
+                    return got
+        return None
+
+    schema = Path(__file__).resolve().parents[1] / "config" / "schema.yaml"
+    return find(yaml.safe_load(schema.read_text()))
+
+
+#: the round's proposals after its choice that the workflow's walk tries on the real simulator
+ALTERNATIVES = _diagnosis_default("alternatives")
 
 
 def curves(t, K, sigma_p, tau_d, gap=0.0, dt=0.0, g=1.0, offset=0.0, k=0.0):

@@ -163,6 +163,21 @@ def test_tiny_series_reduces_and_its_truth_matches_the_arguments(tmp_path):
         assert np.std(pre) == pytest.approx(t["noise_sd_strain"], rel=0.35)
 
 
+def test_an_onset_effects_size_is_read_though_it_moves_where_the_run_stops(tmp_path):
+    """A face gap with a tilted front (closure) changes the run's sample count (the tiny disc: 393 samples
+    against 408 without it), which once stopped the closure series of the benchmark before its first
+    calibration: the effect's curve is now read at the effect-free run's times. A 50 um gap closing at
+    the bar's 2.6-3.0 m/s delays the rise by about 15-20 us of a 60 us rise: the curve up to the peak
+    moves by 12 % of the peak (measured 0.120, 0.121), the peak by -5.9 and -4.7 %."""
+    truth = make_series(tmp_path / "series", geometry="brazilian_disc", drivers=["pulse:2.6", "pulse:3.0"],
+                        params={"sigma_t": 3.8e7, "E_t": 650.0},
+                        plant={"face_gap.gap_m": 5e-5, "closure.range_m": 1.5e-4}, spread={}, preset="fast",
+                        seed=5391, prefix="Tiny", lithology="granite_godinez2021", t_end=1.3e-4, null_peaks=True)
+    for t in truth["tests"]:
+        assert 0.08 < t["pre_peak_change_rms_rel"] < 0.2, t
+        assert -0.1 < t["peak_change_rel"] < -0.02, t
+
+
 def test_the_shipped_planted_series_is_what_its_provenance_says():
     """data/examples/planted_rate: each sheet reduces to the peak and rate truth.json recorded when it was
     made, within 0.5 % of the simulated peak, with the stated noise, and its rate law moves every peak by

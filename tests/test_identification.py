@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from _protocol_standin import BASE, TRUTH, StandIn, observe, record_errors
-from enkf.diagnosis import group_text, select_effects
+from enkf.diagnosis import ModelSpec, ModelStep, Selection, group_text, select_effects
 from shpb import effects as fx
 
 RECORDS = {"A": 0.6e12, "B": 0.85e12, "C": 1.1e12, "D": 1.4e12}
@@ -64,11 +64,17 @@ def test_the_report_names_the_group_of_every_kept_effect():
          "evidence": [{"effect": "trigger_shift", "delta_sq_error": 0.1, "sd": 1.0, "z": 0.1, "told_apart": False}],
          "not_tried": []}
 
-    class Sel:
-        rounds = [{"chosen": "face_gap", "group": g}, {"chosen": None, "group": None}]
-
-    ident = identification(Sel, 1)
-    assert [i["chosen"] for i in ident] == ["face_gap"] and identification(Sel, 0) == []
+    g_alt = {**g, "chosen": "closure", "effects": ["closure"], "evidence": []}
+    specs = [ModelSpec.of(["sigma_t"]), ModelSpec.of(["sigma_t"], [fx.get_effect("face_gap")])]
+    sel = Selection([ModelStep(i, sp, None, None, {}, {}, i) for i, sp in enumerate(specs)],
+                    [{"chosen": "face_gap", "group": g, "alternative_groups": {"closure": g_alt}},
+                     {"chosen": None, "group": None}], "", ["A"], [], {},
+                    [ModelStep(2, ModelSpec.of(["sigma_t"], [fx.get_effect("closure")]), None, None, {}, {}, 1,
+                               alternative_to=1)])
+    ident = identification(sel, 1)
+    assert [i["chosen"] for i in ident] == ["face_gap"] and identification(sel, 0) == []
+    # a refuted choice's alternative kept: the group of its own round is reported, not the choice's
+    assert [i["chosen"] for i in identification(sel, 2)] == ["closure"]
     html = "".join(_diagnosis({"added": ["face_gap"], "verdict": "confirmed", "identification": ident}))
     assert "Identification: the calibration records do not tell face_gap apart from trigger_shift (z = 0.10)" in html
     assert np.isfinite(ident[0]["z_critical"])

@@ -285,8 +285,12 @@ def make_series(out, *, geometry: str, drivers: list[str], params: dict, plant: 
             base = simulate(geometry, preset, params={**params, **off}, t_end=t_end, sample_dt=DT_S / 2,
                             mesh_seed=mesh_seeds[i], **kw) if physical else sim
             off_curve = np.asarray(base.columns["stress_back_Pa"], dtype=float)
-            on_curve = np.asarray(apply_measurement(base.columns["time_s"], sim.columns["stress_back_Pa"],
-                                                    measurement), dtype=float)
+            # the two runs' windows may differ by a few samples (an onset effect moves where the run
+            # stops): the effect's curve is read at the effect-free run's times
+            sim_t = np.asarray(sim.columns["time_s"], dtype=float)
+            on_curve = np.interp(np.asarray(base.columns["time_s"], dtype=float), sim_t,
+                                 np.asarray(apply_measurement(sim_t, sim.columns["stress_back_Pa"], measurement),
+                                            dtype=float))
             p_off, p_on = float(np.max(off_curve)), float(np.max(on_curve))
             test["effect_off_peak_stress_Pa"] = p_off
             test["peak_change_rel"] = p_on / p_off - 1.0

@@ -80,7 +80,7 @@ from ..diagnostics import posterior_dict
 from ..loop import assimilate
 from ..sampling import latin_hypercube
 from ..transforms import BoxTransform
-from .population import Population, fit_population, record_name
+from .population import Population, fit_population, record_name, split_name
 
 __all__ = ["CVResult", "Fit", "ForwardModel", "ModelSpec", "Prediction", "RecordErrors", "calibrate",
            "compare_cv", "compare_replicated", "cross_validate", "fit_populations", "given_fit", "holm", "predict_record",
@@ -154,45 +154,88 @@ class RecordErrors:
     and ``simulator`` variability (run-to-run scatter of the real model at a point), each an
     :class:`~enkf.covariance.ObservationError` on the record's observation times (absent: zero).
     ``model_correlation``, ``simulator_correlation``: correlation of two predictions' model errors and of
-    their simulator variability (module docstring). The dense
-    matrices are cached on first use: build a new one rather than change its parts."""
+    their simulator variability (module docstring).
+
+    ``model_axes``: per record, the model error of each parameter's own term (``{record: {param:
+    error}}``, an additive surrogate's error along each axis, e.g. the anchored model's leave-one-out
+    residuals along that axis). Where a record has them, a model's error of it is the sum over the
+    parameters the model moves (its names, per-record copies read as their parameter), so a model that
+    moves fewer parameters carries less surrogate error; and two models' errors share the terms of the
+    parameters both move (both read the same axis term of one surrogate: correlation 1) and nothing else
+    (``model_correlation`` is then not used). Without names, or for a record without them, ``model``
+    (the pooled error) is used. The dense matrices are cached on first use: build a new one rather than
+    change its parts."""
 
     noise: Mapping[str, ObservationError]
     model: Mapping[str, ObservationError] = field(default_factory=dict)
     simulator: Mapping[str, ObservationError] = field(default_factory=dict)
     model_correlation: float = 0.0
     simulator_correlation: float = 0.0
+    model_axes: Mapping[str, Mapping[str, ObservationError]] = field(default_factory=dict)
     _cache: dict = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self):
-        for rec, e in self.model.items():
+        terms = [(rec, e) for rec, e in self.model.items()]
+        terms += [(f"{rec} ({a})", e) for rec, axes in self.model_axes.items() for a, e in axes.items()]
+        for rec, e in terms:
             if getattr(e, "kind", "") == "diagonal" and e.m > 1:
                 raise ValueError(f"model error of {rec} is diagonal: give a time-correlated one "
                                  "(enkf.emulated.emulator_error_model)")
         if not 0.0 <= self.model_correlation <= 1.0 or not 0.0 <= self.simulator_correlation <= 1.0:
             raise ValueError("model_correlation and simulator_correlation must lie in [0, 1]")
 
-    def parts(self, rec: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Dense ``(R, E, S)`` of record ``rec``."""
+    def axes(self, rec: str, names: Sequence[str] | None) -> tuple[str, ...] | None:
+        """The parameters of ``names`` with an own error term for ``rec`` (None: the pooled error applies)."""
+        if names is None or rec not in self.model_axes:
+            return None
+        plain = {split_name(n)[0] for n in names}
+        return tuple(sorted(a for a in self.model_axes[rec] if a in plain))
+
+    def _model_dense(self, rec: str, axes: tuple[str, ...] | None, m: int) -> np.ndarray:
+        key = ("model", rec, axes)
+        if key not in self._cache:
+            if axes is None:
+                E = self.model[rec].dense() if rec in self.model else np.zeros((m, m))
+            else:
+                E = sum((self.model_axes[rec][a].dense() for a in axes), np.zeros((m, m)))
+            self._cache[key] = E
+        return self._cache[key]
+
+    def parts(self, rec: str, names: Sequence[str] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Dense ``(R, E, S)`` of record ``rec`` for a model of ``names`` (class docstring)."""
         key = ("parts", rec)
         if key not in self._cache:
             R = self.noise[rec].dense()
-            E = self.model[rec].dense() if rec in self.model else np.zeros_like(R)
             S = self.simulator[rec].dense() if rec in self.simulator else np.zeros_like(R)
-            self._cache[key] = (R, E, S)
+            self._cache[key] = (R, S)
+        R, S = self._cache[key]
+        return R, self._model_dense(rec, self.axes(rec, names), R.shape[0]), S
+
+    def pair(self, rec: str, names_a: Sequence[str] | None,
+             names_b: Sequence[str] | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(R, E_a, E_b, C, S)`` for two models' predictions of ``rec``: their model errors and the
+        covariance ``C`` of the two (the shared axes' terms, or ``model_correlation`` times the pooled
+        error)."""
+        R, Ea, S = self.parts(rec, names_a)
+        _, Eb, _ = self.parts(rec, names_b)
+        ax_a, ax_b = self.axes(rec, names_a), self.axes(rec, names_b)
+        if ax_a is None or ax_b is None:
+            return R, Ea, Eb, self.model_correlation * self._model_dense(rec, None, R.shape[0]), S
+        common = tuple(a for a in ax_a if a in ax_b)
+        return R, Ea, Eb, self._model_dense(rec, common, R.shape[0]), S
+
+    def total(self, rec: str, names: Sequence[str] | None = None) -> DenseError:
+        key = ("total", rec, self.axes(rec, names))
+        if key not in self._cache:
+            self._cache[key] = DenseError(sum(self.parts(rec, names)), _symmetric=True)
         return self._cache[key]
 
-    def total(self, rec: str) -> DenseError:
-        key = ("total", rec)
+    def calibration_error(self, records: Sequence[str], names: Sequence[str] | None = None) -> DenseError:
+        """``R + E + S`` block-diagonal over ``records`` (errors of different records are independent),
+        ``E`` that of a model of ``names``."""
+        key = ("calib", tuple(records), tuple(self.axes(r, names) for r in records))
         if key not in self._cache:
-            self._cache[key] = DenseError(sum(self.parts(rec)), _symmetric=True)
-        return self._cache[key]
-
-    def calibration_error(self, records: Sequence[str]) -> DenseError:
-        """``R + E + S`` block-diagonal over ``records`` (errors of different records are independent)."""
-        key = ("calib", tuple(records))
-        if key not in self._cache:
-            blocks = [sum(self.parts(r)) for r in records]
+            blocks = [sum(self.parts(r, names)) for r in records]
             n = sum(b.shape[0] for b in blocks)
             C, i = np.zeros((n, n)), 0
             for b in blocks:
@@ -268,7 +311,7 @@ def calibrate(model: ForwardModel, names: Sequence[str], records: Sequence[str],
     y = np.concatenate([np.asarray(obs[r], dtype=float) for r in records])
     rng = np.random.default_rng(seed_for(seed, "calibrate", *records, *names))
     res = assimilate(model.forward(names, records), latin_hypercube(lo, hi, n_members, rng), y,
-                     errors.calibration_error(records), rng=rng, method="esmda", alphas=esmda_alphas(esmda_steps),
+                     errors.calibration_error(records, names), rng=rng, method="esmda", alphas=esmda_alphas(esmda_steps),
                      transform=BoxTransform(lo, hi), names=names)
     return Fit(names, records, res.params[res.alive], lo, hi,
                {"source": "emulator", "stop_reason": res.decision.reason, "n_members": n_members,
@@ -353,7 +396,7 @@ def score_prediction(pred: Prediction, y: np.ndarray, errors: RecordErrors) -> d
     """Squared error and RMSE of the point curve; log predictive density of ``y`` (the mixture of
     ``N(draw, R + E + S)`` over the draws, and at the point curve alone)."""
     y = np.asarray(y, dtype=float)
-    C = errors.total(pred.record)
+    C = errors.total(pred.record, list(pred.point))
     logdet = 2.0 * float(np.sum(np.log(np.diag(C.cholesky))))
     const = -0.5 * (logdet + y.size * math.log(2.0 * math.pi))
     chi_draws = C.chi2((y[None, :] - pred.draws).T)
@@ -423,20 +466,27 @@ def cross_validate(model: ForwardModel, spec: ModelSpec, records: Sequence[str],
 
 
 def squared_error_difference(y, a, b, R, E=None, S=None, correlation: float = 0.0, Pa=None,
-                             Pb=None, simulator_correlation: float = 0.0) -> tuple[float, float]:
+                             Pb=None, simulator_correlation: float = 0.0, *, Eb=None,
+                             Ec=None) -> tuple[float, float]:
     """``(Delta, Var Delta)`` of ``Delta = |y - a|^2 - |y - b|^2`` under the Gaussian errors of the module
     docstring: noise ``R`` on ``y``; model error ``E`` (correlation ``correlation`` between the two
     predictions) plus simulator variability ``S`` (correlation ``simulator_correlation``: 1 when both
     predictions come from runs on one mesh realization) on each prediction, and each prediction's own
-    spread ``Pa``, ``Pb`` (independent) if given."""
+    spread ``Pa``, ``Pb`` (independent) if given. Two models with different model errors: ``E`` is
+    ``a``'s, ``Eb`` ``b``'s and ``Ec`` the covariance of the two (``correlation`` is then not used)."""
     y, a, b = (np.asarray(v, dtype=float) for v in (y, a, b))
     R = np.asarray(R, dtype=float)
-    E = np.zeros_like(R) if E is None else np.asarray(E, dtype=float)
+    Ea = np.zeros_like(R) if E is None else np.asarray(E, dtype=float)
     S = np.zeros_like(R) if S is None else np.asarray(S, dtype=float)
+    if Eb is None:
+        Eb, CE = Ea, correlation * Ea
+    else:
+        Eb = np.asarray(Eb, dtype=float)
+        CE = np.zeros_like(R) if Ec is None else np.asarray(Ec, dtype=float)
     u, v, d = y - a, y - b, b - a
-    A, C = E + S, correlation * E + simulator_correlation * S
-    Aa = A if Pa is None else A + Pa
-    Ab = A if Pb is None else A + Pb
+    C = CE + simulator_correlation * S
+    Aa = Ea + S if Pa is None else Ea + S + Pa
+    Ab = Eb + S if Pb is None else Eb + S + Pb
     delta = float(u @ u - v @ v)
     var = (4.0 * d @ R @ d + 4.0 * (u @ Aa @ u + v @ Ab @ v - 2.0 * u @ C @ v)
            + 2.0 * np.sum(Aa * Aa) + 2.0 * np.sum(Ab * Ab) - 4.0 * np.sum(C * C) + 4.0 * np.sum(R * (Aa + Ab - 2 * C)))
@@ -445,18 +495,23 @@ def squared_error_difference(y, a, b, R, E=None, S=None, correlation: float = 0.
 
 def compare_cv(y: Mapping[str, np.ndarray], current: Mapping[str, np.ndarray], candidate: Mapping[str, np.ndarray],
                errors: RecordErrors, *, use_model_error: bool = True, spread_current: Mapping | None = None,
-               spread_candidate: Mapping | None = None) -> dict:
+               spread_candidate: Mapping | None = None, names_current: Sequence[str] | None = None,
+               names_candidate: Sequence[str] | None = None) -> dict:
     """The difference of two sets of per-record predictions' squared errors, summed over the records of
     ``current``: ``delta`` (> 0: the candidate is better), its ``sd``, ``z = delta / sd`` and the one-sided
     ``p = 1 - Phi(z)``; per record the same. ``use_model_error=False`` leaves out the model (emulator)
     error, for predictions by the real simulator; ``spread_current`` / ``spread_candidate``: per record the
-    predictions' own spread (:attr:`Prediction.spread`, module docstring)."""
+    predictions' own spread (:attr:`Prediction.spread`, module docstring); ``names_current`` /
+    ``names_candidate``: the two models' names, for an error per model (:class:`RecordErrors`'
+    ``model_axes``)."""
     per, tot, var = {}, 0.0, 0.0
     for j in current:
-        R, E, S = errors.parts(j)
-        d, v = squared_error_difference(y[j], current[j], candidate[j], R, E if use_model_error else None, S,
-                                        errors.model_correlation, (spread_current or {}).get(j),
-                                        (spread_candidate or {}).get(j), errors.simulator_correlation)
+        R, Ea, Eb, Ec, S = errors.pair(j, names_current, names_candidate)
+        if not use_model_error:
+            Ea = Eb = Ec = None
+        d, v = squared_error_difference(y[j], current[j], candidate[j], R, Ea, S, 0.0, (spread_current or {}).get(j),
+                                        (spread_candidate or {}).get(j), errors.simulator_correlation,
+                                        Eb=Eb if use_model_error else None, Ec=Ec)
         per[j] = {"delta": d, "sd": math.sqrt(v)}
         tot += d
         var += v

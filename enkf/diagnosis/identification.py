@@ -47,7 +47,8 @@ def identification_group(best: Mapping, trials: Sequence[Mapping], obs: Mapping[
     for t in others:
         kw = ({"spread_current": {j: t["cv"].spread(j) for j in records},
                "spread_candidate": {j: best["cv"].spread(j) for j in records}} if spreads else {})
-        cmp = compare_cv(obs, {j: t["cv"].curve(j) for j in records}, chosen, errors, **kw)
+        cmp = compare_cv(obs, {j: t["cv"].curve(j) for j in records}, chosen, errors, **kw,
+                         names_current=t["cv"].spec.names(records), names_candidate=best["cv"].spec.names(records))
         evidence.append({"effect": t["candidate"].name, "delta_sq_error": cmp["delta"], "sd": cmp["sd"],
                          "z": cmp["z"], "told_apart": bool(cmp["z"] > z_crit)})
     group = [name] + [e["effect"] for e in evidence if not e["told_apart"]]

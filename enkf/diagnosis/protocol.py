@@ -24,9 +24,13 @@ candidates; nothing about FDEM or SHPB):
 3. :func:`confirm_additions`: given the real simulator's curves at those cross-validation points,
    walk M1, M2, ...: confirm M_r over the last confirmed model when its real cross-validated squared
    error is lower by more than the uncertainty (noise and the simulator's variability; one-sided,
-   level ``alpha / K`` with K of the round that chose it); the first refuted addition is dropped and the
-   walk stops there (what followed was chosen given it). The model shipped is never worse on real
-   cross-validation than the base model.
+   level ``alpha / K`` with K of the round that chose it); the first refuted addition is dropped, and
+   its round's alternatives (``alternatives``: the round's next proposals by the emulated gain, each the
+   same model with that effect instead) are tried in order at the same level, so that one wrong
+   proposal of the emulator does not end the walk; the walk stops at the first refuted step after its
+   alternatives (what followed was chosen given it). Each candidate walked is tested at ``alpha / K``:
+   by Bonferroni over the round's K candidates, every one of them tried keeps the round's family-wise
+   level. The model shipped is never worse on real cross-validation than the base model.
 4. :func:`heldout_evaluation`: the held-out records' observed curves, read here for the first time:
    RMSE, peak and time-to-peak errors of the base and of the final model, and the coverage of the
    predictive band (posterior members x population draws).
@@ -43,6 +47,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
+from scipy import stats
 
 from ..diagnostics import jsonable
 from ..predictive import predictive_band
@@ -55,7 +60,7 @@ from .ranking import finite_difference_sensitivity, rank_candidates
 from .structure import structure_tests
 
 __all__ = ["ModelStep", "Selection", "confirm_additions", "heldout_evaluation", "leave_one_record_out",
-           "replicated", "select_effects"]
+           "real_identification", "replicated", "select_effects"]
 
 
 @dataclass
@@ -73,6 +78,7 @@ class ModelStep:
     heldout: dict[str, Prediction]
     in_play: int = 0
     structure: dict = field(default_factory=dict)
+    alternative_to: int | None = None
 
     def check_points(self) -> dict:
         """``{"cv": {record: point}, "heldout": {record: point}}``: where a real-simulator check runs
@@ -85,7 +91,8 @@ class ModelStep:
                 "posterior_source": self.final.source, "cv_source": "emulator",
                 "populations": {p: pop.to_dict() for p, pop in self.populations.items()},
                 "heldout": {h: p.summary() for h, p in self.heldout.items()},
-                "structure": {k: self.structure.get(k) for k in ("passed", "failed", "chi2")}}
+                "structure": {k: self.structure.get(k) for k in ("passed", "failed", "chi2")},
+                **({} if self.alternative_to is None else {"alternative_to": self.alternative_to})}
 
 
 @dataclass
@@ -99,15 +106,27 @@ class Selection:
     calib_records: list[str]
     heldout_records: list[str]
     settings: dict
+    alternatives: list[ModelStep] = field(default_factory=list)
 
     @property
     def last(self) -> ModelStep:
         return self.steps[-1]
 
+    def step(self, index: int) -> ModelStep:
+        """The model of step ``index``: one of the nested ``steps`` or an alternative."""
+        for st in (*self.steps, *self.alternatives):
+            if st.index == int(index):
+                return st
+        raise KeyError(f"no step {index}")
+
+    def alternatives_to(self, index: int) -> list[ModelStep]:
+        """The alternatives of the round that chose step ``index``, in the order the walk tries them."""
+        return [a for a in self.alternatives if a.alternative_to == int(index)]
+
     def to_dict(self) -> dict:
         return jsonable({"calib_records": self.calib_records, "heldout_records": self.heldout_records,
                          "steps": [s.summary() for s in self.steps], "rounds": self.rounds, "why": self.why,
-                         "settings": self.settings})
+                         "settings": self.settings, "alternatives": [a.summary() for a in self.alternatives]})
 
 
 def _final_step(model, spec: ModelSpec, cv: CVResult, index: int, in_play: int, calib: list, heldout: list,
@@ -126,7 +145,7 @@ def _final_step(model, spec: ModelSpec, cv: CVResult, index: int, in_play: int, 
     y = np.concatenate([obs[r] for r in calib])
     mean = fit.mean()
     sim = model.forward(fit.names, calib)(np.array([mean[n] for n in fit.names]))[0]
-    w = errors.calibration_error(calib).whiten(y - sim)
+    w = errors.calibration_error(calib, fit.names).whiten(y - sim)
     return ModelStep(index, spec, cv, fit, pops, held, in_play, structure_tests(w, n_params=len(fit.names)))
 
 
@@ -148,7 +167,7 @@ def _ranked(model, spec: ModelSpec, step: ModelStep, remaining: list, calib: lis
     lo, hi = model.box(all_names)
     f = model.forward(all_names, calib)
     S = finite_difference_sensitivity(f, x0, fd_fraction * (np.asarray(hi) - np.asarray(lo)), lower=lo, upper=hi)
-    err = errors.calibration_error(calib)
+    err = errors.calibration_error(calib, names)
     Sw = err.whiten(S)
     w = err.whiten(np.concatenate([obs[r] for r in calib]) - f(x0)[0])
     table = rank_candidates(w, Sw[:, :len(names)], {k: Sw[:, a:a + n] for k, (a, n) in cols.items()},
@@ -180,7 +199,8 @@ def _round(model, state: dict, remaining: list, calib: list, obs: Mapping, error
         cv = cross_validate(model, spec.add(c, kw["scopes"]), calib, obs, errors, **_cv_kw(kw))
         spreads = ({"spread_current": {j: cur.spread(j) for j in calib},
                     "spread_candidate": {j: cv.spread(j) for j in calib}} if kw["prediction_spread"] else {})
-        cmp = compare_cv(obs, {j: cur.curve(j) for j in calib}, {j: cv.curve(j) for j in calib}, errors, **spreads)
+        cmp = compare_cv(obs, {j: cur.curve(j) for j in calib}, {j: cv.curve(j) for j in calib}, errors, **spreads,
+                         names_current=cur.spec.names(calib), names_candidate=cv.spec.names(calib))
         trials.append({"candidate": c, "cv": cv, "cmp": cmp})
     accepted, levels = holm([t["cmp"]["p"] for t in trials] + [1.0] * (K - len(tried)), kw["alpha"])
     if kw["gate"] == "improvement":
@@ -195,14 +215,23 @@ def _round(model, state: dict, remaining: list, calib: list, obs: Mapping, error
                      "p": t["cmp"]["p"], "level": lev, "accepted": bool(ok),
                      "text": _trial_text(t["candidate"].name, cur, t["cv"], t["cmp"], lev, K, ok,
                                          kw["gate"])})
-    passing = [t for t in trials if t["accepted"]]
-    best = max(passing, key=lambda t: t["cmp"]["delta"]) if passing else None
-    group = (identification_group(best, trials, obs, errors, level=kw["alpha"],
-                                  not_tried=[c.name for c in remaining if c not in tried],
-                                  spreads=kw["prediction_spread"]) if best else None)
+    # the proposals, the largest gain first: the first is the round's choice, the next ones its
+    # alternatives (tried on the real simulator if the choice is refuted)
+    passing = sorted((t for t in trials if t["accepted"]), key=lambda t: -t["cmp"]["delta"])
+    best = passing[0] if passing else None
+    alts = passing[1:1 + int(kw["alternatives"])]
+
+    def group_of(t):
+        return identification_group(t, trials, obs, errors, level=kw["alpha"],
+                                    not_tried=[c.name for c in remaining if c not in tried],
+                                    spreads=kw["prediction_spread"])
+
     return {"current": spec.label(), "current_cv_rmse": cur.rmse, "in_play": K,
             "tried": [c.name for c in tried], "ranked_by_score_test": kw["max_trials"] is not None,
-            "trials": rows, "chosen": best["candidate"].name if best else None, "group": group, "_best": best}
+            "trials": rows, "chosen": best["candidate"].name if best else None,
+            "group": group_of(best) if best else None,
+            "alternatives": [t["candidate"].name for t in alts],
+            "alternative_groups": {t["candidate"].name: group_of(t) for t in alts}, "_best": best, "_alts": alts}
 
 
 def _cv_kw(kw: dict) -> dict:
@@ -216,7 +245,7 @@ def select_effects(model: ForwardModel, *, base_names: Sequence[str], candidates
                    esmda_steps: int = 4, scales: Mapping[str, str] | None = None, band_level: float = 0.90,
                    population_kw: Mapping | None = None, max_trials: int | None = None,
                    fd_fraction: float = 1e-3, prediction_spread: bool = False,
-                   gate: str = "significance", base_fit: Fit | None = None) -> Selection:
+                   gate: str = "significance", base_fit: Fit | None = None, alternatives: int = 0) -> Selection:
     """Greedy forward selection of effects by cross-validation within the calibration records (module
     docstring, step 2).
 
@@ -244,6 +273,10 @@ def select_effects(model: ForwardModel, *, base_names: Sequence[str], candidates
         records with its draws, and no calibration of the base on all records is run here. The fits it
         cannot provide stay on ``model``: the base's cross-validation (each calibration record left
         out in turn) and every model with an added effect. None: the base is calibrated on ``model``.
+    alternatives : per round, how many of the next proposals (by the gain, after the chosen one) are kept
+        as alternatives: the round's model with that effect instead (:attr:`Selection.alternatives`,
+        numbered after the nested steps), which :func:`confirm_additions` tries on the real simulator,
+        in order, when the round's choice is refuted.
     """
     if gate not in ("significance", "improvement"):
         raise ValueError(f"gate must be 'significance' or 'improvement', got {gate!r}")
@@ -253,11 +286,12 @@ def select_effects(model: ForwardModel, *, base_names: Sequence[str], candidates
     cal_obs = {r: np.array(obs[r], dtype=float) for r in calib}  # the only read of the observations
     kw = {"seed": seed, "n_members": n_members, "esmda_steps": esmda_steps, "scales": scales,
           "band_level": band_level, "population_kw": population_kw, "max_trials": max_trials, "alpha": alpha,
-          "scopes": scopes, "fd_fraction": fd_fraction, "prediction_spread": prediction_spread, "gate": gate}
+          "scopes": scopes, "fd_fraction": fd_fraction, "prediction_spread": prediction_spread, "gate": gate,
+          "alternatives": int(alternatives)}
     spec = ModelSpec.of(base_names)
     cv = cross_validate(model, spec, calib, cal_obs, errors, **_cv_kw(kw))
     steps = [_final_step(model, spec, cv, 0, 0, calib, heldout, cal_obs, errors, kw, fit=base_fit)]
-    remaining, rounds = list(candidates), []
+    remaining, rounds, pending = list(candidates), [], []
     why = f"the maximum of {max_additions} addition(s) was reached"
     for _ in range(max_additions):
         if not remaining:
@@ -265,7 +299,7 @@ def select_effects(model: ForwardModel, *, base_names: Sequence[str], candidates
             break
         state = {"spec": spec, "cv": cv, "step": steps[-1]}
         rnd = _round(model, state, remaining, calib, cal_obs, errors, kw)
-        best = rnd.pop("_best")
+        best, alts = rnd.pop("_best"), rnd.pop("_alts")
         rounds.append(rnd)
         if best is None:
             why = (f"no candidate lowers the cross-validated error of {spec.label()}" if gate == "improvement" else
@@ -274,14 +308,21 @@ def select_effects(model: ForwardModel, *, base_names: Sequence[str], candidates
             rnd["text"] = why
             break
         c = best["candidate"]
+        pending += [(len(steps), spec, t, rnd["in_play"]) for t in alts]
         spec, cv = spec.add(c, scopes), best["cv"]
         remaining = [r for r in remaining if r.name != c.name]
         steps.append(_final_step(model, spec, cv, len(steps), rnd["in_play"], calib, heldout, cal_obs, errors, kw))
         rnd["text"] = next(t["text"] for t in rnd["trials"] if t["effect"] == c.name)
+    alt_steps = []
+    for i, (of, before, t, in_play) in enumerate(pending):
+        st = _final_step(model, before.add(t["candidate"], scopes), t["cv"], len(steps) + i, in_play, calib, heldout,
+                         cal_obs, errors, kw)
+        st.alternative_to = of
+        alt_steps.append(st)
     settings = {k: v for k, v in kw.items() if k not in ("scopes",)}
     settings.update(max_additions=max_additions, scopes=dict(scopes or {}), model_correlation=errors.model_correlation,
                     base_posterior=steps[0].final.source)
-    return Selection(steps, rounds, why, calib, heldout, settings)
+    return Selection(steps, rounds, why, calib, heldout, settings, alt_steps)
 
 
 def confirm_additions(selection: Selection, real: Mapping[int, Mapping[str, np.ndarray | None]],
@@ -316,20 +357,20 @@ def confirm_additions(selection: Selection, real: Mapping[int, Mapping[str, np.n
         return math.sqrt(sum(float(np.mean((y[j] - np.asarray(curves[j], float)) ** 2)) * y[j].size for j in calib)
                          / sum(y[j].size for j in calib))
 
-    confirmed, out = 0, []
     base_rmse = rmse_of(0)
     if base_rmse is None:
         raise ValueError("the base model's real cross-validation curves are needed (real[0][record])")
     rmses = {0: base_rmse}
-    for step in selection.steps[1:]:
-        r, prev = step.index, selection.steps[confirmed]
+
+    def walk(step: ModelStep, confirmed: int, then: str) -> tuple[dict, bool]:
+        r, prev = step.index, selection.step(confirmed)
         name = step.spec.effect_names[-1]
+        label = name if step.alternative_to is None else f"{name} (alternative to step {step.alternative_to})"
         rmses[r] = rmse_of(r)
         level = alpha / max(step.in_play, 1)
         if rmses[r] is None:
-            out.append({"step": r, "effect": name, "confirmed": False,
-                        "text": f"{name}: refuted, a real run at its cross-validation points failed; the walk stops"})
-            break
+            return {"step": r, "effect": name, "confirmed": False, "alternative_to": step.alternative_to,
+                    "text": f"{label}: refuted, a real run at its cross-validation points failed; {then}"}, False
         if replicated(real[confirmed], calib) and replicated(real[r], calib):
             cmp = compare_replicated(y, {j: real[confirmed][j] for j in calib}, {j: real[r][j] for j in calib},
                                      errors.noise)
@@ -338,25 +379,78 @@ def confirm_additions(selection: Selection, real: Mapping[int, Mapping[str, np.n
             cmp = compare_cv(y, real[confirmed], real[r], errors, use_model_error=use_model_error)
             how = ""
         ok = cmp["p"] <= level
-        out.append({"step": r, "effect": name, "confirmed": bool(ok), "real_cv_rmse_before": rmses[confirmed],
-                    "real_cv_rmse_after": rmses[r], "delta_sq_error": cmp["delta"], "sd": cmp["sd"], "z": cmp["z"],
-                    "p": cmp["p"], "level": level,
-                    **{k: cmp[k] for k in ("sd_realizations", "sd_noise", "dof", "test") if k in cmp},
-                    "text": (f"{name} over {prev.spec.label()}: real cross-validated RMSE {rmses[confirmed]:.4g} -> "
-                             f"{rmses[r]:.4g}; the squared-error sum falls by {cmp['delta']:.4g} with sd "
-                             f"{cmp['sd']:.4g} (z = {cmp['z']:.2f}, p = {cmp['p']:.3g}{how}, level {level:.3g} = "
-                             f"{alpha:g} / {step.in_play}): " + ("confirmed" if ok else
-                                                                 "refuted, dropped; the walk stops (the additions "
-                                                                 "after it were chosen given it)"))})
-        if not ok:
-            break
-        confirmed = r
+        return {"step": r, "effect": name, "confirmed": bool(ok), "alternative_to": step.alternative_to,
+                "real_cv_rmse_before": rmses[confirmed], "real_cv_rmse_after": rmses[r],
+                "delta_sq_error": cmp["delta"], "sd": cmp["sd"], "z": cmp["z"], "p": cmp["p"], "level": level,
+                **{k: cmp[k] for k in ("sd_realizations", "sd_noise", "dof", "test") if k in cmp},
+                "text": (f"{label} over {prev.spec.label()}: real cross-validated RMSE {rmses[confirmed]:.4g} -> "
+                         f"{rmses[r]:.4g}; the squared-error sum falls by {cmp['delta']:.4g} with sd "
+                         f"{cmp['sd']:.4g} (z = {cmp['z']:.2f}, p = {cmp['p']:.3g}{how}, level {level:.3g} = "
+                         f"{alpha:g} / {step.in_play}): " + ("confirmed" if ok else f"refuted, dropped; {then}"))}, ok
+
+    confirmed, out = 0, []
+    for step in selection.steps[1:]:
+        alts = selection.alternatives_to(step.index)
+        entry, ok = walk(step, confirmed, "the round's next proposal is tried" if alts else
+                         "the walk stops (the additions after it were chosen given it)")
+        out.append(entry)
+        if ok:
+            confirmed = step.index
+            continue
+        # the round's choice is refuted: its alternatives, in order, over the same model, each at the
+        # round's level (Bonferroni over the round's candidates covers every one of them tried)
+        for i, alt in enumerate(alts):
+            last = i == len(alts) - 1
+            entry, ok = walk(alt, confirmed, "the walk stops" if last else "the round's next proposal is tried")
+            if ok:
+                entry["text"] += "; the walk stops (the later rounds were chosen given the refuted one)"
+            out.append(entry)
+            if ok:
+                confirmed = alt.index
+                break
+        break
     if rmses[confirmed] > base_rmse:  # pragma: no cover - a confirmed step lowers the error; kept as the rule
         confirmed = 0
-    spec = selection.steps[confirmed].spec
+    spec = selection.step(confirmed).spec
     return {"confirmed": confirmed, "model": spec.label(), "effects": spec.effect_names, "steps": out,
             "real_cv_rmse": rmses,
             "text": (f"shipped: {spec.label()} (real cross-validated RMSE {base_rmse:.4g} -> {rmses[confirmed]:.4g})")}
+
+
+def real_identification(selection: Selection, real: Mapping[int, Mapping[str, np.ndarray | None]],
+                        obs: Mapping[str, np.ndarray], errors: RecordErrors, step: int, *,
+                        level: float | None = None) -> list[dict]:
+    """The kept step's round on the real simulator: step ``step`` (confirmed by :func:`confirm_additions`)
+    against every other model of its round with real runs at its cross-validation points (the round's
+    choice and its alternatives: each the same model with another effect added), as the walk compares
+    (paired over replicates where there are, else :func:`~.crossval.compare_cv`). ``told_apart``: the kept
+    effect predicts better at one-sided ``level`` (default the selection's alpha), Bonferroni over those
+    compared. Empty for the base model or a round without another model run."""
+    if int(step) == 0:
+        return []
+    kept = selection.step(step)
+    chain = kept.index if kept.alternative_to is None else kept.alternative_to
+    others = [m for m in (selection.step(chain), *selection.alternatives_to(chain)) if m.index != kept.index]
+    calib = selection.calib_records
+    others = [m for m in others if all(real.get(m.index, {}).get(j) is not None for j in calib)]
+    if not others:
+        return []
+    level = selection.settings["alpha"] if level is None else level
+    z_crit = float(stats.norm.isf(level / len(others)))
+    y = {j: np.asarray(obs[j], dtype=float) for j in calib}
+    out = []
+    for m in others:
+        if replicated(real[m.index], calib) and replicated(real[kept.index], calib):
+            cmp = compare_replicated(y, {j: real[m.index][j] for j in calib}, {j: real[kept.index][j] for j in calib},
+                                     errors.noise)
+            told = cmp["p"] <= level / len(others)
+        else:
+            cmp = compare_cv(y, real[m.index], real[kept.index], errors, use_model_error=False)
+            told = cmp["z"] > z_crit
+        out.append({"effect": m.spec.effect_names[-1], "step": m.index, "delta_sq_error": cmp["delta"], "sd": cmp["sd"],
+                    "z": cmp["z"], "p": cmp["p"], "level": level / len(others), "told_apart": bool(told),
+                    **{k: cmp[k] for k in ("dof", "test") if k in cmp}})
+    return out
 
 
 def replicated(curves: Mapping, records: Sequence[str]) -> bool:
@@ -383,15 +477,15 @@ def heldout_evaluation(selection: Selection, obs: Mapping[str, np.ndarray], time
     out = {}
     for h in selection.heldout_records:
         y, t = np.asarray(obs[h], dtype=float), np.asarray(times[h], dtype=float)
-        rec = {"final_model": selection.steps[final].spec.label()}
-        for when, step in (("before", selection.steps[0]), ("after", selection.steps[final])):
+        rec = {"final_model": selection.step(final).spec.label()}
+        for when, step in (("before", selection.steps[0]), ("after", selection.step(final))):
             pred = step.heldout[h]
             curve = pred.curve if real is None else np.asarray(real[when][h], dtype=float)
             lo, hi = pred.band
             e = replicate_curve_errors(t, curve, y)  # (K, m) replicated runs: their mean errors
             e["band_coverage"] = float(np.mean((y >= lo) & (y <= hi)))
             if errors is not None:
-                plo, phi = predictive_band(pred.draws, errors.total(h), seed, level=pred.band_level)
+                plo, phi = predictive_band(pred.draws, errors.total(h, list(pred.point)), seed, level=pred.band_level)
                 e["predictive_coverage"] = float(np.mean((y >= plo) & (y <= phi)))
             e["point"] = dict(pred.point)
             e["intervals"] = {k: list(v) for k, v in pred.intervals().items()}
@@ -421,7 +515,7 @@ def leave_one_record_out(model: ForwardModel, records: Sequence[str], obs: Mappi
                              heldout_records=[h], obs={r: obs[r] for r in calib}, errors=errors, **select_kw)
         final = confirm(sel) if confirm is not None else len(sel.steps) - 1
         ev = heldout_evaluation(sel, {h: obs[h]}, times, final=final, errors=errors)[h]
-        step = sel.steps[final]
+        step = sel.step(final)
         row = {"heldout": h, "effects": ",".join(step.spec.effect_names), "n_effects": len(step.spec.effects),
                "rmse_before": ev["before"]["rmse"], "rmse_after": ev["after"]["rmse"], "rmse_change": ev["rmse_change"],
                "peak_error_before": ev["before"]["peak_error"], "peak_error_after": ev["after"]["peak_error"],
