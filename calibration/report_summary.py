@@ -150,6 +150,11 @@ def _diagnosis(check: Mapping) -> list[str]:
     conf = _get(check, "fdem_confirmation", "text")
     out = [f"<p style=\"margin:0.4em 0 0 0\"><b>Diagnosis</b>: verdict {escape(str(check.get('verdict') or '?'))}, "
            f"effects kept: {escape(added)}." + (f" {escape(str(conf))}." if conf else "") + "</p>"]
+    steps = _get(check, "fdem_confirmation", "steps")
+    if isinstance(steps, list) and steps:
+        # the walk step by step: a refuted choice and the alternative confirmed after it are both news
+        out.append("<p style=\"margin:0.4em 0 0 0\">The walk on real FDEM runs:</p><ol style=\"margin:0.2em 0\">"
+                   + "".join(f"<li>{escape(str(_get(st, 'text') or '?'))}</li>" for st in steps) + "</ol>")
     for group in check.get("identification") or []:
         out.append(f"<p style=\"margin:0.4em 0 0 0\">Identification: {escape(str(group.get('text', '')))}.</p>")
     per = check.get("errors_per_record")

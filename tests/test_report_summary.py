@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+from html import unescape as html_unescape
 import re
 from pathlib import Path
 
@@ -125,3 +126,14 @@ def test_a_tiny_run_logs_each_iteration_and_its_report_opens_on_the_summary(tmp_
     q = summary["posterior"]["sigma_t"]
     assert f"[{q['q05'] * 1e-6:.4g}, {q['q95'] * 1e-6:.4g}]" in desc
     assert "0 Summary" in html
+
+
+def test_the_summary_lists_the_walk_a_refuted_choice_and_the_alternative_confirmed_after_it():
+    """The default run's marble: its first proposal refuted, its round's next one confirmed; both in the page."""
+    run = REPO / "benchmarks" / "results" / "default_run" / "marble_loop"
+    check = json.loads((run / "diagnosis" / "check.json").read_text())
+    html = summary_html("marble_loop", json.loads((run / "summary.json").read_text()), check)
+    items = re.findall(r"<li>(.*?)</li>", html.split("The walk on real FDEM runs:")[1].split("</ol>")[0])
+    assert [st["text"] for st in check["fdem_confirmation"]["steps"]] == [html_unescape(i) for i in items]
+    assert len(items) == 2 and "refuted" in items[0] and "(alternative to step 1)" in items[1]
+    assert items[1].endswith("confirmed; the walk stops (the later rounds were chosen given the refuted one)")
