@@ -316,9 +316,10 @@ def pool(parts: list[str], plan: dict) -> dict:
                       cores=docs[0]["cores"], wall_s=round(sum(d["wall_s"] for d in docs), 1))
 
 
-def split(part: str, folder: str, plan: dict, note: str = "") -> list[Path]:
+def split(part: str, folder: str, plan: dict, note: str = "", wall_is_cost: bool = True) -> list[Path]:
     """One file per series of a part's JSON, ``<case>_<seed>.json`` in ``folder`` (each with its own
-    wall time and one-series scores, which are not the benchmark's: :func:`pool` scores them together)."""
+    wall time and one-series scores, which are not the benchmark's: :func:`pool` scores them together).
+    ``wall_is_cost`` False: the part shared the machine, so its wall times are no cost figure."""
     doc = json.loads(Path(part).read_text())
     out = []
     for row in doc["series"]:
@@ -327,7 +328,9 @@ def split(part: str, folder: str, plan: dict, note: str = "") -> list[Path]:
             raise SystemExit(f"{path} exists: a benchmark series is run once")
         one = result_doc([row], plan["acceptance"], plan=doc["plan"], seeds=str(row["seed"]), cores=doc["cores"],
                          cpu_count=doc.get("cpu_count"), wall_s=row["wall_s"])
-        path.write_text(json.dumps({**one, "note": note or doc.get("note", "")}, indent=1, default=float) + "\n")
+        extra = {} if wall_is_cost else {"wall_is_cost": False}
+        path.write_text(json.dumps({**one, "note": note or doc.get("note", ""), **extra}, indent=1, default=float)
+                        + "\n")
         out.append(path)
     return out
 
@@ -349,10 +352,12 @@ def main(argv=None) -> int:
     ap.add_argument("--split", nargs=2, metavar=("PART", "FOLDER"), help="write one file per series of a part's "
                     "JSON into FOLDER (benchmarks/results/bench_planted_records); runs nothing")
     ap.add_argument("--note", default="", help="with --split: what the part was (its commit, how it was stopped)")
+    ap.add_argument("--shared-machine", action="store_true", help="with --split: the part ran beside other work, "
+                    "so its wall times are marked as no cost figure (wall_is_cost false)")
     args = ap.parse_args(argv)
     plan = json.loads(Path(args.plan).read_text())
     if args.split:
-        for path in split(*args.split, plan, args.note):
+        for path in split(*args.split, plan, args.note, wall_is_cost=not args.shared_machine):
             print(path)
         return 0
     if args.pool:

@@ -235,3 +235,8 @@ def test_a_part_splits_into_one_file_per_series_and_never_overwrites_one(tmp_pat
     assert one["wall_s"] == 800.0 and one["scores"]["null_false_positive_rate"] == 0.0 and one["note"] == "a part"
     with pytest.raises(SystemExit, match="run once"):
         split(str(part), str(tmp_path), PLAN)
+    assert "wall_is_cost" not in one
+    # a part that shared the machine: its series say their wall time is no cost figure
+    (tmp_path / "shared").mkdir()
+    shared = split(str(part), str(tmp_path / "shared"), PLAN, "beside other work", wall_is_cost=False)
+    assert all(json.loads(p.read_text())["wall_is_cost"] is False for p in shared)
