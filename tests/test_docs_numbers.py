@@ -281,6 +281,16 @@ QUOTES: list[Quote] = [
     Quote("docs/workflow.md", "its predictive coverage is {cov}", lambda J: {
         "cov": f"{_twin()['predictive_coverage_90']['synthetic']:.2f}"}),
     Quote(CL, "A cylinder series costs {lo:.0f}-{hi:.0f} s on 2 cores", lambda J: _series_walls(J, "cylinder")),
+    Quote(CL, "four granite discs at {lo}-{hi} m/s carrying", lambda J: (lambda v: {"lo": v[0], "hi": v[-1]})(
+        re.findall(r"\d+\.\d+", J("benchmarks/planted_plan.json")["series"]["disc"]["drivers"][0].split(" m/s")[0]))),
+    Quote(CL, "the last `seating`\n(z = {z:.2f}): `{named}`; the rate law was not among the proposals. The held-out disc is "
+          "predicted\nwith {r} MPa RMSE, its 90 % predictive band covering {c:.2f} of its curve", lambda J: (lambda s: {
+              "z": float(s["why"].split("(z = ")[1].split(",")[0]), "named": s["named"],
+              "r": _mpa(s["heldout"]["PlantDiscRateStrength_04"]["rmse_before_Pa"]),
+              "c": s["heldout"]["PlantDiscRateStrength_04"]["predictive_coverage_90_after"]})(
+              J("benchmarks/results/bench_planted_records/disc_rate_strength_5305.json")["series"][0])
+          if "seating (alternative to step 1)" in J("benchmarks/results/bench_planted_records/disc_rate_strength_5305.json")
+          ["series"][0]["why"] else {}),
     Quote(CL, "on the null and decoy\n   stand-ins, 0 of 20 confirmed each with the alternatives walked",
           by="tests/test_protocol_decoys.py::test_decoy_candidates_are_rejected_at_the_walks_level_on_null_series"),
     Quote(CL, "told apart from a model 4.5x as far off the data, not from one 1.05x as far (both at alpha / 2)",
