@@ -205,6 +205,28 @@ def test_the_shipped_planted_series_is_what_its_provenance_says():
     assert size["peak_change_rel"] == pytest.approx([0.098, 0.119, 0.143, 0.171], abs=0.001)
 
 
+def test_the_shipped_planted_gap_series_is_what_its_provenance_says():
+    """data/examples/planted_gap: each sheet reduces to what truth.json recorded; the peaks within 0.2 % of
+    the simulated ones but the held-out PlantGap_03's, 1.1 % low (graded invalid for force balance: the
+    reduction's one-wave stress and the model's back face differ there); the gap moves the rise by 9-13
+    times the fast mesh's scatter before the peak and the peaks by under 1 % (PROVENANCE.md)."""
+    from benchmarks.bench_planted import effect_size, mesh_pre_peak_sd_rel, mesh_sd_rel
+    from tools.make_planted_series import _reduced_summary
+
+    folder = ROOT / "data" / "examples" / "planted_gap"
+    truth = json.loads((folder / "truth.json").read_text())
+    assert truth["plant"] == {"face_gap.gap_m": 1e-4} and truth["spread"] == {"face_gap.gap_m": 2.5e-5}
+    assert truth["preset"] == "standard" and truth["seed"] == 53 and len(truth["tests"]) == 3
+    for t, tol in zip(truth["tests"], (0.002, 0.002, 0.012)):
+        got = _reduced_summary(folder / f"{t['name']}.yaml")
+        assert got["peak_stress_Pa"] == pytest.approx(t["reduced"]["peak_stress_Pa"], rel=1e-9)
+        assert got["peak_stress_Pa"] == pytest.approx(t["model_peak_stress_Pa"], rel=tol)
+        assert 50e-6 < t["planted"]["face_gap.gap_m"] < 150e-6
+    size = effect_size(truth, mesh_sd_rel("cylinder"), mesh_pre_peak_sd_rel("cylinder"))
+    assert size["above_scatter"] and max(abs(c) for c in size["peak_change_rel"]) < 0.01
+    assert min(size["pre_peak_change_rms_rel"]) > 9 * size["mesh_pre_peak_sd_rel"]
+
+
 def test_parts_of_a_benchmark_pool_into_one_score_and_a_series_run_twice_is_refused(tmp_path):
     from benchmarks.bench_planted import pool
 
