@@ -30,9 +30,9 @@ VAR = "benchmarks/results/bench_sim_variability.json"
 
 
 def _planted_gap(J) -> dict:
-    """The shipped planted-gap series through the loop (benchmarks/results/planted_gap_run/): the walk's
+    """The shipped planted-gap series through the loop (the default run's planted_gap): the walk's
     confirmed step, the held-out errors, and the planted values against the reported intervals."""
-    run, truth = "benchmarks/results/planted_gap_run", J("data/examples/planted_gap/truth.json")
+    run, truth = f"{RUN}/planted_gap", J("data/examples/planted_gap/truth.json")
     rep, chk = J(f"{run}/diagnosis/report.json"), J(f"{run}/diagnosis/check.json")
     step = [s for s in rep["confirmation"]["steps"] if s["confirmed"]]
     post = rep["selection"]["steps"][rep["shipped_step"]]["posterior"]
@@ -306,7 +306,18 @@ QUOTES: list[Quote] = [
           "90 % predictive band covering {c:.2f} of its curve. The fitted gaps' 90 % intervals hold {k} of the {n}\n"
           "calibration records' planted gaps, and the held-out record's predicted interval holds its own; the\n"
           "shipped model's `sigma_t` interval misses its truth ({m} [{lo}, {hi}] MPa for {t:.0f})", _planted_gap),
-    Quote(CL, "face gap drawn\naround {g:.0f} um;", lambda J: {
+    Quote("docs/workflow.md", "face gaps of {lo:.0f}-{hi:.0f} um that the calibration does not declare): `{e}` is proposed first "
+          "and\n  confirmed on real FDEM runs, and the held-out record's RMSE falls from {rb} to {ra} MPa", lambda J: (
+              lambda g, rep, chk: {"lo": min(g) * 1e6, "hi": max(g) * 1e6, "e": rep["selection"]["rounds"][0]["chosen"],
+                                   "rb": _mpa(chk["heldout"]["PlantGap_03"]["before"]["rmse"]),
+                                   "ra": _mpa(chk["heldout"]["PlantGap_03"]["after"]["rmse"])}
+              if rep["added"] == [rep["selection"]["rounds"][0]["chosen"]] else {})(
+              [t["planted"]["face_gap.gap_m"] for t in J("data/examples/planted_gap/truth.json")["tests"]],
+              J(f"{RUN}/planted_gap/diagnosis/report.json"), J(f"{RUN}/planted_gap/diagnosis/check.json"))),
+    Quote("README.md", "the held-out\nrecord's RMSE falls from {rb} to {ra} MPa", lambda J: {
+        "rb": _mpa(J(f"{RUN}/planted_gap/diagnosis/check.json")["heldout"]["PlantGap_03"]["before"]["rmse"]),
+        "ra": _mpa(J(f"{RUN}/planted_gap/diagnosis/check.json")["heldout"]["PlantGap_03"]["after"]["rmse"])}),
+    Quote(CL, "face gap drawn\naround {g:.0f} um)", lambda J: {
         "g": J("data/examples/planted_gap/truth.json")["plant"]["face_gap.gap_m"] * 1e6}),
     Quote(CL, "four granite discs at {lo}-{hi} m/s carrying", lambda J: (lambda v: {"lo": v[0], "hi": v[-1]})(
         re.findall(r"\d+\.\d+", J("benchmarks/planted_plan.json")["series"]["disc"]["drivers"][0].split(" m/s")[0]))),

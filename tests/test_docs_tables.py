@@ -25,7 +25,7 @@ def test_the_readme_coverage_table_is_generated_from_the_committed_benchmark_jso
 def test_the_readme_results_table_is_generated_from_the_newest_committed_default_run():
     text = (ROOT / "README.md").read_text()
     sources = results_table.readme_block_sources(text)
-    assert sources == [f"benchmarks/results/default_run/{e}/summary.json" for e in ("twin_ref", "marble_loop")]
+    assert sources == [f"benchmarks/results/default_run/{e}/summary.json" for e in results_table.DEFAULT_RUN[1]]
     assert _block(text, results_table) == results_table.block(*sources)
 
 
@@ -63,8 +63,9 @@ def test_the_workflow_docs_default_run_tables_are_the_tools_output():
     start, end = text.index(results_table.WORKFLOW_START), text.index(results_table.WORKFLOW_END)
     assert text[start:end + len(results_table.WORKFLOW_END)] == results_table.workflow_block()
     folder = ROOT / "benchmarks" / "results" / "default_run"
-    assert results_table.table(folder, ["twin_ref", "marble_loop"]) in text
-    assert results_table.diagnosis_table(folder, "marble_loop") in text
+    assert results_table.table(folder, results_table.DEFAULT_RUN[1]) in text
+    for loop in ("marble_loop", "planted_gap"):
+        assert results_table.diagnosis_table(folder, loop) in text
 
 
 def test_the_engine_speed_tables_are_generated_from_the_committed_benchmark_json():

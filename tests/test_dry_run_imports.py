@@ -53,8 +53,8 @@ def test_a_dry_run_of_the_default_config_imports_no_scipy_numba_matplotlib_enkf_
     assert first.returncode == 0, first.stderr[-3000:]
     warm = _dry_run(workdir)
     assert warm.returncode == 0, warm.stderr[-3000:]
-    # the DAG was built: the default run's two experiments start with their prior ensembles
-    for exp in ("twin_ref", "marble_loop"):
+    # the DAG was built: the default run's three experiments start with their prior ensembles
+    for exp in ("twin_ref", "marble_loop", "planted_gap"):
         assert f"results/{exp}/iter_0/params.csv" in warm.stdout
     names = _imported(warm.stderr)
     assert {"snakemake", "calibration.config_check", "calibration.workflow_io"} <= names  # the report was read

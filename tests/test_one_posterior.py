@@ -57,16 +57,17 @@ def test_the_schema_and_the_spec_state_the_same_default_form():
     assert em["tempering"]["enum"] == list(TEMPERINGS) and em["tempering"]["default"] == ExperimentSpec.tempering
 
 
-@pytest.mark.parametrize("exp", ["twin_ref", "marble_loop"])
+@pytest.mark.parametrize("exp", ["twin_ref", "marble_loop", "planted_gap"])
 def test_the_default_runs_summaries_name_their_posterior(exp):
     summary = json.loads((RUN / exp / "summary.json").read_text())
     assert summary["posterior_method"] == "emulator_mcmc"
     assert {k: summary["posterior_form"][k] for k in HARNESS_FORM} == HARNESS_FORM
 
 
-def test_the_default_runs_diagnosis_base_model_is_its_posterior():
-    summary = json.loads((RUN / "marble_loop" / "summary.json").read_text())
-    report = json.loads((RUN / "marble_loop" / "diagnosis" / "report.json").read_text())
+@pytest.mark.parametrize("exp", ["marble_loop", "planted_gap"])
+def test_the_default_runs_diagnosis_base_model_is_its_posterior(exp):
+    summary = json.loads((RUN / exp / "summary.json").read_text())
+    report = json.loads((RUN / exp / "diagnosis" / "report.json").read_text())
     assert report["base_posterior"] == "workflow"
     assert base_posterior_mismatches(summary, report) == []
 

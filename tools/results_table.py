@@ -125,7 +125,14 @@ def readme_block_sources(text: str) -> list:
 
 WORKFLOW_DOC = ROOT / "docs" / "workflow.md"
 WORKFLOW_START, WORKFLOW_END = "<!-- default-run-table:start -->", "<!-- default-run-table:end -->"
-DEFAULT_RUN = ("benchmarks/results/default_run", ("twin_ref", "marble_loop"))
+def _default_experiments() -> tuple[str, ...]:
+    """The experiments of the default run: config/config.yaml's ``run`` list."""
+    import yaml
+
+    return tuple(yaml.safe_load((ROOT / "config" / "config.yaml").read_text())["run"])
+
+
+DEFAULT_RUN = ("benchmarks/results/default_run", _default_experiments())
 
 
 def workflow_block(folder: str = DEFAULT_RUN[0], names=DEFAULT_RUN[1]) -> str:
