@@ -43,8 +43,8 @@ from shpb import effects as fx
 
 from .diagnose import EmulatedSHPB, interpolation_matrix, measured_curve, record_params, workflow_sample
 
-__all__ = ["MAX_BASE_DRAWS", "ProtocolModel", "check_runs", "confirm", "emulator_axis_errors", "emulator_errors", "protocol_model",
-           "real_curves", "real_group", "record_errors", "select", "workflow_base"]
+__all__ = ["MAX_BASE_DRAWS", "ProtocolModel", "check_runs", "confirm", "emulator_axis_errors", "emulator_errors",
+           "protocol_model", "real_curves", "real_group", "record_errors", "select", "workflow_base"]
 
 #: At most this many of the workflow's posterior draws predict with the base model (evenly spaced through
 #: the sample): an MCMC sample holds tens of thousands, and the 5 % and 95 % quantiles of a band from
@@ -86,12 +86,18 @@ def emulator_errors(model: EmulatedSHPB, records: Sequence[str]) -> dict[str, Ob
     per-time rms with AR(1) correlation (:func:`enkf.emulated.emulator_error_model`)."""
     out = {}
     for r in records:
-        W = interpolation_matrix(model.model_times, model.obs_times[r])
-        err, _ = emulator_error_model(np.asarray(model.emulators[r].loo_residuals()) @ W.T, model.obs_times[r])
+        err = _error_at_obs(model, r, model.emulators[r].loo_residuals())
         if err is None:
             raise ValueError(f"the emulator of {r} has no leave-one-out residuals")
         out[r] = err
     return out
+
+
+def _error_at_obs(model: EmulatedSHPB, record: str, residuals) -> ObservationError | None:
+    """Residual curves on the model grid as an error at ``record``'s observation times: per-time rms,
+    AR(1) (:func:`enkf.emulated.emulator_error_model`); None without residuals."""
+    W = interpolation_matrix(model.model_times, model.obs_times[record])
+    return emulator_error_model(np.asarray(residuals) @ W.T, model.obs_times[record])[0]
 
 
 def emulator_axis_errors(model: EmulatedSHPB, records: Sequence[str]) -> dict[str, dict[str, ObservationError]]:
@@ -105,13 +111,8 @@ def emulator_axis_errors(model: EmulatedSHPB, records: Sequence[str]) -> dict[st
         emu = model.emulators[r]
         if not hasattr(emu, "loo_residuals_by_axis"):
             continue
-        W = interpolation_matrix(model.model_times, model.obs_times[r])
-        axes = {}
-        for name, res in emu.loo_residuals_by_axis().items():
-            err, _ = emulator_error_model(np.asarray(res) @ W.T, model.obs_times[r])
-            if err is not None:
-                axes[name] = err
-        out[r] = axes
+        axes = {name: _error_at_obs(model, r, res) for name, res in emu.loo_residuals_by_axis().items()}
+        out[r] = {name: err for name, err in axes.items() if err is not None}
     return out
 
 
@@ -217,7 +218,12 @@ def real_group(selection: Selection, real_cv: Mapping[int, Mapping[str, np.ndarr
                simulator: Mapping[str, ObservationError] | None = None) -> list[dict]:
     """:func:`enkf.diagnosis.real_identification` with the error terms of :func:`confirm`: the kept step
     against the other models of its round that have real runs."""
-    return real_identification(selection, real_cv, obs, RecordErrors(dict(noise), {}, dict(simulator or {})), step)
+    return real_identification(selection, real_cv, obs, _real_errors(noise, simulator), step)
+
+
+def _real_errors(noise: Mapping[str, ObservationError], simulator: Mapping[str, ObservationError] | None) -> RecordErrors:
+    # real runs: no surrogate error, the runs' variability where given
+    return RecordErrors(dict(noise), {}, dict(simulator or {}))
 
 
 def confirm(selection: Selection, real_cv: Mapping[int, Mapping[str, np.ndarray | None]],
@@ -226,5 +232,4 @@ def confirm(selection: Selection, real_cv: Mapping[int, Mapping[str, np.ndarray 
     """:func:`enkf.diagnosis.confirm_additions` on real FDEM curves at the cross-validation points
     (:func:`real_curves`' ``"cv"``): uncertainty = instrument noise and the runs' variability (measured on
     the paired replicates where there are several, else ``simulator`` on each run)."""
-    errors = RecordErrors(dict(noise), {}, dict(simulator or {}))
-    return confirm_additions(selection, real_cv, obs, errors, alpha=alpha)
+    return confirm_additions(selection, real_cv, obs, _real_errors(noise, simulator), alpha=alpha)

@@ -32,25 +32,11 @@ EFFECT_PARAMS = ("face_gap.gap_m", "trigger_shift.dt_s", "gauge_gain.g", "baseli
 
 def _diagnosis_default(key: str):
     """The schema's default of ``diagnosis.<key>`` (config/schema.yaml): the tests walk as the workflow does."""
-    import yaml
+    from calibration.config_check import load_yaml
 
-    def find(node):
-        if isinstance(node, dict):
-            if "diagnosis" in (node.get("properties") or {}):
-                return node["properties"]["diagnosis"]["properties"][key]["default"]
-            for v in node.values():
-                got = find(v)
-                if got is not None:
-                    return got
-        elif isinstance(node, list):
-            for v in node:
-                got = find(v)
-                if got is not None:
-                    return got
-        return None
-
-    schema = Path(__file__).resolve().parents[1] / "config" / "schema.yaml"
-    return find(yaml.safe_load(schema.read_text()))
+    schema = load_yaml(Path(__file__).resolve().parents[1] / "config" / "schema.yaml")
+    return schema["properties"]["experiments"]["additionalProperties"]["properties"]["diagnosis"]["properties"][key][
+        "default"]
 
 
 #: the round's proposals after its choice that the workflow's walk tries on the real simulator

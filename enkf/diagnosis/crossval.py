@@ -509,9 +509,9 @@ def compare_cv(y: Mapping[str, np.ndarray], current: Mapping[str, np.ndarray], c
         R, Ea, Eb, Ec, S = errors.pair(j, names_current, names_candidate)
         if not use_model_error:
             Ea = Eb = Ec = None
-        d, v = squared_error_difference(y[j], current[j], candidate[j], R, Ea, S, 0.0, (spread_current or {}).get(j),
-                                        (spread_candidate or {}).get(j), errors.simulator_correlation,
-                                        Eb=Eb if use_model_error else None, Ec=Ec)
+        d, v = squared_error_difference(y[j], current[j], candidate[j], R, Ea, S, Pa=(spread_current or {}).get(j),
+                                        Pb=(spread_candidate or {}).get(j),
+                                        simulator_correlation=errors.simulator_correlation, Eb=Eb, Ec=Ec)
         per[j] = {"delta": d, "sd": math.sqrt(v)}
         tot += d
         var += v

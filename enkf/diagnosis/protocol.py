@@ -47,7 +47,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
-from scipy import stats
 
 from ..diagnostics import jsonable
 from ..predictive import predictive_band
@@ -371,13 +370,9 @@ def confirm_additions(selection: Selection, real: Mapping[int, Mapping[str, np.n
         if rmses[r] is None:
             return {"step": r, "effect": name, "confirmed": False, "alternative_to": step.alternative_to,
                     "text": f"{label}: refuted, a real run at its cross-validation points failed; {then}"}, False
-        if replicated(real[confirmed], calib) and replicated(real[r], calib):
-            cmp = compare_replicated(y, {j: real[confirmed][j] for j in calib}, {j: real[r][j] for j in calib},
-                                     errors.noise)
-            how = f"; paired over {_replicates(real[r], calib)} mesh realizations, t on {cmp['dof']:.1f} dof"
-        else:
-            cmp = compare_cv(y, real[confirmed], real[r], errors, use_model_error=use_model_error)
-            how = ""
+        cmp = _compare_real(y, real[confirmed], real[r], calib, errors, use_model_error)
+        how = (f"; paired over {_replicates(real[r], calib)} mesh realizations, t on {cmp['dof']:.1f} dof"
+               if "dof" in cmp else "")
         ok = cmp["p"] <= level
         return {"step": r, "effect": name, "confirmed": bool(ok), "alternative_to": step.alternative_to,
                 "real_cv_rmse_before": rmses[confirmed], "real_cv_rmse_after": rmses[r],
@@ -435,22 +430,25 @@ def real_identification(selection: Selection, real: Mapping[int, Mapping[str, np
     others = [m for m in others if all(real.get(m.index, {}).get(j) is not None for j in calib)]
     if not others:
         return []
-    level = selection.settings["alpha"] if level is None else level
-    z_crit = float(stats.norm.isf(level / len(others)))
+    level = (selection.settings["alpha"] if level is None else level) / len(others)
     y = {j: np.asarray(obs[j], dtype=float) for j in calib}
     out = []
     for m in others:
-        if replicated(real[m.index], calib) and replicated(real[kept.index], calib):
-            cmp = compare_replicated(y, {j: real[m.index][j] for j in calib}, {j: real[kept.index][j] for j in calib},
-                                     errors.noise)
-            told = cmp["p"] <= level / len(others)
-        else:
-            cmp = compare_cv(y, real[m.index], real[kept.index], errors, use_model_error=False)
-            told = cmp["z"] > z_crit
+        cmp = _compare_real(y, real[m.index], real[kept.index], calib, errors, use_model_error=False)
         out.append({"effect": m.spec.effect_names[-1], "step": m.index, "delta_sq_error": cmp["delta"], "sd": cmp["sd"],
-                    "z": cmp["z"], "p": cmp["p"], "level": level / len(others), "told_apart": bool(told),
+                    "z": cmp["z"], "p": cmp["p"], "level": level, "told_apart": bool(cmp["p"] <= level),
                     **{k: cmp[k] for k in ("dof", "test") if k in cmp}})
     return out
+
+
+def _compare_real(y: Mapping, current: Mapping, candidate: Mapping, calib: Sequence[str], errors: RecordErrors,
+                  use_model_error: bool) -> dict:
+    """Two models' real runs at the cross-validation points, as the walk compares them: paired over
+    common mesh realizations where both are replicated (:func:`~.crossval.compare_replicated`), else
+    :func:`~.crossval.compare_cv`."""
+    if replicated(current, calib) and replicated(candidate, calib):
+        return compare_replicated(y, {j: current[j] for j in calib}, {j: candidate[j] for j in calib}, errors.noise)
+    return compare_cv(y, current, candidate, errors, use_model_error=use_model_error)
 
 
 def replicated(curves: Mapping, records: Sequence[str]) -> bool:
