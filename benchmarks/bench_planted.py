@@ -19,6 +19,8 @@ the repository; its ``results/<experiment>/diagnosis/report.json`` and ``check.j
   effect); the out-of-catalogue cases' share ending ``base_kept`` or ``unexplained``; the planted
   parameter inside the shipped model's reported 90 % interval (q05-q95; a per-record parameter: each
   calibration record's copy against its own planted value);
+* the proposal's power: the planted effect's place in the first round's emulated ranking and whether
+  the walk ran it on real FDEM (:func:`proposals`);
 * wall time and cores per series; every miss with its reason.
 
 Writes ``--out`` (default benchmarks/results/bench_planted.json) after every series, so a stopped run
@@ -115,16 +117,42 @@ def named_group(report: dict) -> list[str]:
     return list(ident[0]["effects"]) if ident else [named(report)]
 
 
+def planted_effect(case: dict) -> str | None:
+    """The catalogue effect a case plants (None for a null or an out-of-catalogue case)."""
+    if case["class"] in ("null", "out_of_catalogue"):
+        return None
+    return case["case"].removeprefix("disc_")
+
+
 def is_correct(case: dict, name: str, report: dict) -> bool:
     """The series is read right: an effect case names its effect (a gradual closure also when the walk
     confirmed face_gap first and closure after it), a null or out-of-catalogue case names nothing."""
-    if case["class"] in ("null", "out_of_catalogue"):
+    planted = planted_effect(case)
+    if planted is None:
         return name in NOT_NAMED
-    planted = case["case"].removeprefix("disc_")
     if name == planted:
         return True
     added = (report.get("confirmation") or {}).get("effects") or []
     return planted == "closure" and "closure" in added
+
+
+def proposals(report: dict, case: dict) -> dict:
+    """What the selection proposed and what the walk ran (issue 53, item 2: the proposal's power).
+
+    ``ranking``: the first round's candidates by their emulated gain (the fall of the cross-validated
+    squared error, largest first) with its z; ``planted_rank``: the planted effect's place in it (1 = the
+    first proposal; None when nothing is planted or it was not tried); ``walked``: each model of the
+    confirmation walk in order, its effect, real-run z and whether it was confirmed; ``planted_walked``:
+    the planted effect was run on real FDEM (proposed, or an alternative the walk reached)."""
+    rounds = (report.get("selection") or {}).get("rounds") or []
+    trials = sorted(rounds[0].get("trials", []), key=lambda t: -t["delta_sq_error"]) if rounds else []
+    ranking = [[t["effect"], round(float(t["z"]), 3)] for t in trials]
+    walked = [[s["effect"], round(float(s["z"]), 3), bool(s["confirmed"])]
+              for s in (report.get("confirmation") or {}).get("steps", [])]
+    planted = planted_effect(case)
+    order = [e for e, _ in ranking]
+    return {"ranking": ranking, "planted_rank": order.index(planted) + 1 if planted in order else None,
+            "walked": walked, "planted_walked": planted is not None and any(e == planted for e, _, _ in walked)}
 
 
 def score(results: list[dict]) -> dict:
@@ -158,8 +186,14 @@ def score(results: list[dict]) -> dict:
         "parameter_in_90_share": share(named_rows, lambda r: (r["coverage"]["covered"] or 0.0) >= 1.0),
         "parameter_in_90_share_all": share(effect_rows, lambda r: (r["coverage"]["covered"] or 0.0) >= 1.0),
         # reported beside the plan's bars, not one of them: the planted effect inside the named group
-        "planted_in_named_group_share": share(effect_rows, lambda r: r["case"]["case"].removeprefix("disc_")
-                                              in r.get("group", [])),
+        "planted_in_named_group_share": share(effect_rows, lambda r: planted_effect(r["case"]) in r.get("group", [])),
+        # the emulator's proposal on its own (issue 53, item 2), over the effect series that carry it
+        "planted_proposed_first_share": share([r for r in effect_rows if r.get("proposals")],
+                                              lambda r: r["proposals"]["planted_rank"] == 1),
+        "planted_walked_share": share([r for r in effect_rows if r.get("proposals")],
+                                      lambda r: r["proposals"]["planted_walked"]),
+        "planted_ranks": sorted([r["case"]["case"], r["seed"], r["proposals"]["planted_rank"]]
+                                for r in effect_rows if r.get("proposals")),
         "null_false_positive_rate": share(nulls, lambda r: r["named"] not in NOT_NAMED),
         "out_of_catalogue_ok_share": share(ooc, lambda r: r["named"] in NOT_NAMED),
         "misses": misses,
@@ -282,6 +316,7 @@ def run_series(plan: dict, case: dict, seed: int, work: Path, preset: str, recor
         row["named"] = named(report)
         row["group"] = named_group(report)
         row["correct"] = is_correct(case, row["named"], report)
+        row["proposals"] = proposals(report, case)
         row["coverage"] = parameter_coverage(report, truth)
         row["why"] = report.get("why", "")
         row["heldout"] = heldout_summary(check)

@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from benchmarks.bench_planted import (acceptance, effect_size, is_correct, named, named_group,  # noqa: E402
-                                      parameter_coverage, score)
+                                      parameter_coverage, proposals, score)
 from tools.make_planted_series import ar1_noise, make_series, planted_values  # noqa: E402
 
 PLAN = json.loads((ROOT / "benchmarks" / "planted_plan.json").read_text())
@@ -118,6 +118,45 @@ def test_score_gives_the_matrix_and_the_rates():
     assert effect_size(onset, 0.017, 0.005)["above_scatter"]
     assert not effect_size({"tests": [{"peak_change_rel": 0.004, "pre_peak_change_rms_rel": 0.008}]},
                            0.017, 0.005)["above_scatter"]
+
+
+def _walked(report, gains, steps):
+    """report with a first selection round (effect -> emulated fall of the squared error, its z the
+    fall in units of 1e15) and a confirmation walk ((effect, real z, confirmed) in order)."""
+    trials = [{"effect": e, "delta_sq_error": g, "z": g / 1e15} for e, g in gains.items()]
+    return {**report, "selection": {**report["selection"], "rounds": [{"trials": trials}]},
+            "confirmation": {**report["confirmation"],
+                             "steps": [{"effect": e, "z": z, "confirmed": c} for e, z, c in steps]}}
+
+
+def test_the_proposals_power_is_read_from_the_first_rounds_ranking_and_the_walk():
+    gains = {"closure": 3e14, "face_gap": 2e14, "rate_strength": -1e14, "seating": 5e13}
+    rep = _walked(_report("base_kept"), gains, [("closure", -0.1, False), ("face_gap", 0.8, False)])
+    # ranked by the emulated gain, not by the order tried: the rate law third of four
+    p = proposals(rep, CASES["rate_strength"])
+    assert [e for e, _ in p["ranking"]] == ["closure", "face_gap", "seating", "rate_strength"]
+    assert p["ranking"][0] == ["closure", 0.3]
+    assert p["planted_rank"] == 4 and not p["planted_walked"]
+    assert p["walked"] == [["closure", -0.1, False], ["face_gap", 0.8, False]]
+    # a disc case plants the catalogue's effect of its name without the prefix
+    assert proposals(rep, CASES["disc_rate_strength"])["planted_rank"] == 4
+    # the planted gap proposed second and reached by the walk as the refuted choice's alternative
+    gap = proposals(rep, CASES["face_gap"])
+    assert gap["planted_rank"] == 2 and gap["planted_walked"]
+    # nothing planted: no rank, never walked
+    assert proposals(rep, CASES["null"]) == {**p, "planted_rank": None, "planted_walked": False}
+    # a report without a selection round (a failed selection) ranks nothing
+    assert proposals(_report("base_kept"), CASES["face_gap"])["planted_rank"] is None
+    rate = {"plant": {"rate_strength.k": 0.3}, "tests": []}
+    rows = [_row("rate_strength", 1, rep, rate), _row("face_gap", 1, rep, {"plant": {"face_gap.gap_m": 1e-4}}),
+            _row("null", 1, rep, {"plant": {}}), _row("face_gap", 2, _report("base_kept"), {"plant": {}})]
+    for r, rp in zip(rows[:3], (rep, rep, rep)):
+        r["proposals"] = proposals(rp, r["case"])
+    s = score(rows)
+    # of the two effect series with proposals (the third predates them): neither first, the gap walked
+    assert s["planted_proposed_first_share"] == 0.0
+    assert s["planted_walked_share"] == pytest.approx(1 / 2)
+    assert s["planted_ranks"] == [["face_gap", 1, 2], ["rate_strength", 1, 4]]
 
 
 def test_ar1_noise_and_per_record_draws():
