@@ -34,7 +34,7 @@ import numpy as np
 import pandas as pd
 
 from enkf.covariance import DenseError, ObservationError
-from enkf.diagnosis import group_text, heldout_evaluation, box_draws, replicate_curve_errors, replicated
+from enkf.diagnosis import box_draws, group_text, heldout_evaluation, replicate_curve_errors, replicated, walk_weights
 from enkf.diagnosis.band import replicate_variance, residual_discrepancy, run_band
 from enkf.diagnosis.crossval import seed_for
 from enkf.emulator import AnchoredEmulator
@@ -440,12 +440,14 @@ def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: Emulated
     ``discrepancy``: :func:`calibration_discrepancy` of the calibration records."""
     real = real_curves(rows, runs, model)
     y = {r: obs.values[obs.record_slice(r)] for r in obs.records}
+    # each time weighted by the inverse of its noise and mesh-scatter variance (walk_weights: why)
+    weights = walk_weights(noise, simulator, list(obs.records))
     # the walk's own rule (enkf.diagnosis.replicated), so the error terms given and the test it picks agree
     if replicated(real["cv"].get(0, {}), list(obs.records)):
         # replicated runs on common meshes: the walk measures the variability of the difference of two
         # steps (enkf.diagnosis.compare_replicated); the data carry only their instrument noise
         walk_noise, walk_sim = {r: noise[r] for r in obs.records}, {}
-        conf = confirm(selection, real["cv"], y, walk_noise)
+        conf = confirm(selection, real["cv"], y, walk_noise, weights=weights)
     else:
         # one run per point: the data carry their own realization (S on the data, common to every step)
         # and each run its own; the runs of two steps share a mesh, but their departures are taken as
@@ -453,7 +455,7 @@ def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: Emulated
         walk_noise = {r: DenseError(noise[r].dense() + (simulator[r].dense() if r in simulator else 0.0),
                                     _symmetric=True) for r in obs.records}
         walk_sim = {r: simulator[r] for r in obs.records if r in simulator}
-        conf = confirm(selection, real["cv"], y, walk_noise, simulator=walk_sim)
+        conf = confirm(selection, real["cv"], y, walk_noise, simulator=walk_sim, weights=weights)
     k = int(conf["confirmed"])
     held = {}
     if heldout is not None and heldout.records:
@@ -480,7 +482,7 @@ def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: Emulated
     errors = _errors_table(selection, conf, real, obs, held)
     risk = cv_risk(errors, k)
     ident = identification(selection, k)
-    real_ev = real_group(selection, real["cv"], y, walk_noise, k, simulator=walk_sim)
+    real_ev = real_group(selection, real["cv"], y, walk_noise, k, simulator=walk_sim, weights=weights)
     if ident and real_ev:
         ident[-1] = {**ident[-1], "real_evidence": real_ev,
                      "text": ident[-1]["text"] + "; " + real_group_text(ident[-1]["chosen"], real_ev)}
@@ -494,7 +496,8 @@ def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: Emulated
               "errors_per_record": errors, "cv_risk_worse_than_base": risk}
     check = {"added": list(shipped.spec.effect_names), "identification": ident, "verdict": verdict,
              "fdem_confirmation": {"status": verdict, "text": why, "steps": conf["steps"],
-                                   "real_cv_rmse_Pa": conf["real_cv_rmse"]},
+                                   "real_cv_rmse_Pa": conf["real_cv_rmse"],
+                                   "real_cv_weighted_error": conf["real_cv_loss"]},
              "errors_per_record": errors, "heldout": held, "cv_risk_worse_than_base": risk,
              "predictive_band": {"level": 0.90, "records": bands, "file": "check_band.csv",
                                  "terms": "posterior members x population draws on the emulator of the record, "

@@ -215,10 +215,11 @@ def real_curves(rows: Sequence[Mapping], runs: Sequence, model: EmulatedSHPB) ->
 
 def real_group(selection: Selection, real_cv: Mapping[int, Mapping[str, np.ndarray | None]],
                obs: Mapping[str, np.ndarray], noise: Mapping[str, ObservationError], step: int, *,
-               simulator: Mapping[str, ObservationError] | None = None) -> list[dict]:
-    """:func:`enkf.diagnosis.real_identification` with the error terms of :func:`confirm`: the kept step
-    against the other models of its round that have real runs."""
-    return real_identification(selection, real_cv, obs, _real_errors(noise, simulator), step)
+               simulator: Mapping[str, ObservationError] | None = None,
+               weights: Mapping[str, np.ndarray] | None = None) -> list[dict]:
+    """:func:`enkf.diagnosis.real_identification` with the error terms and weights of :func:`confirm`: the
+    kept step against the other models of its round that have real runs."""
+    return real_identification(selection, real_cv, obs, _real_errors(noise, simulator), step, weights=weights)
 
 
 def _real_errors(noise: Mapping[str, ObservationError], simulator: Mapping[str, ObservationError] | None) -> RecordErrors:
@@ -228,8 +229,10 @@ def _real_errors(noise: Mapping[str, ObservationError], simulator: Mapping[str, 
 
 def confirm(selection: Selection, real_cv: Mapping[int, Mapping[str, np.ndarray | None]],
             obs: Mapping[str, np.ndarray], noise: Mapping[str, ObservationError], *,
-            simulator: Mapping[str, ObservationError] | None = None, alpha: float | None = None) -> dict:
+            simulator: Mapping[str, ObservationError] | None = None, alpha: float | None = None,
+            weights: Mapping[str, np.ndarray] | None = None) -> dict:
     """:func:`enkf.diagnosis.confirm_additions` on real FDEM curves at the cross-validation points
     (:func:`real_curves`' ``"cv"``): uncertainty = instrument noise and the runs' variability (measured on
-    the paired replicates where there are several, else ``simulator`` on each run)."""
-    return confirm_additions(selection, real_cv, obs, _real_errors(noise, simulator), alpha=alpha)
+    the paired replicates where there are several, else ``simulator`` on each run); ``weights`` per time
+    (:func:`enkf.diagnosis.walk_weights`)."""
+    return confirm_additions(selection, real_cv, obs, _real_errors(noise, simulator), alpha=alpha, weights=weights)

@@ -56,7 +56,7 @@ from .crossval import (CVResult, Fit, ForwardModel, ModelSpec, Prediction, Recor
                        box_draws, squared_error_difference)
 from .population import Population, fit_population, record_name, split_name
 from .protocol import (ModelStep, Selection, confirm_additions, heldout_evaluation, leave_one_record_out,
-                       real_identification, replicated, select_effects)
+                       real_identification, replicated, select_effects, walk_weights)
 from .acceptance import curve_errors, replicate_curve_errors
 from .identification import group_text, identification_group
 from .ranking import chi2_log10_sf, ensemble_sensitivity, finite_difference_sensitivity, rank_candidates, score_test
@@ -70,6 +70,7 @@ __all__ = ["autocorrelation", "chi2_log10_sf", "covariate_trends", "curve_errors
 __all__ += ["CVResult", "Fit", "ForwardModel", "ModelSpec", "ModelStep", "Population", "Prediction", "RecordErrors",
             "Selection", "calibrate", "compare_cv", "compare_replicated", "confirm_additions", "cross_validate", "fit_population",
             "fit_populations", "given_fit", "heldout_evaluation", "holm", "leave_one_record_out", "predict_record",
-            "box_draws", "real_identification", "record_name", "replicated", "select_effects", "split_name", "squared_error_difference"]
+            "box_draws", "real_identification", "record_name", "replicated", "select_effects", "split_name", "squared_error_difference",
+            "walk_weights"]
 # identification: the group of candidates the calibration records do not tell apart from the chosen one
 __all__ += ["group_text", "identification_group"]
