@@ -23,14 +23,16 @@ candidates; nothing about FDEM or SHPB):
    of its per-record parameters, and the held-out records' prediction points and bands.
 3. :func:`confirm_additions`: given the real simulator's curves at those cross-validation points,
    walk M1, M2, ...: confirm M_r over the last confirmed model when its real cross-validated squared
-   error is lower by more than the uncertainty (noise and the simulator's variability; one-sided,
+   error (each time weighted by :func:`walk_weights` where given) is lower by more than the uncertainty
+   (noise and the simulator's variability; one-sided,
    level ``alpha / K`` with K of the round that chose it); the first refuted addition is dropped, and
    its round's alternatives (``alternatives``: the round's next proposals by the emulated gain, each the
    same model with that effect instead) are tried in order at the same level, so that one wrong
    proposal of the emulator does not end the walk; the walk stops at the first refuted step after its
    alternatives (what followed was chosen given it). Each candidate walked is tested at ``alpha / K``:
    by Bonferroni over the round's K candidates, every one of them tried keeps the round's family-wise
-   level. The model shipped is never worse on real cross-validation than the base model.
+   level. The model shipped is never worse on real cross-validation than the base model (in the error
+   compared).
 4. :func:`heldout_evaluation`: the held-out records' observed curves, read here for the first time:
    RMSE, peak and time-to-peak errors of the base and of the final model, and the coverage of the
    predictive band (posterior members x population draws).
