@@ -56,12 +56,15 @@ def one_run(run: Path) -> dict:
     return {"verdict": report["verdict"], "steps": steps}
 
 
-def main(argv=None) -> dict:
+def main(argv=None, one=None, doc: str | None = None) -> dict:
+    """Read each of ``--runs`` (finished experiments' results folders) with ``one`` (default this study's
+    :func:`one_run`) and write ``--out``; ``doc``: the study's docstring (its first paragraph is ``what``)."""
     ap = argparse.ArgumentParser()
     ap.add_argument("--runs", nargs="+", required=True, help="experiments' results folders (finished diagnosis)")
     ap.add_argument("--out", required=True)
     a = ap.parse_args(argv)
-    out = {"what": __doc__.split("\n\n")[0], "runs": {Path(r).name: one_run(Path(r)) for r in a.runs}}
+    one = one or one_run
+    out = {"what": (doc or __doc__).split("\n\n")[0], "runs": {Path(r).name: one(Path(r)) for r in a.runs}}
     emit_json(out, a.out)
     return out
 

@@ -18,14 +18,13 @@ seeds 5305-5307 are not re-scored.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import pickle
 from pathlib import Path
 
 from calibration.closing import assemble
 from calibration.observations import read_curve, read_observations
-from shpb.atomic import emit_json
+from surrogate_at_check_points import main as read_runs  # studies/ is the script's own folder
 
 
 def _outcome(report: dict) -> dict:
@@ -51,13 +50,7 @@ def one_run(run: Path) -> dict:
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--runs", nargs="+", required=True, help="finished experiments' results folders")
-    ap.add_argument("--out", required=True)
-    a = ap.parse_args(argv)
-    out = {"what": __doc__.split("\n\n")[0], "runs": {Path(r).name: one_run(Path(r)) for r in a.runs}}
-    emit_json(out, a.out)
-    return out
+    return read_runs(argv, one_run, __doc__)
 
 
 if __name__ == "__main__":
