@@ -129,11 +129,26 @@ def test_a_tiny_run_logs_each_iteration_and_its_report_opens_on_the_summary(tmp_
 
 
 def test_the_summary_lists_the_walk_a_refuted_choice_and_the_alternative_confirmed_after_it():
-    """The default run's marble: its first proposal refuted, its round's next one confirmed; both in the page."""
+    """The default run's marble: its two confirmed steps in the page, in order; and a walk whose first
+    proposal was refuted and its round's next one confirmed (the marble's check with those two steps)."""
     run = REPO / "benchmarks" / "results" / "default_run" / "marble_loop"
     check = json.loads((run / "diagnosis" / "check.json").read_text())
-    html = summary_html("marble_loop", json.loads((run / "summary.json").read_text()), check)
-    items = re.findall(r"<li>(.*?)</li>", html.split("The walk on real FDEM runs:")[1].split("</ol>")[0])
-    assert [st["text"] for st in check["fdem_confirmation"]["steps"]] == [html_unescape(i) for i in items]
-    assert len(items) == 2 and "refuted" in items[0] and "(alternative to step 1)" in items[1]
-    assert items[1].endswith("confirmed; the walk stops (the later rounds were chosen given the refuted one)")
+    summary = json.loads((run / "summary.json").read_text())
+
+    def walk_items(chk):
+        html = summary_html("marble_loop", summary, chk)
+        return [html_unescape(i) for i in
+                re.findall(r"<li>(.*?)</li>", html.split("The walk on real FDEM runs:")[1].split("</ol>")[0])]
+
+    steps = check["fdem_confirmation"]["steps"]
+    assert walk_items(check) == [st["text"] for st in steps]
+    assert len(steps) == 2 and all(st["text"].endswith("confirmed") for st in steps)
+    refuted = {**steps[0], "confirmed": False,
+               "text": "gauge_gain over base: real cross-validated RMSE 2.1e+07 -> 1.6e+07; ... refuted, dropped; "
+                       "the round's next proposal is tried"}
+    alt = {**steps[1], "alternative_to": 1,
+           "text": "face_gap (alternative to step 1) over base: ... confirmed; the walk stops (the later rounds were "
+                   "chosen given the refuted one)"}
+    items = walk_items({**check, "fdem_confirmation": {**check["fdem_confirmation"], "steps": [refuted, alt]}})
+    assert items == [refuted["text"], alt["text"]]
+    assert "refuted" in items[0] and "(alternative to step 1)" in items[1]
