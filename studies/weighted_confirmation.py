@@ -1,9 +1,9 @@
 """Does the confirmation test lose its power to the post-peak's mesh scatter? (issue 53, item 2)
 
 The walk's paired test (enkf.diagnosis.compare_replicated) compares two models by the plain squared-error
-sum of their real runs over the whole window. The simulator's mesh scatter is some fifteen times larger
-after the failure peak than before it (bench_sim_variability.json: 8 % against 0.5 % of the peak on the
-marble cylinder), and a change of the failure path between two steps' runs on one mesh does not cancel
+sum of their real runs over the whole window. The simulator's mesh scatter is 17x larger after the
+failure peak than before it (bench_sim_variability.json: 8.2 % against 0.48 % of the peak on the marble
+cylinder), and a change of the failure path between two steps' runs on one mesh does not cancel
 in their difference; the plain sum is dominated by those post-peak samples, while the effects of the
 catalogue act mostly on the rise. This study re-scores, with no new runs, each walked step of finished
 series on the same real runs with each time weighted by the inverse of the variance the workflow gives it

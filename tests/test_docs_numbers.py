@@ -333,6 +333,10 @@ QUOTES: list[Quote] = [
               "rank": {3: "third"}.get(rec["proposals"]["planted_rank"], rec["proposals"]["planted_rank"])})(
               J("studies/results/weighted_confirmation.json")["runs"]["planted_disc_rate_strength_5303"]["weighted"],
               J("benchmarks/results/bench_planted_records/disc_rate_strength_5303.json")["series"][0])),
+    Quote(CL, "mesh scatter on the marble cylinder is {pre:.2f} % of the\n   peak before the failure peak and {post:.1f} % "
+              "after it", lambda J: (lambda v: {"pre": 100 * v["std_rms_pre_peak_over_peak"],
+                                                "post": 100 * v["std_rms_post_peak_over_peak"]})(
+              J("benchmarks/results/bench_sim_variability.json")["cases"]["marble"]["mesh_variability"])),
     Quote(CL, "a planted seating it had proposed (z {zp:.2f})\n   that the weighted error confirms (z {zw:.1f})",
           lambda J: (lambda r: {"zp": r["plain"]["walk"][0][1], "zw": r["weighted"]["walk"][0][1]})(
               J("studies/results/weighted_confirmation.json")["runs"]["planted_seating_5302"])),

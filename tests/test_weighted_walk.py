@@ -14,6 +14,7 @@ from enkf import AR1Error
 from enkf.covariance import DenseError
 from enkf.diagnosis import RecordErrors, compare_replicated, confirm_additions, walk_weights
 from enkf.diagnosis.protocol import _compare_real
+from enkf.diagnosis.weights import Weighted
 
 from test_protocol_selection import WALK, fake_selection
 
@@ -57,7 +58,8 @@ def test_the_weights_are_the_inverse_of_the_noise_and_mesh_variance_and_reweight
     # a record without a measured mesh scatter is weighted by its noise alone
     assert walk_weights(noise, {}, ["A"])["A"] == pytest.approx(np.full(OBS_T.size, 1.0 / 0.5e6 ** 2), rel=1e-12)
     y, cur, cand = _runs(np.random.default_rng(3), 3.0, 0.0, records=WALK)
-    got = _compare_real(y, cur, cand, WALK, RecordErrors(noise, {}, {}), False, w)
+    errs = RecordErrors(noise, {}, {})
+    got = _compare_real(y, cur, cand, WALK, errs, False, Weighted(errs, WALK, w))
     # the weighted difference of the squared errors, mean over the meshes, summed over the records
     expect = sum(float(np.mean(((y[r] - cur[r]) ** 2 - (y[r] - cand[r]) ** 2) @ w[r])) for r in WALK)
     assert got["delta"] == pytest.approx(expect, rel=1e-9)
@@ -68,9 +70,9 @@ def test_the_weights_are_the_inverse_of_the_noise_and_mesh_variance_and_reweight
     # unit weights are the plain sum
     ones = {r: np.ones(OBS_T.size) for r in WALK}
     plain = compare_replicated(y, cur, cand, noise)
-    assert _compare_real(y, cur, cand, WALK, RecordErrors(noise, {}, {}), False, ones)["z"] == pytest.approx(plain["z"])
+    assert _compare_real(y, cur, cand, WALK, errs, False, Weighted(errs, WALK, ones))["z"] == pytest.approx(plain["z"])
     with pytest.raises(ValueError, match="no model error"):
-        _compare_real(y, cur, cand, WALK, RecordErrors(noise, {}, {}), True, w)
+        _compare_real(y, cur, cand, WALK, errs, True, Weighted(errs, WALK, w))
 
 
 def test_the_weighted_comparison_holds_its_level_on_a_null_candidate():
@@ -81,10 +83,11 @@ def test_the_weighted_comparison_holds_its_level_on_a_null_candidate():
     noise, sim = _errors(("A", "B", "C"))
     w = walk_weights(noise, sim, ["A", "B", "C"])
     errs = RecordErrors(noise, {}, {})
+    weighted = Weighted(errs, ["A", "B", "C"], w)
     rejected = 0
     for _ in range(1000):
         y, cur, cand = _runs(rng, 2.0, -2.0)
-        rejected += _compare_real(y, cur, cand, ["A", "B", "C"], errs, False, w)["p"] <= 0.05
+        rejected += _compare_real(y, cur, cand, ["A", "B", "C"], errs, False, weighted)["p"] <= 0.05
     assert 0.025 <= rejected / 1000 <= 0.075, rejected
 
 
@@ -97,11 +100,12 @@ def test_an_effect_on_the_rise_is_confirmed_weighted_where_the_post_peak_scatter
     noise, sim = _errors(WALK)
     w = walk_weights(noise, sim, WALK)
     errs = RecordErrors(noise, {}, {})
+    weighted_errs = Weighted(errs, WALK, w)
     level = 0.05 / 10
     weighted = plain = 0
     for _ in range(40):
         y, cur, cand = _runs(rng, 4.0, 0.0, records=WALK)
-        weighted += _compare_real(y, cur, cand, WALK, errs, False, w)["p"] <= level
+        weighted += _compare_real(y, cur, cand, WALK, errs, False, weighted_errs)["p"] <= level
         plain += compare_replicated(y, cur, cand, noise)["p"] <= level
     assert weighted >= 36 and plain <= 2, (weighted, plain)
     # and in the walk: confirmed with the weights, refuted without them

@@ -59,7 +59,7 @@ from .identification import identification_group
 from .population import Population, record_name
 from .ranking import finite_difference_sensitivity, rank_candidates
 from .structure import structure_tests
-from .weights import _weighted, walk_weights
+from .weights import Weighted, walk_weights
 
 __all__ = ["ModelStep", "Selection", "confirm_additions", "heldout_evaluation", "leave_one_record_out",
            "real_identification", "replicated", "select_effects", "walk_weights"]
@@ -355,22 +355,26 @@ def confirm_additions(selection: Selection, real: Mapping[int, Mapping[str, np.n
     calib = selection.calib_records
     y = {j: np.asarray(obs[j], dtype=float) for j in calib}
 
-    def rmse_of(r):
+    weighted = None if weights is None else Weighted(errors, calib, weights)
+
+    def mean_square(r, w=None):
+        """Step r's squared error per observation, averaged over its runs (a (K, m) array of replicates),
+        each time weighted by w[j] if given; None if a run failed."""
         curves = real.get(r, {})
         if any(curves.get(j) is None for j in calib):
             return None
-        # a (K, m) array of replicates broadcasts: the mean squared error over every run
-        return math.sqrt(sum(float(np.mean((y[j] - np.asarray(curves[j], float)) ** 2)) * y[j].size for j in calib)
-                         / sum(y[j].size for j in calib))
+        total = 0.0
+        for j in calib:
+            per_time = np.mean(np.atleast_2d((y[j] - np.asarray(curves[j], float)) ** 2), axis=0)
+            total += float(per_time.sum() if w is None else per_time @ w[j])
+        return total / sum(y[j].size for j in calib)
+
+    def rmse_of(r):
+        ms = mean_square(r)
+        return None if ms is None else math.sqrt(ms)
 
     def loss_of(r):
-        if rmses[r] is None:
-            return None
-        if weights is None:
-            return rmses[r] ** 2
-        curves = real[r]
-        return (sum(float(np.mean(((y[j] - np.asarray(curves[j], float)) ** 2) @ weights[j])) for j in calib)
-                / sum(y[j].size for j in calib))
+        return mean_square(r, weights)
 
     base_rmse = rmse_of(0)
     if base_rmse is None:
@@ -390,7 +394,7 @@ def confirm_additions(selection: Selection, real: Mapping[int, Mapping[str, np.n
         if rmses[r] is None:
             return {"step": r, "effect": name, "confirmed": False, "alternative_to": step.alternative_to,
                     "text": f"{label}: refuted, a real run at its cross-validation points failed; {then}"}, False
-        cmp = _compare_real(y, real[confirmed], real[r], calib, errors, use_model_error, weights)
+        cmp = _compare_real(y, real[confirmed], real[r], calib, errors, use_model_error, weighted)
         how = (f"; paired over {_replicates(real[r], calib)} mesh realizations, t on {cmp['dof']:.1f} dof"
                if "dof" in cmp else "")
         ok = cmp["p"] <= level
@@ -455,9 +459,10 @@ def real_identification(selection: Selection, real: Mapping[int, Mapping[str, np
         return []
     level = (selection.settings["alpha"] if level is None else level) / len(others)
     y = {j: np.asarray(obs[j], dtype=float) for j in calib}
+    weighted = None if weights is None else Weighted(errors, calib, weights)
     out = []
     for m in others:
-        cmp = _compare_real(y, real[m.index], real[kept.index], calib, errors, False, weights)
+        cmp = _compare_real(y, real[m.index], real[kept.index], calib, errors, False, weighted)
         out.append({"effect": m.spec.effect_names[-1], "step": m.index, "delta_sq_error": cmp["delta"], "sd": cmp["sd"],
                     "z": cmp["z"], "p": cmp["p"], "level": level, "told_apart": bool(cmp["p"] <= level),
                     **{k: cmp[k] for k in ("dof", "test") if k in cmp}})
@@ -465,14 +470,16 @@ def real_identification(selection: Selection, real: Mapping[int, Mapping[str, np
 
 
 def _compare_real(y: Mapping, current: Mapping, candidate: Mapping, calib: Sequence[str], errors: RecordErrors,
-                  use_model_error: bool, weights: Mapping[str, np.ndarray] | None = None) -> dict:
+                  use_model_error: bool, weighted: Weighted | None = None) -> dict:
     """Two models' real runs at the cross-validation points, as the walk compares them: paired over
     common mesh realizations where both are replicated (:func:`~.crossval.compare_replicated`), else
-    :func:`~.crossval.compare_cv`; each time weighted by ``weights`` (:func:`walk_weights`) if given."""
-    if weights is not None:
+    :func:`~.crossval.compare_cv`; each time weighted where ``weighted`` (:class:`~.weights.Weighted`, the
+    walk's weights applied to ``errors``) is given."""
+    if weighted is not None:
         if use_model_error:
             raise ValueError("weights apply to real runs, which carry no model error")
-        y, current, candidate, errors = _weighted(y, current, candidate, calib, errors, weights)
+        y, current, candidate, errors = (weighted.scale(y), weighted.scale(current), weighted.scale(candidate),
+                                         weighted.errors)
     if replicated(current, calib) and replicated(candidate, calib):
         return compare_replicated(y, {j: current[j] for j in calib}, {j: candidate[j] for j in calib}, errors.noise)
     return compare_cv(y, current, candidate, errors, use_model_error=use_model_error)
