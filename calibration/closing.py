@@ -42,6 +42,7 @@ from shpb import effects as fx
 
 from .diagnose import EmulatedSHPB, anchored_emulators, emulators_from_design
 # light, for the Snakefile's parse: re-exported here, where the rest of closing the loop lives
+from .covariates import peak_error_trends
 from .diagnosis_config import FOLD_SEPARATOR, candidate_effects, loro_folds  # noqa: F401
 from .model_error import stored_error
 from .observations import Observations
@@ -499,6 +500,7 @@ def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: Emulated
                                    "real_cv_rmse_Pa": conf["real_cv_rmse"],
                                    "real_cv_weighted_error": conf["real_cv_loss"]},
              "errors_per_record": errors, "heldout": held, "cv_risk_worse_than_base": risk,
+             "covariate_trends": peak_error_trends(errors, obs.meta.get("record_info", {}), list(obs.records)),
              "predictive_band": {"level": 0.90, "records": bands, "file": "check_band.csv",
                                  "terms": "posterior members x population draws on the emulator of the record, "
                                           "the simulator's variability from the check's replicates, the model "

@@ -34,6 +34,7 @@ import numpy as np
 import pandas as pd
 
 from enkf.diagnosis import covariate_trends
+from enkf.diagnostics import jsonable
 
 #: ``(column, record_info key)`` of every covariate, in the order of the table's columns.
 COVARIATES: tuple[tuple[str, str], ...] = (
@@ -108,3 +109,31 @@ def pointed_at(trends: pd.DataFrame | None, column: str = "mean_resid_sd", alpha
         return []
     t = trends[(trends["column"] == column) & (trends[test] < alpha)].sort_values(test)
     return t["covariate"].tolist()
+
+
+#: The check's real-run errors whose trends across the calibration records the report shows.
+ERROR_COLUMNS = ("peak_rel_error_before", "peak_rel_error_after")
+
+
+def peak_error_trends(errors: Mapping[str, Mapping], record_info: Mapping[str, Mapping],
+                      records: Sequence[str]) -> dict:
+    """The calibration ``records``' relative peak errors of the real cross-validated FDEM runs before and
+    after the loop (``errors``: check.json's ``errors_per_record``) against every covariate their sheets
+    give, and the trends across them (:func:`covariate_table_trends`, at least three records).
+
+    The peak error is the statistic a rate law or an end-friction confinement moves (a stronger response
+    at a higher rate, a shorter specimen); a trend before the loop that is gone after it says the kept
+    effect took up that dependence. Held-out records are not in ``records``: their covariates come from
+    their own response (the strain rate at their peak)."""
+    rows = []
+    for rec in records:
+        e = errors.get(rec) or {}
+        rows.append({"record": rec, **covariate_values(record_info.get(rec, {})),
+                     **{col: _number((e.get(col.rsplit("_", 1)[1]) or {}).get("peak_rel_error"))
+                        for col in ERROR_COLUMNS}})
+    table = pd.DataFrame(rows, columns=["record", *(c for c, _ in COVARIATES), *ERROR_COLUMNS])
+    trends = covariate_table_trends(table, ERROR_COLUMNS)
+    return jsonable({"records": table.to_dict(orient="records"),
+                     "trends": None if trends is None else trends.to_dict(orient="records"),
+                     "note": "calibration records only, the relative peak error (model - record) / record of the "
+                             "real cross-validated runs; trends need three records whose covariate varies"})

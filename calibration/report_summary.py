@@ -175,6 +175,46 @@ def _diagnosis(check: Mapping) -> list[str]:
                 "prediction; '?': a check made before it was scored):</p>",
                 _table(["record", "used for", "RMSE before [MPa]", "RMSE after [MPa]", "peak error before [%]",
                         "peak error after [%]", "band covers", "band score / box"], rows)]
+    return out + _covariates(check.get("covariate_trends"))
+
+
+#: covariate column: (label in the table, display scale, format, the step a trend's slope is quoted per)
+COVARIATE_DISPLAY = {"strain_rate_per_s": ("strain rate [1/s]", 1.0, ".0f", (100.0, "100 1/s")),
+                     "length_to_diameter": ("L/D", 1.0, ".2f", (0.1, "0.1 of L/D")),
+                     "gas_pressure_Pa": ("gas pressure [MPa]", 1e-6, ".3g", (1e5, "0.1 MPa")),
+                     "striker_velocity_m_s": ("striker velocity [m/s]", 1.0, ".3g", (1.0, "1 m/s"))}
+
+
+def _covariates(cov) -> list[str]:
+    """The calibration records' real cross-validated peak errors against their test covariates, and the
+    trends across them (check.json's ``covariate_trends``, :func:`calibration.covariates.peak_error_trends`)."""
+    if not isinstance(cov, Mapping) or not cov.get("records"):
+        return []
+    recs = cov["records"]
+    shown = [c for c in COVARIATE_DISPLAY if any(r.get(c) is not None for r in recs)]
+    rows = [[escape(str(r.get("record")))] + [_num(r.get(c), COVARIATE_DISPLAY[c][1], COVARIATE_DISPLAY[c][2])
+                                               for c in shown]
+            + [_num(r.get(f"peak_rel_error_{w}"), 100.0, "+.1f") for w in ("before", "after")] for r in recs]
+    out = ["<p style=\"margin:0.2em 0 0 0\">The calibration records' peak errors (real cross-validated runs) "
+           "against what their sheets give: a trend with a test condition points at an effect that depends on it "
+           "(a rate law, an end confinement):</p>",
+           _table(["record"] + [COVARIATE_DISPLAY[c][0] for c in shown] + ["peak error before [%]",
+                                                                            "peak error after [%]"], rows)]
+    lines = []
+    for t in cov.get("trends") or []:
+        if t.get("slope") is None or t.get("covariate") not in COVARIATE_DISPLAY:
+            continue
+        label, _, _, (step, per) = COVARIATE_DISPLAY[t["covariate"]]
+        when = "before" if t.get("column", "").endswith("before") else "after"
+        lines.append(f"{when} the loop, against {label.split(' [')[0]}: {_num(t['slope'] * step, 100.0, '+.2f')} % "
+                     f"per {per} (Pearson r = {_num(t.get('r'), 1.0, '+.2f')}, p = {_num(t.get('p_pearson'), 1.0, '.2g')}; "
+                     f"Spearman p = {_num(t.get('p_spearman'), 1.0, '.2g')}; {t.get('n', '?')} records)")
+    if lines:
+        out.append("<p style=\"margin:0.2em 0 0 0\">Trends of the peak error across the calibration records:</p>"
+                   "<ul style=\"margin:0.2em 0\">" + "".join(f"<li>{escape(x)}</li>" for x in lines) + "</ul>")
+    else:
+        out.append(f"<p style=\"margin:0.2em 0 0 0\">No trend is tested: that needs three calibration records "
+                   f"whose test condition varies; this run has {len(recs)}.</p>")
     return out
 
 
