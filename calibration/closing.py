@@ -66,12 +66,13 @@ def blind(heldout: Observations | None) -> Observations | None:
 
 
 def emulated_model(X, names: Sequence[str], lower, upper, curves: Mapping[str, Sequence], model_times,
-                   obs_times: Mapping[str, np.ndarray], label: str, axis=None) -> tuple[EmulatedSHPB, dict]:
-    """The selection's model of every record: with ``axis`` (the anchored design's, design.json) the
-    anchored one (:func:`calibration.diagnose.anchored_emulators`), else the RBF emulator of a
-    space-filling design (:func:`calibration.diagnose.emulators_from_design`)."""
+                   obs_times: Mapping[str, np.ndarray], label: str, axis=None, pair=None) -> tuple[EmulatedSHPB, dict]:
+    """The selection's model of every record: with ``axis`` (and ``pair``, the anchored design's,
+    design.json) the anchored one (:func:`calibration.diagnose.anchored_emulators`), else the RBF emulator
+    of a space-filling design (:func:`calibration.diagnose.emulators_from_design`)."""
     if axis is not None:
-        emulators, n_failed = anchored_emulators(X, axis, curves, model_times, lower, upper, names, label=label)
+        emulators, n_failed = anchored_emulators(X, axis, curves, model_times, lower, upper, names, label=label,
+                                                 pair=pair)
     else:
         emulators, n_failed = emulators_from_design(X, curves, model_times, lower, upper, names, label=label)
     return EmulatedSHPB(emulators, list(names), model_times, dict(obs_times)), n_failed

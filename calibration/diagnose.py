@@ -225,13 +225,19 @@ def emulators_from_design(X, curves: Mapping[str, Sequence], model_times, lower,
 
 
 def anchored_design(base_anchor, base_lower, base_upper, physical_nulls, physical_upper, *, base_step: float,
-                    sweep: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(X, axis)``: the one-at-a-time design of the anchored selection model
+                    sweep: int, cross: Sequence[int] = ()) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(X, axis, pair)``: the one-at-a-time design of the anchored selection model
     (:class:`enkf.emulator.AnchoredEmulator`). Row 0 is the anchor: the base parameters at
     ``base_anchor`` (the workflow's posterior mean), every physical effect at its null. Then each base
     parameter moved by ``-+ base_step`` of its design box's width (kept inside the box), and each
     physical parameter moved from its null to ``k / (sweep + 1)`` of its range, ``k = 1..sweep`` (evenly
-    spaced inside it: some upper bounds are open), the others at the anchor. ``axis[i]`` is the parameter row ``i`` moves (-1 for the anchor)."""
+    spaced inside it: some upper bounds are open), the others at the anchor. ``axis[r]`` is the parameter
+    row ``r`` moves (-1 for the anchor).
+
+    ``cross`` (base parameter indices): for each, the physical parameters' runs again with that base
+    parameter at its lower step (the emulator's second-order terms: an effect whose size depends on the
+    strength, an end friction or a rate law, is measured at a second strength). Those rows have ``axis``
+    the physical parameter and ``pair`` the base one; every other row's ``pair`` is -1."""
     a = np.asarray(base_anchor, float)
     bl, bu = np.asarray(base_lower, float), np.asarray(base_upper, float)
     pn, pu = np.asarray(physical_nulls, float), np.asarray(physical_upper, float)
@@ -239,39 +245,53 @@ def anchored_design(base_anchor, base_lower, base_upper, physical_nulls, physica
         raise ValueError(f"base_step must lie in (0, 0.5] and sweep be >= 1, got {base_step}, {sweep}")
     if np.any(a <= bl) or np.any(a >= bu):
         raise ValueError(f"the anchor {a} is not inside the base design box {bl} .. {bu}")
+    if any(not 0 <= int(i) < a.size for i in cross) or len(set(cross)) < len(cross):
+        raise ValueError(f"cross must list distinct base parameter indices below {a.size}, got {list(cross)}")
     x0 = np.concatenate([a, pn])
-    rows, axis = [x0], [-1]
+    rows, axis, pair = [x0], [-1], [-1]
+    low = {}
     for j in range(a.size):
         h = base_step * (bu[j] - bl[j])
-        for v in (max(a[j] - h, 0.5 * (bl[j] + a[j])), min(a[j] + h, 0.5 * (a[j] + bu[j]))):
-            rows.append(np.where(np.arange(x0.size) == j, v, x0)), axis.append(j)
-    for j in range(pn.size):
-        for k in range(1, int(sweep) + 1):
-            v = pn[j] + k / (int(sweep) + 1) * (pu[j] - pn[j])  # inside the range: some bounds are open
-            rows.append(np.where(np.arange(x0.size) == a.size + j, v, x0)), axis.append(a.size + j)
-    return np.array(rows), np.array(axis, dtype=int)
+        low[j] = max(a[j] - h, 0.5 * (bl[j] + a[j]))
+        for v in (low[j], min(a[j] + h, 0.5 * (a[j] + bu[j]))):
+            rows.append(np.where(np.arange(x0.size) == j, v, x0)), axis.append(j), pair.append(-1)
+    for i in (-1, *(int(c) for c in cross)):
+        base = x0 if i < 0 else np.where(np.arange(x0.size) == i, low[i], x0)
+        for j in range(pn.size):
+            for k in range(1, int(sweep) + 1):
+                v = pn[j] + k / (int(sweep) + 1) * (pu[j] - pn[j])  # inside the range: some bounds are open
+                rows.append(np.where(np.arange(x0.size) == a.size + j, v, base))
+                axis.append(a.size + j), pair.append(i)
+    return np.array(rows), np.array(axis, dtype=int), np.array(pair, dtype=int)
 
 
 def anchored_emulators(X, axis, curves: Mapping[str, Sequence], model_times, lower, upper, names: Sequence[str],
-                       *, label: str = "diagnosis") -> tuple[dict, dict]:
-    """One :class:`enkf.emulator.AnchoredEmulator` per record from the one-at-a-time design ``(X, axis)``
-    (:func:`anchored_design`) and, per record, its runs' curves in the order of ``X``; a failed run is left
-    out of its axis (an axis with none left is held at the anchor). Returns ``(emulators, n_failed)``;
-    RuntimeError when a record's anchor run failed."""
+                       *, label: str = "diagnosis", pair=None) -> tuple[dict, dict]:
+    """One :class:`enkf.emulator.AnchoredEmulator` per record from the one-at-a-time design ``(X, axis,
+    pair)`` (:func:`anchored_design`; ``pair`` None: no cross runs) and, per record, its runs' curves in
+    the order of ``X``; a failed run is left out of its axis or pair (an axis with none left is held at the
+    anchor, a pair then dropped). Returns ``(emulators, n_failed)``; RuntimeError when a record's anchor
+    run failed."""
     X, axis = np.asarray(X, float), np.asarray(axis, int)
-    if axis[0] != -1 or np.any(axis[1:] < 0):
-        raise ValueError("the anchored design's first row must be its anchor and only that row")
+    pair = np.full(axis.size, -1) if pair is None else np.asarray(pair, int)
+    if axis[0] != -1 or np.any(axis[1:] < 0) or pair.shape != axis.shape:
+        raise ValueError("the anchored design's first row must be its anchor and only that row, and pair "
+                         "must give one entry per row")
     emulators, n_failed = {}, {}
     for rec, runs in curves.items():
         Y = [curve_on_model_grid(c, model_times) for c in runs]
         n_failed[rec] = sum(y is None for y in Y)
         if Y[0] is None:
             raise RuntimeError(f"{label}: the anchor run of {rec} failed; the anchored model needs it")
-        axes = {}
-        for j in sorted(set(axis[1:].tolist())):
-            ok = [i for i in np.flatnonzero(axis == j) if Y[i] is not None]
-            axes[j] = (X[ok, j], [Y[i] for i in ok])
-        emulators[rec] = AnchoredEmulator(X[0], Y[0], axes, lower, upper, names=list(names))
+        axes, pairs = {}, {}
+        for j in sorted(set(axis[1:][pair[1:] < 0].tolist())):
+            ok = [r for r in np.flatnonzero((axis == j) & (pair < 0)) if Y[r] is not None]
+            axes[j] = (X[ok, j], [Y[r] for r in ok])
+        for i, j in sorted({(int(i), int(j)) for i, j in zip(pair, axis) if i >= 0}):
+            ok = [r for r in np.flatnonzero((axis == j) & (pair == i)) if Y[r] is not None]
+            if ok and all(len(axes.get(k, ((),))[0]) for k in (i, j)):  # a pair needs both axes' runs
+                pairs[(i, j)] = (float(X[ok[0], i]), X[ok, j], [Y[r] for r in ok])
+        emulators[rec] = AnchoredEmulator(X[0], Y[0], axes, lower, upper, names=list(names), pairs=pairs)
     return emulators, n_failed
 
 

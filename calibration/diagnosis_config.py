@@ -62,8 +62,8 @@ def design_mesh_point(exp: Mapping, point) -> int:
 def design_size(exp: Mapping) -> int:
     """The number of runs per record of a diagnosed experiment's design (the Snakefile's design points):
     ``design_points`` for the emulator; for the anchored model the anchor, two runs per estimated
-    parameter and ``sweep_points`` per physical candidate's parameter (:func:`calibration.diagnose.
-    anchored_design`)."""
+    parameter and ``sweep_points`` per physical candidate's parameter, again per name in ``interactions``
+    (:func:`calibration.diagnose.anchored_design`)."""
     d = diagnosis_settings(exp)
     if selection_model(d) == "emulator":
         return int(d["design_points"])
@@ -73,7 +73,12 @@ def design_size(exp: Mapping) -> int:
                          f"parameters: {base!r} (set diagnosis.selection_model: emulator, or list them)")
     physical = [p for c in candidate_effects(d) for p in fx.get_effect(c).params
                 if fx.get_effect(c).kind == "physical"]
-    return 1 + 2 * len(base) + int(d.get("sweep_points", 3)) * len(physical)
+    unknown = [n for n in d.get("interactions") or [] if n not in base]
+    if unknown:
+        raise ValueError(f"diagnosis.interactions names {unknown}, which are not estimated parameters "
+                         f"(parameters: {list(base)})")
+    sweeps = 1 + len(d.get("interactions") or [])  # the physical sweeps, once plus once per interaction
+    return 1 + 2 * len(base) + sweeps * int(d.get("sweep_points", 3)) * len(physical)
 
 
 def loro_folds(name: str, exp: Mapping) -> dict[str, dict]:

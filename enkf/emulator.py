@@ -150,19 +150,29 @@ class AnchoredEmulator:
 
     each term interpolated piecewise-linearly along its own axis from runs that move that one parameter
     away from the anchor ``a`` (linearly extrapolated past the outermost runs of the axis). It is exact
-    at every run it is built from and for any response additive in its parameters; it has no interaction
-    terms. Why it exists beside :class:`CurveEmulator`: one effect's response to its own parameter can be
-    strongly nonlinear (an onset that moves with a gap), and a handful of runs along its axis resolve it
-    where a space-filling design of the same size spread over every dimension cannot.
+    at every run it is built from and for any response additive in its parameters. Why it exists beside
+    :class:`CurveEmulator`: one effect's response to its own parameter can be strongly nonlinear (an
+    onset that moves with a gap), and a handful of runs along its axis resolve it where a space-filling
+    design of the same size spread over every dimension cannot.
+
+    ``pairs`` adds second-order terms where two parameters do not add: an end friction's confinement
+    scales with the strength, so the friction's runs made at the base model's ``sigma_t`` overstate its
+    increment at a lower one. For a pair ``(i, j)`` with runs at ``x_i = u`` and ``x_j = v_k`` the term
+    ``g_k = f(u, v_k) - f(u, a_j) - f(a_i, v_k) + f(a)`` (the first-order parts read off the axes'
+    chords) is interpolated along ``j`` as the axes are and scaled linearly in ``x_i``:
+    ``g(x_i, x_j) = chord(x_j) (x_i - a_i) / (u - a_i)``, zero on both axes through the anchor.
 
     anchor : (n,) the anchor ``a``; anchor_curve : (m,) ``f(a)``.
     axes : ``{j: (values, curves)}``, per parameter index ``j`` the values it was moved to (``(k,)``,
         none equal to ``a_j``) and those runs' curves (``(k, m)``). A parameter without runs contributes
         nothing (held at the anchor).
     lower, upper : the box (bounds of the inputs, not checked: the terms extrapolate linearly).
+    pairs : ``{(i, j): (u, values, curves)}``: runs with parameter ``i`` at ``u`` and ``j`` at each of
+        ``values`` (``(k,)``, none equal to ``a_j``), the others at the anchor; both axes need runs.
     """
 
-    def __init__(self, anchor, anchor_curve, axes, lower, upper, *, names: Sequence[str] | None = None):
+    def __init__(self, anchor, anchor_curve, axes, lower, upper, *, names: Sequence[str] | None = None,
+                 pairs=None):
         self.anchor = np.asarray(anchor, dtype=float)
         self.f0 = np.asarray(anchor_curve, dtype=float)
         self.lower = np.asarray(lower, dtype=float)
@@ -188,6 +198,28 @@ class AnchoredEmulator:
             order = np.argsort(np.concatenate([[self.anchor[j]], v]))
             self._axes[int(j)] = (np.concatenate([[self.anchor[j]], v])[order],
                                   np.vstack([np.zeros_like(self.f0), Y - self.f0])[order])
+        self._pairs = {}
+        for (i, j), (u, values, curves) in (pairs or {}).items():
+            self._pairs[(int(i), int(j))] = self._pair_term(int(i), int(j), float(u), values, curves)
+
+    def _pair_term(self, i: int, j: int, u: float, values, curves):
+        """``(u, values along j with the anchor's, second-order terms)`` of one pair (class docstring)."""
+        v = np.asarray(values, dtype=float).ravel()
+        Y = np.array(curves, dtype=float, ndmin=2)
+        if i == j or i not in self._axes or j not in self._axes:
+            raise ValueError(f"pair ({i}, {j}): two different parameters, each with axis runs, are needed")
+        if Y.shape != (v.size, self.f0.size) or not np.all(np.isfinite(Y)) or v.size == 0:
+            raise ValueError(f"pair ({i}, {j}): {v.size} values and curves of shape {Y.shape} (need finite "
+                             f"({v.size}, {self.f0.size}))")
+        if abs(u - self.anchor[i]) <= 1e-9 * (self.upper[i] - self.lower[i]):
+            raise ValueError(f"pair ({i}, {j}): its runs must move parameter {i} off the anchor")
+        if np.any(np.abs(v - self.anchor[j]) <= 1e-9 * (self.upper[j] - self.lower[j])):
+            raise ValueError(f"pair ({i}, {j}) has a run at the anchor's own value of parameter {j}")
+        vi, Di = self._axes[i]
+        vj, Dj = self._axes[j]
+        G = Y - self.f0 - _chords(vi, Di, np.array([u]))[0] - _chords(vj, Dj, v)
+        order = np.argsort(np.concatenate([[self.anchor[j]], v]))
+        return u, np.concatenate([[self.anchor[j]], v])[order], np.vstack([np.zeros_like(self.f0), G])[order]
 
     @property
     def n_params(self) -> int:
@@ -204,6 +236,8 @@ class AnchoredEmulator:
         Y = np.broadcast_to(self.f0, (P.shape[0], self.m)).copy()
         for j, (v, D) in self._axes.items():
             Y += _chords(v, D, P[:, j])
+        for (i, j), (u, v, G) in self._pairs.items():
+            Y += _chords(v, G, P[:, j]) * ((P[:, i] - self.anchor[i]) / (u - self.anchor[i]))[:, None]
         return Y
 
     def loo_residuals(self) -> np.ndarray:

@@ -35,7 +35,8 @@ curves = {rec: [read_curve(root / p / rec / "curve.csv") for p in snakemake.para
 obs_times = {r: obs.grid(r) for r in obs.records}
 obs_times.update({r: held.grid(r) for r in (held.records if held is not None else [])})
 model, n_failed = emulated_model(X, names, meta["lower"], meta["upper"], curves, model_grid(e["simulation"]),
-                                 obs_times, label=f"diagnosis of {snakemake.wildcards.exp}", axis=meta.get("axis"))
+                                 obs_times, label=f"diagnosis of {snakemake.wildcards.exp}", axis=meta.get("axis"),
+                                 pair=meta.get("pair"))
 noise, simulator = protocol_errors(obs, analysis, held)
 # the base model is the workflow's posterior (posterior.csv, summary.json), not a second fit on the emulator
 base = workflow_base(model, meta["base_names"], obs.records, pd.read_csv(inp.posterior), summary, file=inp.posterior)

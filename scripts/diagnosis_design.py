@@ -23,10 +23,11 @@ blo, bhi = base_design_box(post, spec.names, spec.lower, spec.upper, width_sd=d[
                            min_rel_width=d["base_min_rel_width"])
 pnames, plo, phi = physical_design_ranges(candidate_effects(d), d["physical_upper"])
 model = selection_model(d)
-axis = None
+axis = pair = None
 if model == "anchored":
-    X, axis = anchored_design(sample.mean(axis=0), blo, bhi, plo, phi, base_step=float(d.get("anchor_step", 0.25)),
-                              sweep=int(d.get("sweep_points", 3)))
+    X, axis, pair = anchored_design(sample.mean(axis=0), blo, bhi, plo, phi,
+                                    base_step=float(d.get("anchor_step", 0.25)), sweep=int(d.get("sweep_points", 3)),
+                                    cross=[list(spec.names).index(n) for n in d.get("interactions") or []])
 else:
     X = design_points(blo, bhi, plo, phi, d["design_points"], seed=d["seed"], null_fraction=d["null_fraction"])
 if X.shape[0] != design_size(e):  # the Snakefile declared design_size(e) runs per record
@@ -38,6 +39,7 @@ atomic_write_csv(frame, snakemake.output.design)
 atomic_write_json(snakemake.output.meta, {"names": names, "base_names": list(spec.names), "physical_names": pnames,
                                           "selection_model": model,
                                           "axis": None if axis is None else axis.tolist(),
+                                          "pair": None if pair is None else pair.tolist(),
                                           "lower": np.concatenate([blo, plo]).tolist(),
                                           "upper": np.concatenate([bhi, phi]).tolist(),
                                           "posterior_mean": dict(zip(spec.names, sample.mean(axis=0).tolist())),

@@ -63,8 +63,9 @@ def test_the_anchored_emulators_leave_one_out_error_is_each_axis_run_against_its
 
 
 def test_the_anchored_design_moves_one_parameter_per_run_inside_the_box():
-    X, axis = anchored_design([30e6, 5e3], [20e6, 1e3], [50e6, 2e4], [0.0, 0.0], [0.6, 2e-4],
-                              base_step=0.25, sweep=3)
+    X, axis, pair = anchored_design([30e6, 5e3], [20e6, 1e3], [50e6, 2e4], [0.0, 0.0], [0.6, 2e-4],
+                                    base_step=0.25, sweep=3)
+    assert np.all(pair == -1)  # no interactions asked
     assert X.shape == (1 + 2 * 2 + 3 * 2, 4) and axis[0] == -1
     assert np.allclose(X[0], [30e6, 5e3, 0.0, 0.0])
     moved = (X[1:] != X[0]).sum(axis=1)
@@ -100,7 +101,7 @@ def _anchored_standin(anchor, sweep=3):
     names = BASE + ["face_gap.gap_m", "rate_strength.k"]
     stand = StandIn(GAP_K)
     lo, hi = stand.box(names)
-    X, axis = anchored_design(anchor, lo[:2], hi[:2], lo[2:], hi[2:], base_step=0.25, sweep=sweep)
+    X, axis, _ = anchored_design(anchor, lo[:2], hi[:2], lo[2:], hi[2:], base_step=0.25, sweep=sweep)
     curves = {}
     for r in GAP_K:
         Y = stand.forward(names, [r])(X)
