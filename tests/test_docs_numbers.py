@@ -50,6 +50,18 @@ def _planted_gap(J) -> dict:
             "m": _mpa(sig["mean"]), "lo": _mpa(sig["q05"]), "hi": _mpa(sig["q95"]), "t": truth["params"]["sigma_t"] / 1e6}
 
 
+def _interactions(J) -> dict:
+    """The second-order term's development study (studies/anchored_interactions.py,
+    interactions_rediagnosis.py): the emulators' worst error at the planted point on the friction series'
+    calibration records, and the re-diagnosed selection's friction fit."""
+    d = J("studies/results/anchored_interactions_interface_friction_5302.json")
+    cal = [r["at_planted_base"]["effect_planted"] for r in d["records"].values() if r["data"] == "calibration"]
+    fit = J("studies/results/interactions_rediagnosis.json")["series"]["planted_interface_friction_5302"]
+    return {"first": max(c["first"]["rmse_Pa"] for c in cal) / 1e6, "second": max(c["second"]["rmse_Pa"] for c in cal) / 1e6,
+            "mu": fit["interactions"]["fitted"]["base + interface_friction"]["interface_friction.mu"][1],
+            "planted": fit["plant"]["interface_friction.mu"]}
+
+
 def _series_walls(J, series: str) -> dict:
     """The wall times of the planted benchmark's series of one kind (cylinder or disc) run so far, but for a
     series that shared the machine (``wall_is_cost`` false)."""
@@ -302,6 +314,9 @@ QUOTES: list[Quote] = [
     Quote("docs/workflow.md", "its predictive coverage is {cov}", lambda J: {
         "cov": f"{_twin()['predictive_coverage_90']['synthetic']:.2f}"}),
     Quote(CL, "A cylinder series costs {lo:.0f}-{hi:.0f} s on 2 cores", lambda J: _series_walls(J, "cylinder")),
+    Quote(CL, "real runs at the planted point by up to {first:.1f} MPa RMSE, with the term by at most {second:.1f} MPa",
+          _interactions),
+    Quote(CL, "the friction at {mu:.2f} for {planted} planted", _interactions),
     Quote(CL, "(z = {z:.2f}), and the held-out record's RMSE fell from {rb} to {ra} MPa, its\n"
           "90 % predictive band covering {c:.2f} of its curve. The fitted gaps' 90 % intervals hold {k} of the {n}\n"
           "calibration records' planted gaps, and the held-out record's predicted interval holds its own; the\n"
