@@ -171,6 +171,9 @@ class AnchoredEmulator:
         ``values`` (``(k,)``, none equal to ``a_j``), the others at the anchor; both axes need runs.
     """
 
+    # an emulator pickled before pairs existed (a selection.pkl of an earlier run) has none
+    _pairs: dict = {}
+
     def __init__(self, anchor, anchor_curve, axes, lower, upper, *, names: Sequence[str] | None = None,
                  pairs=None):
         self.anchor = np.asarray(anchor, dtype=float)

@@ -92,3 +92,15 @@ def test_the_workflow_declares_the_cross_runs_and_refuses_an_unknown_name():
     assert design_size(exp) == 1 + 2 * 2 + 2 * 3 * len(phys) == 23
     with pytest.raises(ValueError, match=r"interactions names \['sigma_n'\]"):
         design_size({**exp, "diagnosis": {**exp["diagnosis"], "interactions": ["sigma_n"]}})
+
+
+def test_an_emulator_pickled_before_pairs_existed_still_evaluates():
+    import pickle
+
+    a = np.array([44.0, 3.0, 0.0])
+    axes = {0: ([34.0], _runs([[34.0, 3.0, 0.0]])), 2: ([0.25], _runs([[44.0, 3.0, 0.25]]))}
+    emu = AnchoredEmulator(a, response(a), axes, [10.0, 1.0, 0.0], [80.0, 5.0, 0.5])
+    old = pickle.loads(pickle.dumps(emu))
+    del old.__dict__["_pairs"]  # what an earlier run's selection.pkl holds
+    x = np.array([[39.0, 3.0, 0.125]])
+    assert np.array_equal(old(x), emu(x))
