@@ -91,11 +91,12 @@ def in_sample(series: Path, effect: str, draws: int, seed: int) -> dict:
             d = diag / "check" / str(i)
             run0 = json.loads((d / "run.json").read_text())
             c = pd.read_csv(d / "curve.csv")
-            W = interpolation_matrix(c.time_s.to_numpy(), obs[obs.record == j].time_s.to_numpy())
             dt = float(np.median(np.diff(c.time_s.to_numpy())))
             for x, nm, out, tag in ((x0, base_names, r0, "base"), (x1, names, r1, effect)):
                 cc = run_point(series, j, dict(zip(nm, map(float, x))), run0,
                                series / "study_insample" / j / f"{tag}_{k}", dt)
+                # each run on its own output times (a disc's time step moves with its parameters)
+                W = interpolation_matrix(cc.time_s.to_numpy(), obs[obs.record == j].time_s.to_numpy())
                 out.append(W @ cc.stress_Pa.to_numpy())
         real0[j], real1[j] = np.array(r0), np.array(r1)
     Wt = Weighted(RecordErrors({j: noise[j] for j in calib}, {}, {}), calib, w)

@@ -88,10 +88,12 @@ def main(argv=None) -> dict:
 
     def real_at(rec, role, x, tag):
         runs = []
-        for k, (_, run0, W, dt) in enumerate(base_runs(rec, role)):
+        for k, (_, run0, _, dt) in enumerate(base_runs(rec, role)):
             c = run_point(series, rec, dict(zip(names, map(float, x))), run0,
                           series / "study_points" / rec / f"{tag}_{k}", dt)
-            runs.append(W @ c.stress_Pa.to_numpy())
+            # on its own output times (a time step that moves with the parameters moves them)
+            runs.append(interpolation_matrix(c.time_s.to_numpy(), obs[obs.record == rec].time_s.to_numpy())
+                        @ c.stress_Pa.to_numpy())
         return np.array(runs)
 
     points, base, cand = {}, {}, {}
