@@ -40,9 +40,9 @@ from enkf.diagnosis.crossval import seed_for
 from enkf.emulator import AnchoredEmulator
 from shpb import effects as fx
 
+from .covariates import peak_error_trends
 from .diagnose import EmulatedSHPB, anchored_emulators, emulators_from_design
 # light, for the Snakefile's parse: re-exported here, where the rest of closing the loop lives
-from .covariates import peak_error_trends
 from .diagnosis_config import FOLD_SEPARATOR, candidate_effects, loro_folds  # noqa: F401
 from .model_error import stored_error
 from .observations import Observations

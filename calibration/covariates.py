@@ -129,8 +129,8 @@ def peak_error_trends(errors: Mapping[str, Mapping], record_info: Mapping[str, M
     for rec in records:
         e = errors.get(rec) or {}
         rows.append({"record": rec, **covariate_values(record_info.get(rec, {})),
-                     **{col: _number((e.get(col.rsplit("_", 1)[1]) or {}).get("peak_rel_error"))
-                        for col in ERROR_COLUMNS}})
+                     **{f"peak_rel_error_{w}": _number((e.get(w) or {}).get("peak_rel_error"))
+                        for w in ("before", "after")}})
     table = pd.DataFrame(rows, columns=["record", *(c for c, _ in COVARIATES), *ERROR_COLUMNS])
     trends = covariate_table_trends(table, ERROR_COLUMNS)
     return jsonable({"records": table.to_dict(orient="records"),

@@ -289,7 +289,7 @@ def anchored_emulators(X, axis, curves: Mapping[str, Sequence], model_times, low
             axes[j] = (X[ok, j], [Y[r] for r in ok])
         for i, j in sorted({(int(i), int(j)) for i, j in zip(pair, axis) if i >= 0}):
             ok = [r for r in np.flatnonzero((axis == j) & (pair == i)) if Y[r] is not None]
-            if ok and all(len(axes.get(k, ((),))[0]) for k in (i, j)):  # a pair needs both axes' runs
+            if ok and all(k in axes and len(axes[k][0]) for k in (i, j)):  # a pair needs both axes' runs
                 pairs[(i, j)] = (float(X[ok[0], i]), X[ok, j], [Y[r] for r in ok])
         emulators[rec] = AnchoredEmulator(X[0], Y[0], axes, lower, upper, names=list(names), pairs=pairs)
     return emulators, n_failed

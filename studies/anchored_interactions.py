@@ -44,6 +44,7 @@ sys.path.insert(0, str(ROOT))
 
 from calibration.diagnose import interpolation_matrix  # noqa: E402
 from calibration.runner import simulate_argv, simulator_command  # noqa: E402
+from enkf.emulator import AnchoredEmulator  # noqa: E402
 from shpb.atomic import emit_json  # noqa: E402
 
 
@@ -64,9 +65,12 @@ def curve(path: Path) -> pd.DataFrame:
 def run_point(series: Path, record: str, params: dict, run0: dict, out: Path, sample_dt: float) -> pd.DataFrame:
     """One FDEM run of ``record`` on its design mesh (run0: the anchor's run.json) with ``params``
     changed; kept under ``out`` (re-used when there)."""
+    wanted = {**run0["params"], **params}
+    if (out / "run.json").exists() and json.loads((out / "run.json").read_text())["params"] != wanted:
+        raise RuntimeError(f"{out} holds a run of other parameters; remove it to run this point")
     if not (out / "curve.csv").exists():
         argv = simulate_argv(simulator_command(), geometry=run0["geometry"], preset=run0["preset"],
-                             params={**run0["params"], **params}, out_dir=out,
+                             params=wanted, out_dir=out,
                              record=str(series / "observations" / record / "record.json"), t_end=run0["t_end_s"],
                              sample_dt=sample_dt, mesh_seed=run0["mesh_seed"])
         env = {**os.environ, "OMP_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1", "PYTHONPATH": str(ROOT)}
@@ -74,34 +78,6 @@ def run_point(series: Path, record: str, params: dict, run0: dict, out: Path, sa
         if r.returncode != 0:
             raise RuntimeError(f"{record} {params}: exit {r.returncode}: {r.stderr[-800:]}")
     return curve(out / "curve.csv")
-
-
-class Emulators:
-    """Per record, the first-order anchored emulator of (sigma_t, E_t, effect) from the design's axis
-    runs, and the same plus the (sigma_t, effect) second-order term from the cross runs."""
-
-    def __init__(self, anchor, axes, cross_s, cross, W):
-        self.a = np.asarray(anchor, float)  # (3,)
-        self.axes = axes                    # j -> (values incl. anchor sorted, deltas on obs grid)
-        self.s_low = cross_s
-        self.cross = cross                  # (values of the effect incl. 0, second-order term at s_low)
-
-    @staticmethod
-    def _chord(v, D, x):
-        # piecewise linear, linear extrapolation past the ends (AnchoredEmulator's rule)
-        i = np.clip(np.searchsorted(v, x) - 1, 0, len(v) - 2)
-        w = (x - v[i]) / (v[i + 1] - v[i])
-        return D[i] + w * (D[i + 1] - D[i])
-
-    def __call__(self, x, f0, second: bool):
-        y = f0.copy()
-        for j, (v, D) in self.axes.items():
-            y = y + self._chord(v, D, x[j])
-        if second:
-            mv, G = self.cross
-            g = self._chord(mv, G, x[2])
-            y = y + g * (x[0] - self.a[0]) / (self.s_low - self.a[0])
-        return y
 
 
 def main(argv=None) -> dict:
@@ -143,20 +119,16 @@ def main(argv=None) -> dict:
         def on_obs(i):
             return W @ curve(series / "diagnosis" / "design" / f"{i:03d}" / rec / "curve.csv").stress_Pa.to_numpy()
 
-        axes = {}
-        for k, j in enumerate((js, je, jm)):
-            v = np.array([anchor[j]] + [P.iloc[i][names[j]] for i in pts[j]])
-            D = np.vstack([np.zeros_like(f0)] + [on_obs(i) - f0 for i in pts[j]])
-            order = np.argsort(v)
-            axes[k] = (v[order], D[order])
-        # the cross runs: sigma_t at its low axis value, the effect at each of its axis values
-        f_s = on_obs(next(i for i in pts[js] if P.iloc[i]["sigma_t"] == s_low))
-        G = [np.zeros_like(f0)]
-        for mv in m_vals:
-            c = run_point(series, rec, {"sigma_t": s_low, a.effect: mv}, run0, runs_dir / rec / f"cross_{mv:g}", dt)
-            f_m = on_obs(next(i for i in pts[jm] if P.iloc[i][a.effect] == mv))
-            G.append(W @ c.stress_Pa.to_numpy() - f_s - f_m + f0)
-        emus[rec] = Emulators(anchor[[js, je, jm]], axes, s_low, (np.array([anchor[jm]] + m_vals), np.vstack(G)), W)
+        # the first-order model from the design's axis runs, the second-order one with the cross runs
+        axes = {k: ([P.iloc[i][names[j]] for i in pts[j]], [on_obs(i) for i in pts[j]])
+                for k, j in enumerate((js, je, jm))}
+        cross = [W @ run_point(series, rec, {"sigma_t": s_low, a.effect: mv}, run0, runs_dir / rec / f"cross_{mv:g}",
+                               dt).stress_Pa.to_numpy() for mv in m_vals]
+        box = ([meta["lower"][j] for j in (js, je, jm)], [meta["upper"][j] for j in (js, je, jm)])
+        first = AnchoredEmulator(anchor[[js, je, jm]], f0, axes, *box)
+        second = AnchoredEmulator(anchor[[js, je, jm]], f0, axes, *box, pairs={(0, 2): (s_low, m_vals, cross)})
+        emus[rec] = {"first": first, "second": second}
+        G = second._pairs[(0, 2)][2]
         # the emulators' error at the planted base, effect off and on, against real runs on the same mesh
         rows = {}
         for label, mv in (("effect_off", 0.0), ("effect_planted", a.truth_effect)):
@@ -164,8 +136,8 @@ def main(argv=None) -> dict:
             real = W @ run_point(series, rec, {"sigma_t": x[0], a.effect: mv}, run0,
                                  runs_dir / rec / f"truthlike_{mv:g}", dt).stress_Pa.to_numpy()
             rows[label] = {"real_peak_Pa": float(real.max()),
-                           **{form: {"rmse_Pa": float(np.sqrt(np.mean((emus[rec](x, f0, form == "second") - real) ** 2))),
-                                     "peak_Pa": float(emus[rec](x, f0, form == "second").max())}
+                           **{form: {"rmse_Pa": float(np.sqrt(np.mean((emus[rec][form](x[None])[0] - real) ** 2))),
+                                     "peak_Pa": float(emus[rec][form](x[None])[0].max())}
                               for form in ("first", "second")}}
         out["records"][rec] = {"data": "held out" if rec in held else "calibration", "at_planted_base": rows,
                                "second_order_term_rms_Pa": float(np.sqrt(np.mean(np.vstack(G) ** 2)))}
@@ -176,7 +148,7 @@ def main(argv=None) -> dict:
     for form in ("first", "second"):
         def loss(u):
             x = lo + u * (hi - lo)
-            return sum(float(np.sum(((emus[r](x, f0s[r], form == "second") - ys[r]) / sig[r]) ** 2)) for r in calib)
+            return sum(float(np.sum(((emus[r][form](x[None])[0] - ys[r]) / sig[r]) ** 2)) for r in calib)
 
         best = None
         for u0 in np.random.default_rng(0).uniform(0.05, 0.95, (24, 3)):
@@ -194,8 +166,7 @@ def main(argv=None) -> dict:
             real = Ws[rec] @ run_point(series, rec, {"sigma_t": x[0], "E_t": x[1], a.effect: x[2]}, run0,
                                        runs_dir / rec / f"fit_{form}", dt).stress_Pa.to_numpy()
             err[rec] = {"real_rmse_Pa": float(np.sqrt(np.mean((real - ys[rec]) ** 2))),
-                        "emulated_rmse_Pa": float(np.sqrt(np.mean((emus[rec](x, f0s[rec], form == "second")
-                                                                    - ys[rec]) ** 2))),
+                        "emulated_rmse_Pa": float(np.sqrt(np.mean((emus[rec][form](x[None])[0] - ys[rec]) ** 2))),
                         "real_peak_rel_error": float((real.max() - ys[rec].max()) / ys[rec].max())}
         fits[form] = {"point": fit, "errors": err}
     out["fits"] = fits
