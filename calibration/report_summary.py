@@ -167,14 +167,19 @@ def _diagnosis(check: Mapping) -> list[str]:
                          _num(_get(e, "before", "peak_rel_error"), 100.0, "+.1f"),
                          _num(_get(e, "after", "peak_rel_error"), 100.0, "+.1f"),
                          _num(_get(bands, rec, "after", "predictive_coverage_90"), 1.0, ".2f"),
+                         _num(_get(bands, rec, "before", "interval_score_over_box"), 1.0, ".2f"),
                          _num(_get(bands, rec, "after", "interval_score_over_box"), 1.0, ".2f")])
         out += ["<p style=\"margin:0.2em 0 0 0\">Errors of real FDEM runs at the posterior means before and "
-                "after the loop (diagnosis/check.json), and each record's 90 % predictive band after it: the share "
-                "of the record inside, and its interval score over that of the same band with the parameters "
-                "uniform over the emulator's design box (near 1: the model's miss, not the parameters, limits the "
-                "prediction; '?': a check made before it was scored):</p>",
+                "after the loop (diagnosis/check.json), and each record's 90 % predictive band: the share of the "
+                "record inside it after the loop, and its interval score (a proper score: lower is better) over "
+                "that of the same band with the parameters uniform over the emulator's design box, before and "
+                "after (near 1: the model's miss, not the parameters, limits the prediction; '?': a check made "
+                "before it was scored). The RMSE weighs every sample alike, so after the failure peak, where "
+                "the simulator's own mesh scatter is largest, it can rise while the band's score falls: the "
+                "score reads each sample against its own uncertainty, as the walk does:</p>",
                 _table(["record", "used for", "RMSE before [MPa]", "RMSE after [MPa]", "peak error before [%]",
-                        "peak error after [%]", "band covers", "band score / box"], rows)]
+                        "peak error after [%]", "band covers", "band score / box before",
+                        "band score / box after"], rows)]
     return out + _covariates(check.get("covariate_trends"))
 
 

@@ -36,17 +36,19 @@ def test_the_summary_gives_verdict_intervals_misfit_per_iteration_and_the_heldou
     # the diagnosis: effects kept and the FDEM errors before/after, the held-out record last
     assert "effects kept: face_gap, trigger_shift" in html
     # a check made before the bands were scored: their cells say so
-    assert rows[-1] == ["CaMa_SHPB_005", "held out", "18.64", "11.59", "-1.3", "+10.4", "?", "?"]
-    assert ["CaMa_SHPB_004", "calibration", "17.25", "13.59", "+2.1", "+11.9", "?", "?"] in rows
+    assert rows[-1] == ["CaMa_SHPB_005", "held out", "18.64", "11.59", "-1.3", "+10.4", "?", "?", "?"]
+    assert ["CaMa_SHPB_004", "calibration", "17.25", "13.59", "+2.1", "+11.9", "?", "?", "?"] in rows
 
 
 def test_the_diagnosis_shows_each_record_s_band_coverage_and_its_score_over_the_design_box():
     check = json.loads((REPO / "benchmarks" / "results" / "loro_rerun_sandstone" / "SeeSst_SHPB_023_check.json")
                        .read_text())
     rows = _cells(summary_html("sandstone_unseen__SeeSst_SHPB_023", {"verdict": "ok"}, check))
-    band = check["predictive_band"]["records"]["SeeSst_SHPB_023"]["after"]
+    band = check["predictive_band"]["records"]["SeeSst_SHPB_023"]
     assert rows[-1][0] == "SeeSst_SHPB_023" and rows[-1][1] == "held out"
-    assert rows[-1][-2:] == [f"{band['predictive_coverage_90']:.2f}", f"{band['interval_score_over_box']:.2f}"]
+    assert rows[-1][-3:] == [f"{band['after']['predictive_coverage_90']:.2f}",
+                             f"{band['before']['interval_score_over_box']:.2f}",
+                             f"{band['after']['interval_score_over_box']:.2f}"]
 
 
 def test_a_twin_shows_its_truth_against_the_interval_and_no_diagnosis():
@@ -152,3 +154,19 @@ def test_the_summary_lists_the_walk_a_refuted_choice_and_the_alternative_confirm
     items = walk_items({**check, "fdem_confirmation": {**check["fdem_confirmation"], "steps": [refuted, alt]}})
     assert items == [refuted["text"], alt["text"]]
     assert "refuted" in items[0] and "(alternative to step 1)" in items[1]
+
+
+def test_the_errors_table_shows_the_band_score_before_and_after_beside_the_rmse():
+    """A held-out record whose RMSE rises while its band's proper score falls (a planted trigger shift
+    named as a baseline offset: the pre-peak fits better, the post-peak scatter rules the RMSE) shows
+    both moves on the page, so a lab sees which way the prediction went on each measure."""
+    errors = {"H": {"data": "heldout", "before": {"rmse": 8.16e6, "peak_rel_error": 0.072},
+                    "after": {"rmse": 9.87e6, "peak_rel_error": 0.053}}}
+    bands = {"H": {"before": {"predictive_coverage_90": 0.99, "interval_score_over_box": 0.665},
+                   "after": {"predictive_coverage_90": 0.84, "interval_score_over_box": 0.579}}}
+    html = summary_html("series", {"experiment": "series"},
+                        {"verdict": "confirmed", "added": ["baseline"], "errors_per_record": errors,
+                         "predictive_band": {"records": bands}})
+    header, row = _cells(html[html.index("Errors of real FDEM runs"):])[:2]
+    assert header[-3:] == ["band covers", "band score / box before", "band score / box after"]
+    assert row == ["H", "held out", "8.16", "9.87", "+7.2", "+5.3", "0.84", "0.67", "0.58"]
