@@ -29,13 +29,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT)]
 
-from benchmarks.scores import proper_scores  # noqa: E402
+from benchmarks.bench_coverage import EXPERIMENT, score_mcmc, twin_experiment  # noqa: E402
+from calibration.experiment import ExperimentSpec  # noqa: E402
 from shpb.atomic import emit_json  # noqa: E402
 from shpb.simulate import simulate  # noqa: E402
 
 SOURCE = ROOT / "benchmarks" / "results" / "coverage_one_posterior.json"
 OUT = ROOT / "studies" / "results" / "censored_identification.json"
-BOX = {"sigma_t": (4.0e6, 60.0e6), "E_t": (200.0, 2400.0)}  # twin_ref's box (config/config.yaml)
 WINDOW_S, SAMPLE_S = 1.6e-4, 5.0e-7  # twin_ref's simulation window and output step
 CUT = 0.25  # post-peak drop that separates "post-peak seen" from "censored", fixed before scoring
 
@@ -53,15 +53,14 @@ def post_peak(truth: dict) -> dict:
 
 
 def scores(twins: list) -> dict:
-    out = {"n": len(twins)}
-    for p, (lo, hi) in BOX.items():
-        rows = [t["emulator_mcmc"]["params"][p] for t in twins]
-        truth = np.array([float(t["truth"][p]) for t in twins])
-        res = proper_scores(rows, truth, lo, hi)
-        cover = np.mean([r["q05"] <= y <= r["q95"] for r, y in zip(rows, truth)]) if twins else None
-        out[p] = {"wis_over_prior": res["wis_over_prior"], "coverage_90": None if cover is None else float(cover),
-                  "width_90_over_box": float(np.mean([(r["q95"] - r["q05"]) / (hi - lo) for r in rows]))}
-    return out
+    """The twins' reported posterior scored by the harness itself (benchmarks.bench_coverage.score_mcmc, on
+    its twin experiment's box), as docs/inference.md's censored table is."""
+    spec = ExperimentSpec.from_config(EXPERIMENT, twin_experiment())
+    q = score_mcmc(twins, list(spec.lower), list(spec.upper), list(spec.names))["params"] if twins else {}
+    return {"n": len(twins), **{p: {"wis_over_prior": q[p]["wis_over_prior"],
+                                    "coverage_90": q[p]["coverage_90"]["fraction_counting_failures_as_misses"],
+                                    "width_over_prior_median": q[p]["width_over_prior_median"]}
+                                for p in spec.names if p in q}}
 
 
 def main() -> None:
