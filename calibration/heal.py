@@ -129,7 +129,7 @@ def write_manifest(folder: str | Path, files: Iterable[str | Path], request: str
 
 def check_manifest(manifest: str | Path) -> tuple[list[Path], str | None]:
     """``(the member's files, why they are bad)`` for one manifest; ``why`` None: every listed file that
-    exists matches (a missing one is Snakemake's to notice). A size is compared before hashing."""
+    exists matches (a missing one: :func:`heal_results` re-queues its batch). A size is compared before hashing."""
     manifest = Path(manifest)
     folder = manifest.parent
     try:
@@ -176,15 +176,16 @@ def _locked(workdir: Path) -> bool:
 
 def heal_results(root: str | Path = "results", argv: Sequence[str] | None = None, out=None) -> list[str]:
     """At the start of a run: remove the stale temporaries under ``root`` and put every member whose
-    files no longer match their manifest out of date; returns (and prints to ``out``, default stderr) one
+    files no longer match their manifest, or that a batch file lists and whose files are gone, out of
+    date; returns (and prints to ``out``, default stderr) one
     line each.
 
     A bad member's files are dated back to the epoch, with the batch file of the job that wrote them
     (rule simulate; the member's own rule runs no job), older than any input of that job: Snakemake's
     default rerun trigger (``mtime``) then runs the batch again, which re-simulates what is altered
     (calibration.batch keeps its runs made by the same request), and reruns what depends on it.
-    Deleting them here would not do: Snakemake does not rebuild a missing file whose consumers are up to date. Until a run asks for the member, the files stay bad and
-    each start says so again.
+    Deleting them here would not do: Snakemake does not rebuild a missing file whose consumers are up to
+    date. Until a run asks for the member, the files stay bad and each start says so again.
 
     Nothing is changed in an invocation that runs no job (:func:`is_dry_invocation`; the lines then say
     what a run would do), nor while ``.snakemake/locks`` holds a lock: another run may be live in this
@@ -229,6 +230,13 @@ def _heal(root: Path, dry: bool) -> list[str]:
             member_files, why = check_manifest(here / MANIFEST)
             if why:
                 bad.append((here, [p for p in member_files if p.is_file()], why))
+    # a run removed with its manifest: no rule asks for its files (the stages' collecting rules take the
+    # batch files, rules/inputs.smk stage_batch_files), so its batch is what must run again
+    listed = {str(f) for f, _, _ in bad}
+    for folder in sorted(set(batches) - listed):
+        missing = [name for name in MEMBER_FILES if not (Path(folder) / name).is_file()]
+        if missing:
+            bad.append((Path(folder), [], f"{', '.join(missing)} missing"))
     if stale:
         if not dry:
             for path in stale:

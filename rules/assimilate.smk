@@ -7,10 +7,8 @@ rule aggregate:
         params="results/{exp}/iter_{it}/params.csv",
         obs="results/{exp}/observations/obs.csv",
         obs_meta="results/{exp}/observations/obs.json",
-        curves=lambda wc: member_files(wc, "curve.csv"),
-        runs=lambda wc: member_files(wc, "run.json"),
-        replicate_curves=lambda wc: member_files(wc, "curve.csv", "replicates"),
-        replicate_runs=lambda wc: member_files(wc, "run.json", "replicates"),
+        # the members' and replicates' files, written by these batches (stage_batch_files)
+        batches=lambda wc: iteration_batch_files(wc.exp, wc.it),
     output:
         responses="results/{exp}/iter_{it}/responses.csv",
         replicates="results/{exp}/iter_{it}/replicates.csv",

@@ -47,18 +47,7 @@ rule refine_aggregate:
         params="results/{exp}/refine/params.csv",
         obs="results/{exp}/observations/obs.csv",
         obs_meta="results/{exp}/observations/obs.json",
-        curves=lambda wc: expand(
-            "results/{exp}/refine/members/{member}/{record}/curve.csv",
-            exp=wc.exp,
-            member=member_ids(refine_runs(wc.exp)),
-            record=list(records(wc.exp)),
-        ),
-        runs=lambda wc: expand(
-            "results/{exp}/refine/members/{member}/{record}/run.json",
-            exp=wc.exp,
-            member=member_ids(refine_runs(wc.exp)),
-            record=list(records(wc.exp)),
-        ),
+        batches=lambda wc: stage_batch_files(wc.exp, "refine_member"),
     output:
         responses="results/{exp}/refine/responses.csv",
     log:

@@ -14,17 +14,6 @@ from calibration.workflow_io import record_name
 
 
 # rules/observations.smk
-def approximation_files(exp, name):
-    """`name` of every approximation run (none when observations.model_error.approximation_error is off)."""
-    return expand(
-        "results/{exp}/approximation/{run}/{record}/{name}",
-        exp=exp,
-        run=approximation_run_ids(EXPERIMENTS[exp]),
-        record=list(records(exp)),
-        name=name,
-    )
-
-
 def approximation_point(exp, run):
     """The run's design point {parameter: value} (a param, so that a new box or seed re-runs the pairs)."""
     names = spec(exp).names
@@ -49,7 +38,8 @@ def approximation_preset(exp, run):
 
 def observation_inputs(wc):
     e = EXPERIMENTS[wc.exp]
-    out = {"approximation": approximation_files(wc.exp, "curve.csv")}
+    # the approximation runs (none when observations.model_error.approximation_error is off)
+    out = {"approximation": stage_batch_files(wc.exp, "approximation_run")}
     if e["kind"] == "twin":
         return {**out, "truth": f"results/{wc.exp}/truth/synthetic/curve.csv"}
     return {**out, "records": [stored_record(wc.exp, r) for r in records(wc.exp)]}
@@ -125,14 +115,27 @@ def stage_batches(exp, stage, key):
     return [runs[b * n // nb : (b + 1) * n // nb] for b in range(nb)]
 
 
+BATCH_FILE = "results/{exp}/simulate/{stage}/{key}/batch_{batch}.json"
+
+
 def batch_file(stage, wc):
     """The batch job's file of the run with wildcards `wc` (rule simulate)."""
     key = stage_key(stage, wc)
     run = {k: v for k, v in wc.items() if k != "exp"}
     for b, runs in enumerate(stage_batches(wc.exp, stage, key)):
         if run in runs:
-            return f"results/{wc.exp}/simulate/{stage}/{key}/batch_{b}.json"
+            return BATCH_FILE.format(exp=wc.exp, stage=stage, key=key, batch=b)
     raise ValueError(f"{stage} {run} of {wc.exp} is in no batch")
+
+
+def stage_batch_files(exp, stage, key="all"):
+    """Every batch file of a stage instance: what a rule collecting the stage's runs takes as input.
+    Why not the runs' own files: each would make a job of its stage rule, which runs nothing, at about
+    0.065 s a simulation (benchmarks/results/bench_batch.json); the batch file is written after every
+    run of the batch (calibration.batch.run_batch), and calibration.heal dates it back when one of its
+    runs is altered or missing, so that the batch runs again."""
+    n = len(stage_batches(exp, stage, key)) if stage_runs(exp, stage, key) else 0
+    return [BATCH_FILE.format(exp=exp, stage=stage, key=key, batch=b) for b in range(n)]
 
 
 #: The file a stage's simulations take their parameters from (batch_inputs; `{key}` the stage's
@@ -239,20 +242,11 @@ def batch_group(wc):
 
 # rules/ensemble.smk
 # rules/assimilate.smk
-def member_files(wc, name, folder="members"):
-    ids = (
-        member_ids(EXPERIMENTS[wc.exp]["ensemble_size"])
-        if folder == "members"
-        else replicate_ids(wc.exp)
-    )
-    return expand(
-        "results/{exp}/iter_{it}/{folder}/{member}/{record}/{name}",
-        exp=wc.exp,
-        it=wc.it,
-        folder=folder,
-        member=ids,
-        record=list(records(wc.exp)),
-        name=name,
+def iteration_batch_files(exp, it):
+    """The batch files of an iteration's members and replicates (scripts/aggregate.py reads their runs)."""
+    key = f"iter_{it}"
+    return stage_batch_files(exp, "member", key) + stage_batch_files(
+        exp, "replicate", key
     )
 
 
@@ -361,16 +355,6 @@ def design_records(exp):
     return {r: stored_record(exp, r) for r in {**records(exp), **heldout_records(exp)}}
 
 
-def design_files(exp, name):
-    return expand(
-        "results/{exp}/diagnosis/design/{point}/{record}/{name}",
-        exp=exp,
-        point=member_ids(design_size(EXPERIMENTS[exp])),
-        record=list(design_records(exp)),
-        name=name,
-    )
-
-
 def reported_analysis(exp):
     """The analysis.json of the calibration's reported ensemble (its error terms: noise, S, D)."""
     return iteration_files(exp, "analysis.json")
@@ -380,7 +364,8 @@ def diagnosis_inputs(wc):
     files = {
         "design": f"results/{wc.exp}/diagnosis/design/params.csv",
         "design_meta": f"results/{wc.exp}/diagnosis/design/design.json",
-        "curves": design_files(wc.exp, "curve.csv"),
+        # the design's runs (scripts/diagnosis.py reads them from the design's folder)
+        "design_runs": stage_batch_files(wc.exp, "diagnosis_member"),
         "obs": f"results/{wc.exp}/observations/obs.csv",
         "obs_meta": f"results/{wc.exp}/observations/obs.json",
         "analyses": reported_analysis(wc.exp),
@@ -400,10 +385,7 @@ def diagnosis_check_inputs(wc):
     files = {k: v for k, v in diagnosis_inputs(wc).items() if k not in ("summary",)}
     files["selection"] = f"results/{wc.exp}/diagnosis/selection.pkl"
     files["rows"] = f"results/{wc.exp}/diagnosis/check_runs.json"
-    files["runs"] = [
-        f"results/{wc.exp}/diagnosis/check/{i}/curve.csv"
-        for i in range(len(check_rows_of(wc.exp)))
-    ]
+    files["check_runs"] = stage_batch_files(wc.exp, "diagnosis_check_member")
     return files
 
 

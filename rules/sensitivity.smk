@@ -57,8 +57,7 @@ rule sensitivity_analysis:
         unpack(
             lambda wc: {
                 "design": f"results/{wc.exp}/sensitivity/design.csv",
-                "curves": sensitivity_files(wc.exp, "curve.csv"),
-                "runs": sensitivity_files(wc.exp, "run.json"),
+                "runs": stage_batch_files(wc.exp, "sensitivity_member"),
                 "record": [
                     p for p in [records(wc.exp)[sensitivity_spec(wc.exp).record]] if p
                 ],
@@ -90,5 +89,7 @@ rule sensitivity_analysis:
             "bootstrap": sensitivity_spec(wc.exp).bootstrap,
             "record": sensitivity_spec(wc.exp).record,
         },
+        curves=lambda wc: sensitivity_files(wc.exp, "curve.csv"),
+        runs=lambda wc: sensitivity_files(wc.exp, "run.json"),
     script:
         "../scripts/sensitivity_analysis.py"

@@ -11,7 +11,11 @@
 # simulate`, the one rule that simulates, runs a batch in one Python process
 # (calibration.batch.run_batch: the engine loaded once, each run in a forked child that writes its own
 # curve.csv, run.json and manifest.json). Why: a job's start-up and the engine's load cost about as much
-# as a `fast` simulation's time loop (benchmarks/results/bench_batch.json).
+# as a `fast` simulation's time loop (benchmarks/results/bench_batch.json). The rules that collect a
+# stage's runs (aggregate, refine_aggregate, observations' approximation pairs, the sensitivity analysis,
+# the diagnosis) take the stage's batch files as input (stage_batch_files), not the runs' files, so that
+# the stage rules never become jobs; the forecast and the truth, one run per record, are still asked for
+# by their files (the forecast's snapshots are report items).
 
 
 rule simulate:
@@ -23,7 +27,7 @@ rule simulate:
     input:
         unpack(batch_inputs),
     output:
-        batch="results/{exp}/simulate/{stage}/{key}/batch_{batch}.json",
+        batch=BATCH_FILE,
     log:
         "results/{exp}/simulate/{stage}/{key}/batch_{batch}.log",
     wildcard_constraints:

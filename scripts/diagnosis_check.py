@@ -5,6 +5,7 @@ from calibration.job_log import log_to
 log_to(snakemake.log[0])  # the job's output goes to its log (rules/*.smk)
 
 import pickle
+from pathlib import Path
 
 from calibration.closing import assemble
 from calibration.observations import read_curve, read_observations
@@ -16,7 +17,8 @@ state = pickle.loads(open(inp.selection, "rb").read())
 if "discrepancy" not in state:  # written before the bands needed the calibration's discrepancy
     raise RuntimeError(f"{inp.selection} holds no discrepancy: re-run rule diagnosis_select for it")
 rows = read_json(inp.rows)["rows"]
-runs = [read_curve(p) for p in inp.runs]
+# row i's run, written by the check's batches (rules/inputs.smk, diagnosis_check_inputs)
+runs = [read_curve(Path(inp.rows).parent / "check" / str(i) / "curve.csv") for i in range(len(rows))]
 obs = read_observations(inp.obs, inp.obs_meta)
 held = read_observations(inp.heldout, inp.heldout_meta) if "heldout" in inp.keys() else None
 report, check, curves, bands = assemble(state["selection"], rows, runs, state["model"], obs, held, state["noise"],

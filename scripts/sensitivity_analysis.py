@@ -22,7 +22,7 @@ grid = observation_grid(o["t_start"], o["t_end"], dt)
 X = pd.read_csv(snakemake.input.design)[list(spec.names)].to_numpy(float)
 Y = np.full((len(X), grid.size), np.nan)
 reasons = {}
-for i, (curve, run) in enumerate(zip(snakemake.input.curves, snakemake.input.runs)):
+for i, (curve, run) in enumerate(zip(snakemake.params.curves, snakemake.params.runs)):
     status = read_json(run)
     df = read_curve(curve)
     if status.get("status") == "ok" and len(df) >= 2:
@@ -32,7 +32,7 @@ for i, (curve, run) in enumerate(zip(snakemake.input.curves, snakemake.input.run
     elif not np.all(np.isfinite(Y[i])):
         reasons[i] = "the curve does not cover the observation window"
 indices = sa.analyze(spec, X, Y, grid, failed_reasons=reasons)  # refuses, naming the rows, if any failed
-wall = [read_json(r).get("wall_s") or 0.0 for r in snakemake.input.runs]
+wall = [read_json(r).get("wall_s") or 0.0 for r in snakemake.params.runs]
 atomic_write_json(snakemake.output.report, sa.report(spec, indices, simulation_wall_s=float(np.sum(wall)),
                                                      grid={"t_start_s": grid[0], "t_end_s": grid[-1], "dt_s": dt}))
 table_time, table_features = sa.tables(indices)

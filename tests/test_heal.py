@@ -12,6 +12,7 @@ from __future__ import annotations
 import io
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -28,9 +29,9 @@ pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="pr
 
 
 # --------------------------------------------------------------------------------------------------
-# (a) a member file truncated or altered between runs is re-simulated; the posterior is unchanged
+# (a) a member file truncated, altered or removed between runs is re-simulated; the posterior is unchanged
 # --------------------------------------------------------------------------------------------------
-def test_a_truncated_or_altered_member_file_is_resimulated_and_the_posterior_is_unchanged(tmp_path):
+def test_a_truncated_altered_or_removed_member_is_resimulated_and_the_posterior_is_unchanged(tmp_path):
     cfg = twin_config(ensemble_size=4, esmda={"steps": 1})
     cfg["experiments"]["twin"]["observations"]["model_error"] = {"simulator_replicates": 0}  # fewer jobs
     cfg["simulator"] = write_stand_in(tmp_path)
@@ -55,6 +56,7 @@ def test_a_truncated_or_altered_member_file_is_resimulated_and_the_posterior_is_
     (stale[0] / "curve.csv").write_text("half a curve")
     stale[1].write_text("half a table")
     assert len(list(members.rglob(MANIFEST))) == 4
+    shutil.rmtree(members / "003")  # no rule asks for a member's files: its batch file must be dated back
     again = snakemake(tmp_path, "--cores", "2", target)
     assert again.returncode == 0, again.stderr[-4000:]
     lines = [ln for ln in again.stderr.splitlines() if ln.startswith("results")]
@@ -63,15 +65,17 @@ def test_a_truncated_or_altered_member_file_is_resimulated_and_the_posterior_is_
                         f"says {size} (truncated or altered); re-queued: curve.csv, run.json, batch_0.json dated back to 1970, "
                         "out of date, so a run that needs them simulates the member again")
     assert "members/002/synthetic: the sha256 of curve.csv does not match its manifest (altered)" in lines[2]
-    assert len(lines) == 3 and not any(p.exists() for p in stale)
+    assert lines[3] == ("results/twin/iter_0/members/003/synthetic: curve.csv, run.json missing; re-queued: "
+                        "batch_1.json dated back to 1970, out of date, so a run that needs them simulates the member again")
+    assert len(lines) == 4 and not any(p.exists() for p in stale)
     assert json.loads(analysis.read_text()) == uninterrupted
-    # 1 and 2 simulated again; 0 and 3, in their batches (0 and 1, 2 and 3), kept: made by the same request
-    for b, m in ((0, 1), (1, 2)):
+    # 1, 2 and 3 simulated again; 0, in its batch (0 and 1; 2 and 3), kept: made by the same request
+    for b, kept, again in ((0, 1, [1]), (1, 0, [2, 3])):
         log = (tmp_path / f"results/twin/simulate/member/iter_0/batch_{b}.log").read_text().splitlines()
-        assert log[0] == "batch of 2 simulations, attempt 1 of 2; 1 made before by the same request"
-        assert [ln.split(":")[0] for ln in log[1:]] == [str(curves[m].parent.relative_to(tmp_path))]
+        assert log[0] == f"batch of 2 simulations, attempt 1 of 2; {kept} made before by the same request"
+        assert [ln.split(":")[0] for ln in log[1:]] == [str(curves[m].parent.relative_to(tmp_path)) for m in again]
     for m, c in curves.items():
-        assert m not in (0, 3) or (c.parent / "run.json").read_text() == written[m], m
+        assert m != 0 or (c.parent / "run.json").read_text() == written[m], m
         assert check_manifest(c.parent / MANIFEST)[1] is None and os.path.getmtime(c) > 1.0  # not left in 1970
 
 

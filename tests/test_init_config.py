@@ -127,8 +127,11 @@ def test_the_written_configs_pass_the_validation_and_a_dry_run(written):
     assert out.returncode == 0, out.stderr[-3000:]
     jobs = dict(ln.split()[:2] for ln in out.stdout.splitlines() if ln.split()[:1] and ln.split()[0].isidentifier()
                 and len(ln.split()) == 2 and ln.split()[1].isdigit())
-    # 25 disc members + 8 members x 2 marble records in the first ensembles; the marble's diagnosis check
-    assert int(jobs["member"]) == 25 + 16 and int(jobs["diagnosis_check"]) == 1 and int(jobs["lhs"]) == 2
+    # the first ensembles' batch jobs (at most 8 fast runs each, an even count): the disc's 25 members in 4
+    # and its 6 replicates in 2, the marble's 8 members x 2 records in 2 and 6 replicates x 2 records in 2;
+    # their declaring rules are no jobs (rules/inputs.smk, stage_batch_files); the marble's diagnosis check
+    assert int(jobs["simulate"]) == (4 + 2) + (2 + 2) and "member" not in jobs and int(jobs["aggregate"]) == 2
+    assert int(jobs["diagnosis_check"]) == 1 and int(jobs["lhs"]) == 2
     assert not (tmp / "results").exists()
 
 

@@ -117,8 +117,6 @@ def sizes_per_iteration(groups) -> dict[tuple[str, str], list[int]]:
 # and small's iteration 0, so the plan holds member batches of two iterations and two experiments.
 TARGETS = ["results/big/iter_1/responses.csv", "results/small/iter_0/responses.csv"]
 N_MEMBERS = 25 + 25 + 8
-#: observations.model_error.simulator_replicates (default 6) at the mean of each of those three iterations
-N_REPLICATES = 3 * 6
 #: batch jobs of at most 8 fast runs (simulations_per_job), an even count: 25 -> 4, 8 -> 2, 6 replicates -> 2
 N_BATCHES = 4 + 4 + 2 + 3 * 2
 
@@ -134,8 +132,10 @@ def test_the_slurm_dry_run_groups_the_batches_of_each_iteration_into_jobs_of_the
     out = snakemake(tmp_path, "-n", *TARGETS)
     plan = out.stdout + out.stderr
     assert out.returncode == 0, plan[-3000:]
-    # every simulation is declared by its own rule (no job of its own), run by a batch job
-    assert job_count(plan, "member") == N_MEMBERS and job_count(plan, "replicate") == N_REPLICATES
+    # every simulation is declared by its own rule and run by a batch job; the aggregation takes the batch
+    # files, so the declaring rules are no jobs (rules/inputs.smk, stage_batch_files)
+    assert job_count(plan, "member") == 0 and job_count(plan, "replicate") == 0
+    assert job_count(plan, "aggregate") == 3
     # the member and replicate batches, and each twin's truth run (a batch of its own)
     assert job_count(plan, "simulate") == N_BATCHES + 2
     groups = [g for g in group_jobs(plan) if g[1][0][1]["stage"] != "truth"]
