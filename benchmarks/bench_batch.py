@@ -7,7 +7,9 @@ against batches of simulations per job (rule simulate, calibration.batch), old a
 Each code version is cloned at its commit into a temporary folder (its own Numba cache, compiled by a
 warm-up run that is not counted). The workload: a `fast` Brazilian-disc twin (the default run's
 `twin_ref` settings, `--members` members, no replicates), and the timed command is what Snakemake does
-for one ensemble iteration's simulations: ``snakemake --cores 1 <every member's run.json of iter_0>``
+for one ensemble iteration's simulations: ``snakemake --cores 1 <iter_0's responses.csv> --omit-from
+aggregate`` (every job upstream of the aggregation; targeting each member's run.json instead would add
+a job per member that runs nothing, which the workflow no longer has)
 after the member folders (and, new, their batch files) are removed, so that only the simulations run,
 one after another on one core. ``overhead_per_member_s`` = (the command's wall minus Snakemake's own
 floor, the same command with nothing to do measured beside each repeat, minus the members' summed
@@ -81,7 +83,10 @@ def old_and_new(argv, out: str, **extra) -> tuple[argparse.Namespace, str]:
 def measure(clone: Path, work: Path, members: int, repeats: int) -> dict:
     work.mkdir(parents=True)
     (work / "config.yaml").write_text(yaml.safe_dump(config(members), sort_keys=False))
-    targets = [f"results/{EXP}/iter_0/members/{m:03d}/synthetic/run.json" for m in range(members)]
+    # what the workflow runs for one iteration's simulations: the jobs upstream of its aggregation (the
+    # batch jobs and, before the aggregation took the batch files, a job per member that ran nothing)
+    targets = [f"results/{EXP}/iter_0/responses.csv", "--omit-from", "aggregate"]
+    runs = [work / f"results/{EXP}/iter_0/members/{m:03d}/synthetic/run.json" for m in range(members)]
     snakemake(clone, work, "--cores", "2", *targets)  # warm-up: the engine compiled, the inputs made
     floor, rows = [], []
     for _ in range(repeats):
@@ -95,7 +100,7 @@ def measure(clone: Path, work: Path, members: int, repeats: int) -> dict:
         after = [snakemake(clone, work, "--cores", "1", *targets) for _ in range(2)]
         here = statistics.median([before, *after])
         floor.append(round(here, 3))
-        solver = sum(json.loads((work / t).read_text())["solver_wall_s"] for t in targets)
+        solver = sum(json.loads(r.read_text())["solver_wall_s"] for r in runs)
         rows.append({"wall_s": round(wall, 3), "solver_sum_s": round(solver, 3), "snakemake_floor_s": round(here, 3),
                      "overhead_per_member_s": round((wall - here - solver) / members, 3)})
     return {"snakemake_floor_s": floor, "repeats": rows,
