@@ -597,7 +597,7 @@ QUOTES: list[Quote] = [
               "cs": _calib_over_box("sandstone"), "cm": _calib_over_box("marble")}),
     Quote("docs/workflow.md", "a `fast` disc simulation in a batch of 8 costs {new:.2f} s, counting Snakemake's job, "
           "the interpreter, the engine's load, the mesh and the files (`benchmarks/results/bench_batch.json`, one core; "
-          "{old:.2f} s before", lambda J: {
+          "{old:.2f} s before the rules collecting", lambda J: {
               "new": J("benchmarks/results/bench_batch.json")["new"]["overhead_per_member_s_median"],
               "old": J("benchmarks/results/bench_batch.json")["old"]["overhead_per_member_s_median"]}),
     Quote(CL, "residual less what (a), (b) and (d) already give it, averaged over {w:.0f} us and floored at zero",
