@@ -131,7 +131,7 @@ def batch_file(stage, wc):
 def stage_batch_files(exp, stage, key="all"):
     """Every batch file of a stage instance: what a rule collecting the stage's runs takes as input.
     Why not the runs' own files: each would make a job of its stage rule, which runs nothing, at about
-    0.065 s a simulation (benchmarks/results/bench_batch.json); the batch file is written after every
+    0.07 s a simulation (benchmarks/results/bench_batch.json); the batch file is written after every
     run of the batch (calibration.batch.run_batch), and calibration.heal dates it back when one of its
     runs is altered or missing, so that the batch runs again."""
     n = len(stage_batches(exp, stage, key)) if stage_runs(exp, stage, key) else 0
