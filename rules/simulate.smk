@@ -27,7 +27,7 @@ rule simulate:
     input:
         unpack(batch_inputs),
     output:
-        batch=BATCH_FILE,
+        batch="results/{exp}/simulate/{stage}/{key}/batch_{batch}.json",
     log:
         "results/{exp}/simulate/{stage}/{key}/batch_{batch}.log",
     wildcard_constraints:

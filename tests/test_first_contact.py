@@ -197,8 +197,9 @@ def test_a_configfile_is_deep_merged_into_config_yaml(workdir):
     (workdir / "my.yaml").write_text("run: [twin_ref]\nexperiments:\n  twin_ref:\n    ensemble_size: 10\n")
     out = snakemake(workdir, "-n", "--configfile", "my.yaml")
     assert out.returncode == 0, out.stderr[-3000:]
-    members = set(re.findall(r"results/(\w+)/iter_0/members/(\d+)/", out.stdout + out.stderr))
-    assert {e for e, _ in members} == {"twin_ref"} and len(members) == 10
+    # the first ensemble's batch jobs (at most 8 fast runs each, an even count): 10 members in 2 (25 in 4)
+    batches = set(re.findall(r"results/(\w+)/simulate/member/iter_0/batch_(\d+)\.json", out.stdout + out.stderr))
+    assert batches == {("twin_ref", "0"), ("twin_ref", "1")}
 
 
 # --------------------------------------------------------------------------------------------------

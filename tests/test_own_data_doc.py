@@ -48,9 +48,10 @@ def test_the_pages_commands_run_as_written(tmp_path):
     for line in outputs[1].splitlines():
         assert line.strip().replace("/tmp", "") in page.replace("/tmp", ""), line
     assert (tmp_path / "reduced/granite_disc/force_balance.png").is_file()
-    # init-config prints the line the page shows; the dry run of the config it wrote lists the 25 members of
-    # granite_own's first ensemble and nothing of twin_ref
+    # init-config prints the line the page shows; the dry run of the config it wrote plans the 25 members of
+    # granite_own's first ensemble (4 batch jobs of at most 8 fast runs, an even count) and nothing of twin_ref
     assert outputs[2].strip() in page
-    assert re.search(r"\bmember\s+25\b", outputs[3]), outputs[3][-3000:]
+    batches = set(re.findall(r"results/granite_own/simulate/member/iter_0/batch_(\d+)\.json", outputs[3]))
+    assert batches == {"0", "1", "2", "3"}, outputs[3][-3000:]
     assert "twin_ref" not in outputs[3] and "granite_own" in outputs[3]
     assert not (tmp_path / "results").exists()
