@@ -306,7 +306,7 @@ QUOTES: list[Quote] = [
     Quote("README.md", "hold `E_t` 75 % (bar not met)", by=HARNESS),
     Quote("README.md", "78 % / 71 % well-specified", by=HARNESS),
     # docs/workflow.md: the default run
-    Quote("docs/workflow.md", "(2 cores, {beside} run\nbeside it: install {install_s} s in a new virtual environment, run {run_s} s, exit {exit_code}; "
+    Quote("docs/workflow.md", "(2 cores, not an idle figure: {beside} run\nbeside it: install {install_s} s in a new virtual environment, run {run_s} s, exit {exit_code}; "
           "{fdem_runs} FDEM runs, {refine_runs} of them the refinement batches", lambda J: J(f"{RUN}/run.json")),
     Quote("docs/workflow.md", "is {stat} against the statistic's target {target}", lambda J: {
         "stat": f"{_twin()['verdict']['chi2_per_obs']['reported_against_noise_and_simulator']:.2f}",
