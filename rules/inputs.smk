@@ -115,7 +115,7 @@ def stage_batches(exp, stage, key):
     return [runs[b * n // nb : (b + 1) * n // nb] for b in range(nb)]
 
 
-#: rule simulate's output (written out there too: the conventions test reads the rule's text)
+#: The batch file of rule simulate, spelled out there too (the conventions test reads the rule's text)
 BATCH_FILE = "results/{exp}/simulate/{stage}/{key}/batch_{batch}.json"
 
 
