@@ -111,7 +111,7 @@ def stage_batches(exp, stage, key):
     runs = stage_runs(exp, stage, key)
     n = len(runs)
     k = int(config["simulations_per_job"][EXPERIMENTS[exp]["preset"]])
-    nb = max(1, min(n, 2 * -(-n // (2 * k))))
+    nb = min(n, 2 * -(-n // (2 * k)))  # none for a stage without runs
     return [runs[b * n // nb : (b + 1) * n // nb] for b in range(nb)]
 
 
@@ -135,7 +135,7 @@ def stage_batch_files(exp, stage, key="all"):
     0.07 s a simulation (benchmarks/results/bench_batch.json); the batch file is written after every
     run of the batch (calibration.batch.run_batch), and calibration.heal dates it back when one of its
     runs is altered or missing, so that the batch runs again."""
-    n = len(stage_batches(exp, stage, key)) if stage_runs(exp, stage, key) else 0
+    n = len(stage_batches(exp, stage, key))
     return [BATCH_FILE.format(exp=exp, stage=stage, key=key, batch=b) for b in range(n)]
 
 

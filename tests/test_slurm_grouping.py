@@ -90,7 +90,7 @@ def group_jobs(plan: str) -> list[tuple[str, list[tuple[str, dict]]]]:
 def batch_sizes(n: int, k: int = 8) -> list[int]:
     """The runs per batch of a stage of n runs (rules/inputs.smk, stage_batches; fast: at most 8 per
     job, an even count of batches)."""
-    nb = max(1, min(n, 2 * -(-n // (2 * k))))
+    nb = min(n, 2 * -(-n // (2 * k)))
     return [(b + 1) * n // nb - b * n // nb for b in range(nb)]
 
 
