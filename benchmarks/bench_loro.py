@@ -4,11 +4,14 @@ clones: wall time, what each stage costs, the FDEM runs made and copied, and the
 
     python benchmarks/bench_loro.py [--old REV] [--new REV] [--out benchmarks/results/bench_loro.json]
     python benchmarks/bench_loro.py --from OLD_CLONE OLD_LOG OLD_WALL_S NEW_CLONE NEW_LOG NEW_WALL_S [--out ...]
+    python benchmarks/bench_loro.py --add NAME CLONE LOG WALL_S [--out ...]
 
 The first form clones each commit into an empty temporary folder and runs ``snakemake --cores 2
 --configfile config/validation.yaml`` there (the clone's packages first on the path, its own Numba cache
 compiled by the run), old then new. The second assembles the same JSON from two such runs made by hand
-(a clone, its console log, its wall time). Per run: :func:`tools.job_times.job_times` on the console log
+(a clone, its console log, its wall time). The third adds one such run under ``runs[NAME]`` to the JSON
+already at ``--out``, keeping its other runs (each run's own ``commit`` and the note say when and how
+each was made; only runs of one sitting are compared in ``wall_ratio_old_over_new``). Per run: :func:`tools.job_times.job_times` on the console log
 (the simulating rule split by stage, the job time per fold), the FDEM runs per stage with the solver
 seconds of those simulated in this run (a copied run's run.json carries its source's time, so it is
 counted apart), and the series' ``loro/summary.json`` totals with each fold's held-out band coverage.
@@ -127,10 +130,17 @@ def main(argv=None) -> dict:
     ap.add_argument("--new", default="HEAD")
     ap.add_argument("--from", dest="made", nargs=6, metavar=("OLD_CLONE", "OLD_LOG", "OLD_WALL_S", "NEW_CLONE",
                                                              "NEW_LOG", "NEW_WALL_S"))
+    ap.add_argument("--add", nargs=4, metavar=("NAME", "CLONE", "LOG", "WALL_S"))
     ap.add_argument("--note", default="")
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "bench_loro.json"))
     a = ap.parse_args(argv)
     load0 = list(os.getloadavg())
+    if a.add:
+        doc = json.loads(Path(a.out).read_text())
+        name, clone, log, wall = a.add
+        doc["runs"][name] = {**summarize(Path(clone), Path(log).read_text(), float(wall)), "note": a.note,
+                             "load_average_at_assembly": load0}
+        return emit_json(doc, a.out)
     if a.made:
         runs = {side: summarize(Path(a.made[i]), Path(a.made[i + 1]).read_text(), float(a.made[i + 2]))
                 for side, i in (("old", 0), ("new", 3))}
