@@ -6,8 +6,8 @@ For a finished series (its ``diagnosis/selection.pkl``, ``check_runs.json`` and 
 calibration records only:
 
 * the base ``(sigma_t, E_t)`` and, per candidate, base + candidate (a per-record candidate with one copy
-  per record) fitted to all calibration records by noise-weighted least squares on the selection's
-  surrogate;
+  per record) fitted to all calibration records by least squares on the selection's surrogate, each time
+  weighted as the comparison below weights it (so the nested model never fits worse in sample);
 * both points run on each calibration record's check meshes (the base model's cross-validation runs'
   meshes, so every model of a record is compared on common realizations), through the candidate's
   measurement chain, and compared in pairs by their squared errors weighted per time by
@@ -16,7 +16,9 @@ calibration records only:
   calibration's noise and mesh scatter added, both models re-fitted to each draw), with the same draws
   for every candidate: each candidate's real gain is read against its own chance quantiles, and the
   maximum over candidates of ``gain / q99`` against the same maximum over the draws (a level over the
-  whole catalogue, not per test).
+  whole catalogue, not per test); and ``z_over_chance``: the real gain less the chance gain's mean over
+  the real gain's paired sd and the chance gain's sd together (Bonferroni over the catalogue at 0.05:
+  above 2.576 with ten candidates).
 
 What is not in the null: the surrogate's departure from the real runs at the two fitted points. On a
 null series that shows as real gains above the simulated chance; this study measures it there.
@@ -64,6 +66,7 @@ def load(series: Path) -> dict:
     calib = list(sel.calib_records)
     obs = pd.read_csv(series / "observations" / "obs.csv")
     rows = json.loads((diag / "check_runs.json").read_text())["rows"]
+    w = walk_weights(st["noise"], st.get("simulator") or {}, calib)
     meshes = {}
     for j in calib:
         idx = sorted((r["replicate"], i) for i, r in enumerate(rows)
@@ -74,7 +77,8 @@ def load(series: Path) -> dict:
     report = json.loads((diag / "report.json").read_text())
     return {"sel": sel, "model": st["model"], "noise": st["noise"], "sim": st.get("simulator") or {},
             "calib": calib, "y": {j: obs[obs.record == j].stress_Pa.to_numpy() for j in calib},
-            "sig": np.concatenate([obs[obs.record == j].sigma_Pa.to_numpy() for j in calib]),
+            # the fits read the data as the comparison does: each time by 1 / (noise^2 + mesh scatter^2)
+            "sig": 1.0 / np.sqrt(np.concatenate([w[j] for j in calib])),
             "meshes": meshes, "report": report}
 
 
@@ -94,8 +98,13 @@ def fits(state: dict, cands: list[str], data: np.ndarray, starts: int, seed: int
         names = spec.names(calib)
         lo, hi = (np.asarray(v, float) for v in pm.box(names))
         f = pm.forward(names, calib)
-        x = least_squares(f, data, state["sig"], lo, hi, starts=starts, seed=seed,
-                          x0=at[name]["x"] if at else None)
+        x0 = [at[name]["x"]] if at else []
+        if name:
+            # the base's fit with the effect at its null: the nested model never fits worse than the base
+            b = dict(zip(out[None]["names"], out[None]["x"]))
+            x0.append([b[n] if n in b else fx.null_values([fx.split_record(n)[0]])[fx.split_record(n)[0]]
+                       for n in names])
+        x = least_squares(f, data, state["sig"], lo, hi, starts=starts, seed=seed, x0=x0 or None)
         out[name] = {"names": names, "x": x, "curve": f(x)[0]}
     return out
 
@@ -165,7 +174,12 @@ def rank(series: Path, draws: int, seed: int, work: Path) -> dict:
     for c in cands:
         cmp = compare_replicated(Wt.scale(y), Wt.scale(real[None]), Wt.scale(real[c]), Wt.errors.noise)
         g = float(cmp["delta"])
-        rows[c] = {"point": pts[c], "real_gain": g, "real_z": float(cmp["z"]),
+        # the real gain's own sd (mesh realizations and noise, paired) and the chance gain's spread together:
+        # the surrogate-simulated chance alone has no run-to-surrogate departures (too narrow on a null)
+        z_chance = (g - float(np.mean(null[c]))) / float(np.hypot(cmp["sd"], np.std(null[c], ddof=1)))
+        rows[c] = {"point": pts[c], "real_gain": g, "real_sd": float(cmp["sd"]), "real_z": float(cmp["z"]),
+                   "z_over_chance": z_chance, "null_mean": float(np.mean(null[c])),
+                   "null_sd": float(np.std(null[c], ddof=1)), "null_gains": null[c].round(3).tolist(),
                    "emulated_gain": float(np.sum(wcat * (yy - at[None]["curve"]) ** 2)
                                           - np.sum(wcat * (yy - at[c]["curve"]) ** 2)),
                    "null_q50": float(np.median(null[c])), "null_q99": q99[c],

@@ -42,14 +42,14 @@ from studies.anchored_interactions import run_point  # noqa: E402
 
 def least_squares(f, y, sigma, lo, hi, starts: int = 24, seed: int = 0, x0=None) -> np.ndarray:
     """The noise-weighted least-squares point of ``f`` (rows -> concatenated curves) in the box, from
-    ``starts`` random starts and ``x0`` (a point in the box) if given."""
+    ``starts`` random starts and ``x0`` (one point in the box, or rows of points) if given."""
     def loss(u):
         return float(np.sum(((f(lo + u * (hi - lo))[0] - y) / sigma) ** 2))
 
     best = None
     u_starts = np.random.default_rng(seed).uniform(0.05, 0.95, (starts, lo.size))
     if x0 is not None:
-        u_starts = np.vstack([np.clip((np.asarray(x0, float) - lo) / (hi - lo), 0.0, 1.0), u_starts])
+        u_starts = np.vstack([np.clip((np.atleast_2d(np.asarray(x0, float)) - lo) / (hi - lo), 0.0, 1.0), u_starts])
     for u0 in u_starts:
         res = optimize.minimize(loss, u0, method="L-BFGS-B", bounds=[(0.0, 1.0)] * lo.size)
         if best is None or res.fun < best.fun:

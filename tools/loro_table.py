@@ -60,10 +60,17 @@ def _mean_coverage(series: dict) -> str:
                                                                  t.get("mean_interval_score_over_box_after")))
 
 
+#: Committed folders of series run again, and how the table marks them: ``loro_rerun_*`` the same records
+#: and config through later code, ``loro_anchored_*`` that, with the shipped default selection
+#: (``selection_model: anchored``) instead of the emulator of the first runs.
+MARKS = {"loro_rerun": " (re-run)", "loro_anchored": " (re-run, anchored)"}
+
+
 def _label(series: dict, path: str) -> str:
     """The series' name, marked where the committed folder holds a re-run of a series run before
-    (``loro_rerun_*``: the same records and config through later code)."""
-    return series["experiment"] + (" (re-run)" if Path(path).parent.name.startswith("loro_rerun") else "")
+    (:data:`MARKS`)."""
+    folder = Path(path).parent.name
+    return series["experiment"] + next((m for k, m in MARKS.items() if folder.startswith(k)), "")
 
 
 def rows(series: dict, label: str | None = None) -> list[str]:
