@@ -73,9 +73,11 @@ def named(report: dict) -> str:
 
 
 def _shipped_posterior(report: dict) -> dict:
-    """The posterior summary (name -> mean, q05, q95) of the model the report ships."""
+    """The posterior summary (name -> mean, q05, q95) of the model the report ships: a nested step, or a
+    round's alternative where the walk confirmed that instead of the round's refuted choice."""
     effects = list((report.get("confirmation") or {}).get("effects") or report.get("added") or [])
-    for step in (report.get("selection") or {}).get("steps", []):
+    sel = report.get("selection") or {}
+    for step in (*sel.get("steps", []), *sel.get("alternatives", [])):
         if list(step.get("effects", [])) == effects:
             return step.get("posterior") or {}
     return {}

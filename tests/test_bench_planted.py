@@ -70,6 +70,13 @@ def test_named_and_coverage_of_hand_made_reports():
     rep = _report("confirmed", ["face_gap"], {"face_gap.gap_m@A": _q(0.7e-4, 0.9e-4),
                                               "face_gap.gap_m@B": _q(0.9e-4, 1.1e-4)})
     assert parameter_coverage(rep, gap)["covered"] == 0.5
+    # an effect confirmed as a round's alternative (its choice refuted) is read from the alternatives
+    damping = {"plant": {"damping.beta": 0.1}, "tests": []}
+    rep = _report("confirmed", ["trigger_shift"], {})
+    rep["added"] = rep["confirmation"]["effects"] = ["damping"]
+    rep["selection"]["alternatives"] = [{"index": 2, "effects": ["damping"], "alternative_to": 1,
+                                         "posterior": {"damping.beta": _q(0.088, 0.136)}}]
+    assert parameter_coverage(rep, damping)["covered"] == 1.0
     # the closure case is read right when closure follows a confirmed face_gap, not on face_gap alone
     assert is_correct(CASES["closure"], "face_gap", _report("confirmed", ["face_gap", "closure"]))
     assert not is_correct(CASES["closure"], "face_gap", _report("confirmed", ["face_gap"]))
