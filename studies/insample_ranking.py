@@ -102,8 +102,9 @@ def fits(state: dict, cands: list[str], data: np.ndarray, starts: int, seed: int
         if name:
             # the base's fit with the effect at its null: the nested model never fits worse than the base
             b = dict(zip(out[None]["names"], out[None]["x"]))
-            x0.append([b[n] if n in b else fx.null_values([fx.split_record(n)[0]])[fx.split_record(n)[0]]
-                       for n in names])
+            plain = [fx.split_record(n)[0] for n in names]
+            nulls = fx.null_values([p for n, p in zip(names, plain) if n not in b])
+            x0.append([b[n] if n in b else nulls[p] for n, p in zip(names, plain)])
         x = least_squares(f, data, state["sig"], lo, hi, starts=starts, seed=seed, x0=x0 or None)
         out[name] = {"names": names, "x": x, "curve": f(x)[0]}
     return out
