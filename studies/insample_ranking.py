@@ -151,9 +151,11 @@ def null_gains(state: dict, cands: list[str], at: dict, draws: int, seed: int, w
     return {c: np.array(g) for c, g in gains.items()}
 
 
-def rank(series: Path, draws: int, seed: int, work: Path) -> dict:
+def rank(series: Path, draws: int, seed: int, work: Path, state: dict | None = None) -> dict:
+    """The ranking of the module docstring; ``state``: :func:`load`'s, possibly with its surrogate changed
+    (``insample_interactions.py``)."""
     t0 = time.perf_counter()
-    state = load(series)
+    state = state or load(series)
     calib, y = state["calib"], state["y"]
     cands = candidate_names(state)
     yy = np.concatenate([y[j] for j in calib])
