@@ -50,34 +50,46 @@ from studies.anchored_interactions import run_point  # noqa: E402
 from studies.insample_ranking import candidate_names, fits, load, rank, real_curves  # noqa: E402
 
 
-def cross_runs(series: Path, state: dict, work: Path, pool: ThreadPoolExecutor) -> dict:
-    """Per calibration record and physical parameter index ``j``: ``(u, values, curves on model_times)``,
-    the sweep of ``j`` made again with ``sigma_t`` at the design's lower step ``u``."""
+def sweeps_at(series: Path, state: dict, work: Path, pool: ThreadPoolExecutor, *, at: str = "step",
+              effects: list[str] | None = None, with_null: bool = False) -> tuple[dict, dict]:
+    """The design's physical sweeps made again, per calibration record on its design mesh, with ``sigma_t``
+    at ``u``: the design's lower step (``at="step"``) or its box's lower bound (``"bound"``). ``effects``:
+    only those candidates' sweeps (default every physical one). Returns ``(nulls, sweeps)``: per record
+    ``(u, curve)`` of the run with every effect at its null (``with_null``; else empty) and, per parameter
+    index ``j``, ``(u, values, curves)`` (curves on ``model_times``). Runs are kept under ``work`` and
+    re-used."""
     design = series / "diagnosis" / "design"
     meta = json.loads((design / "design.json").read_text())
     names, axis = meta["names"], np.asarray(meta["axis"], int)
     X = pd.read_csv(design / "params.csv")[names].to_numpy(float)
     js = names.index("sigma_t")
-    u = float(min(X[axis == js, js]))
-    phys = [names.index(p) for p in meta["physical_names"]]
+    u = float(min(X[axis == js, js])) if at == "step" else float(meta["lower"][js])
+    phys = [names.index(p) for p in meta["physical_names"] if effects is None or p.split(".")[0] in effects]
     jobs = {}
     for rec in state["calib"]:
         d0 = design / "000" / rec
         run0 = json.loads((d0 / "run.json").read_text())
         dt = float(np.median(np.diff(pd.read_csv(d0 / "curve.csv").time_s.to_numpy())))
+        if with_null:
+            jobs[(rec, None, None)] = pool.submit(run_point, series, rec, {"sigma_t": u}, run0, work / rec / "null", dt)
         for j in phys:
             for r in np.flatnonzero(axis == j):
-                p = {"sigma_t": u, names[j]: float(X[r, j])}
-                jobs[(rec, j, r)] = (float(X[r, j]), pool.submit(run_point, series, rec, p, run0,
-                                                                 work / rec / f"cross_{r:03d}", dt))
-    out = {}
-    for (rec, j, r), (v, fut) in jobs.items():
+                # the folder names of the first runs: cross_ at the lower step, sweep_ at the box's bound
+                tag = "cross" if at == "step" else "sweep"
+                jobs[(rec, j, float(X[r, j]))] = pool.submit(run_point, series, rec, {"sigma_t": u, names[j]: float(X[r, j])},
+                                                             run0, work / rec / f"{tag}_{r:03d}", dt)
+    nulls, sweeps = {}, {}
+    for (rec, j, v), fut in jobs.items():
         y = curve_on_model_grid(fut.result(), state["model"].model_times)
         if y is None:
-            raise RuntimeError(f"{rec}: the cross run of {names[j]} = {v:g} does not cover the model's times")
-        out.setdefault(rec, {}).setdefault(j, (u, [], []))
-        out[rec][j][1].append(v), out[rec][j][2].append(y)
-    return out
+            raise RuntimeError(f"{rec}: the run at sigma_t {u:g}, {names[j] if j is not None else 'no effect'} "
+                               f"= {v} does not cover the model's times")
+        if j is None:
+            nulls[rec] = (u, y)
+        else:
+            sweeps.setdefault(rec, {}).setdefault(j, (u, [], []))
+            sweeps[rec][j][1].append(v), sweeps[rec][j][2].append(y)
+    return nulls, sweeps
 
 
 def with_pairs(state: dict, cross: dict) -> dict:
@@ -140,7 +152,7 @@ def main(argv=None) -> dict:
         obs = pd.read_csv(series / "observations" / "obs.csv")
         state["sig"] = np.concatenate([obs[obs.record == j].sigma_Pa.to_numpy() for j in state["calib"]])
     with ThreadPoolExecutor(2) as pool:
-        cross = cross_runs(series, state, work / "cross", pool)
+        _, cross = sweeps_at(series, state, work / "cross", pool)
     t_cross = time.perf_counter() - t0
     state = with_pairs(state, cross)
     if a.paired_only:

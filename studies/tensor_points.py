@@ -24,7 +24,6 @@ are read from its run folder)::
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -36,11 +35,9 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.append(str(ROOT))
 
-from calibration.diagnose import curve_on_model_grid  # noqa: E402
 from enkf.emulator import AnchoredEmulator, _chords  # noqa: E402
 from shpb.atomic import emit_json  # noqa: E402
-from studies.anchored_interactions import run_point  # noqa: E402
-from studies.insample_interactions import compare, cross_runs  # noqa: E402
+from studies.insample_interactions import compare, sweeps_at  # noqa: E402
 from studies.insample_ranking import fits, load, real_curves  # noqa: E402
 
 
@@ -53,11 +50,7 @@ class LevelledPairs(AnchoredEmulator):
 
     def __call__(self, P) -> np.ndarray:
         P = np.array(P, dtype=float, ndmin=2)
-        saved, self._pairs = self._pairs, {}
-        try:
-            Y = super().__call__(P)
-        finally:
-            self._pairs = saved
+        Y = super().__call__(P)  # built without one-level pairs (levelled): the axes' first-order sum
         for (i, j), lv in self.levels.items():
             us = np.array([self.anchor[i]] + [u for u, _, _ in lv])
             terms = np.stack([np.zeros((P.shape[0], self.m))] + [_chords(v, G, P[:, j]) for _, v, G in lv])
@@ -78,46 +71,8 @@ def levelled(em: AnchoredEmulator, sigma_run: tuple, sweeps: dict) -> LevelledPa
     u0, y0 = sigma_run
     axes[i] = (np.append(axes[i][0], u0), np.vstack([axes[i][1], y0]))
     out = LevelledPairs(em.anchor, em.f0, axes, em.lower, em.upper, names=em.names)
-    out.levels = {(i, j): [_level(out, i, j, u, v, Y) for u, v, Y in lv] for j, lv in sweeps.items()}
+    out.levels = {(i, j): [out._pair_term(i, j, u, v, Y) for u, v, Y in lv] for j, lv in sweeps.items()}
     return out
-
-
-def _level(em: AnchoredEmulator, i: int, j: int, u: float, v, Y) -> tuple:
-    _, vv, G = em._pair_term(i, j, u, v, Y)
-    return u, vv, G
-
-
-def lower_runs(series: Path, state: dict, effects: list[str], work: Path, pool) -> tuple[dict, dict]:
-    """Per calibration record: the run at the box's lower ``sigma_t`` (effects null) and, per effect index,
-    its sweep there ``(u, values, curves)``."""
-    design = series / "diagnosis" / "design"
-    meta = json.loads((design / "design.json").read_text())
-    names, axis = meta["names"], np.asarray(meta["axis"], int)
-    X = pd.read_csv(design / "params.csv")[names].to_numpy(float)
-    u = float(meta["lower"][names.index("sigma_t")])
-    idx = [names.index(p) for p in meta["physical_names"] if p.split(".")[0] in effects]
-    jobs = {}
-    for rec in state["calib"]:
-        d0 = design / "000" / rec
-        run0 = json.loads((d0 / "run.json").read_text())
-        dt = float(np.median(np.diff(pd.read_csv(d0 / "curve.csv").time_s.to_numpy())))
-        jobs[(rec, None, None)] = pool.submit(run_point, series, rec, {"sigma_t": u}, run0, work / rec / "null", dt)
-        for j in idx:
-            for r in np.flatnonzero(axis == j):
-                jobs[(rec, j, float(X[r, j]))] = pool.submit(run_point, series, rec, {"sigma_t": u, names[j]: float(X[r, j])},
-                                                             run0, work / rec / f"sweep_{r:03d}", dt)
-    T = state["model"].model_times
-    base, sweeps = {}, {}
-    for (rec, j, v), fut in jobs.items():
-        y = curve_on_model_grid(fut.result(), T)
-        if y is None:
-            raise RuntimeError(f"{rec}: the run at sigma_t {u:g}, {j}={v} does not cover the model's times")
-        if j is None:
-            base[rec] = (u, y)
-        else:
-            sweeps.setdefault(rec, {}).setdefault(j, (u, [], []))
-            sweeps[rec][j][1].append(v), sweeps[rec][j][2].append(y)
-    return base, sweeps
 
 
 def main(argv=None) -> dict:
@@ -131,8 +86,8 @@ def main(argv=None) -> dict:
     work = series / "study_tensor_points"
     state = load(series)
     with ThreadPoolExecutor(2) as pool:
-        mid = cross_runs(series, state, series / "study_insample_interactions" / "cross", pool)
-        low, sweeps = lower_runs(series, state, a.effects, work / "lower", pool)
+        _, mid = sweeps_at(series, state, series / "study_insample_interactions" / "cross", pool)
+        low, sweeps = sweeps_at(series, state, work / "lower", pool, at="bound", effects=a.effects, with_null=True)
     for rec in state["calib"]:
         em = state["model"].emulators[rec]
         per = {j: [mid[rec][j], sweeps[rec][j]] for j in sweeps[rec]}
