@@ -282,7 +282,8 @@ def _mcmc_record(spec, truth, seed, params, responses, analyses, obs, refine=Non
     for j, p in enumerate(spec.names):
         x = post.samples[:, j]
         below, ties = int(np.sum(x < truth[j])), int(np.sum(x == truth[j]))
-        out["params"][p] = {"mean": summ[p]["mean"], **{k: summ[p][k] for k in ("q05", "q25", "q75", "q95")},
+        out["params"][p] = {"mean": summ[p]["mean"],
+                            **{k: summ[p][k] for k in ("q05", "q25", "q75", "q95", "score_over_prior")},
                             "q50": float(np.median(x)),
                             "n": int(x.size), "sbc_u": float((below + rng.uniform(0, ties + 1)) / (x.size + 1))}
     d = post.diagnostics
@@ -309,7 +310,7 @@ def _twin_record(spec, truth, seed, data_preset, post: np.ndarray, analyses, R) 
     intervals = prediction_interval_dict(post, list(spec.names), transform=spec.transform)
     for j, p in enumerate(spec.names):
         x = post[:, j]
-        q = {k: intervals[p][k] for k in ("q05", "q25", "q75", "q95")}
+        q = {k: intervals[p][k] for k in ("q05", "q25", "q75", "q95", "score_over_prior")}
         below, ties = int(np.sum(x < truth[j])), int(np.sum(x == truth[j]))
         out["params"][p] = {"mean": float(x.mean()), **q, "n": int(x.size), "interval": intervals[p]["interval"],
                             "sbc_u": float((below + rng.uniform(0, ties + 1)) / (x.size + 1))}

@@ -10,9 +10,10 @@ the prior cannot match is sharpness *and* coverage at once, which a proper score
   with ``IS_alpha = (u - l) + 2 / alpha (l - y)_+ + 2 / alpha (y - u)_+`` (an approximation of the CRPS);
 * ``wis_over_prior``: its mean over a set's twins divided by the same score of the box's uniform prior
   (its 5-95 %, 25-75 % intervals and median) on the same truths. 1: no better than the prior;
-* ``uninformative_share``: the share of twins whose 90 % interval spans more than
-  :data:`calibration.verdict.UNINFORMATIVE_FRACTION` of the box, the product's own ``uninformative``
-  flag.
+* ``uninformative_share``: the share of twins the product flags ``uninformative``: a posterior that
+  expects to score more than :data:`enkf.scores.INFORMATIVE_RATIO` of the prior's (the twin's
+  ``score_over_prior``). Records written before that flag carry no such score; for them it is the flag of
+  their time, a 90 % interval over :data:`WIDTH_FLAG_OF_OLD_RECORDS` of the box.
 
 The twins' records hold the reported intervals' quantiles, not the posterior members or samples, so the
 CRPS of the sample is not computed; a record's median is its ``q50`` where it holds one (the MCMC records
@@ -29,10 +30,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from calibration.verdict import UNINFORMATIVE_FRACTION
+from enkf.scores import INFORMATIVE_RATIO, prior_quantiles
+from enkf.scores import weighted_interval_score as _wis
 
-#: the central intervals of the score: (alpha, lower quantile key, upper quantile key)
-INTERVALS = ((0.5, "q25", "q75"), (0.1, "q05", "q95"))
+#: the ``uninformative`` flag of the records written before the expected score (their 90 % interval over
+#: this fraction of the box)
+WIDTH_FLAG_OF_OLD_RECORDS = 0.8
 #: the largest ``wis_over_prior`` that passes, per parameter (``sigma_t`` is identified by the disc's
 #: peak, ``E_t`` by its post-peak only)
 WIS_BAR = {"sigma_t": 0.25, "E_t": 0.55}
@@ -41,13 +44,6 @@ COVERAGE_90_BAR = (0.85, 0.95)
 COVERAGE_90_MISSPECIFIED_MIN = 0.80
 SBC_ALPHA = 0.01
 MEDIAN_FROM_MIDPOINT = "midpoint of the 25-75 % interval (no q50 recorded)"
-
-
-def interval_score(lo, hi, y, alpha: float) -> np.ndarray:
-    """The interval score of the central ``1 - alpha`` interval ``[lo, hi]`` at the truth ``y``: its
-    width plus ``2 / alpha`` times the distance by which the truth falls outside it."""
-    lo, hi, y = (np.asarray(v, float) for v in (lo, hi, y))
-    return (hi - lo) + 2.0 / alpha * (np.maximum(lo - y, 0.0) + np.maximum(y - hi, 0.0))
 
 
 def median_of(row: dict) -> float:
@@ -59,17 +55,13 @@ def median_of(row: dict) -> float:
 
 def weighted_interval_score(row: dict, y: float) -> float:
     """WIS of one twin's parameter (``row``: its ``q05, q25, q75, q95`` and median) at the truth ``y``."""
-    total = 0.5 * abs(y - median_of(row))
-    for alpha, lo, hi in INTERVALS:
-        total += 0.5 * alpha * float(interval_score(row[lo], row[hi], y, alpha))
-    return total / (len(INTERVALS) + 0.5)
+    return float(_wis(row, y, median_of(row)))
 
 
 def prior_row(lower: float, upper: float) -> dict:
     """The box's uniform prior as a record's parameter row: its quantiles, mean and median."""
-    w = upper - lower
-    q = {k: lower + f * w for k, f in (("q05", 0.05), ("q25", 0.25), ("q50", 0.5), ("q75", 0.75), ("q95", 0.95))}
-    return {"mean": lower + 0.5 * w, **q, "interval": "the prior box's quantiles"}
+    return {"mean": lower + 0.5 * (upper - lower), **prior_quantiles(lower, upper),
+            "interval": "the prior box's quantiles"}
 
 
 def proper_scores(rows: list, t: np.ndarray, lower: float, upper: float) -> dict:
@@ -86,7 +78,13 @@ def proper_scores(rows: list, t: np.ndarray, lower: float, upper: float) -> dict
                     "twins_worse_than_prior": int(np.sum(wis > wis_prior)),
                     "median": " and ".join(sorted(medians)),
                     "reference": "Bracher et al. 2021, 50 % and 90 % central intervals and the median"},
-            "uninformative_share": float(np.mean(width > UNINFORMATIVE_FRACTION)) if len(t) else None}
+            "uninformative_share": float(np.mean(_flagged(rows, width))) if len(t) else None}
+
+
+def _flagged(rows: list, width: np.ndarray) -> np.ndarray:
+    """Whether the product flagged each twin's parameter ``uninformative`` (module docstring)."""
+    return np.array([float(r["score_over_prior"]) > INFORMATIVE_RATIO if r.get("score_over_prior") is not None
+                     else wd > WIDTH_FLAG_OF_OLD_RECORDS for r, wd in zip(rows, width)])
 
 
 def with_failures_as_prior(res: dict, failed_truths, lower: float, upper: float, n_scored: int) -> float:

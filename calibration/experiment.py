@@ -358,7 +358,7 @@ def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], 
     else:
         from enkf.ces import interval_summary  # the MCMC's summary; SciPy's statistics only where used
 
-        post = interval_summary(posterior_samples[names].to_numpy(float), names)
+        post = interval_summary(posterior_samples[names].to_numpy(float), names, spec.lower, spec.upper)
     out = {
         "experiment": spec.name,
         "kind": exp["kind"],

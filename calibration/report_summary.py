@@ -84,13 +84,17 @@ def _parameters(s: Mapping) -> list[str]:
     truth = s.get("truth") if isinstance(s.get("truth"), Mapping) else {}
     which = (f"{s['posterior_method']} sample" if s.get("posterior_method") not in (None, "ensemble")
              else f"ensemble of iteration {escape(str(s.get('posterior_iteration', '?')))}")
-    header = ["parameter", "posterior mean", "90 % interval", "unit"] + (["truth"] if truth else [])
+    scored = any(isinstance(q, Mapping) and q.get("score_over_prior") is not None for q in post.values())
+    header = (["parameter", "posterior mean", "90 % interval", "unit"] + (["expected score / prior's"] if scored else [])
+              + (["truth"] if truth else []))
     rows = []
     for p, q in post.items():
         q = q if isinstance(q, Mapping) else {}
         f, unit = _unit(p)
         row = [escape(str(p)), _num(q.get("mean"), f), f"[{_num(q.get('q05'), f)}, {_num(q.get('q95'), f)}]",
                escape(unit)]
+        if scored:
+            row.append(_learned(q.get("score_over_prior")))
         if truth:
             t = truth.get(p)
             inside = (t is not None and _num(q.get("q05")) != "?" and _num(q.get("q95")) != "?"
@@ -99,6 +103,16 @@ def _parameters(s: Mapping) -> list[str]:
         rows.append(row)
     return [f"<p style=\"margin:0.4em 0 0 0\">Parameters (posterior: {which}; {_scored(s)}):</p>",
             _table(header, rows)]
+
+
+def _learned(ratio) -> str:
+    """The score a parameter's posterior expects over the prior box's, and whether that counts as learned
+    (calibration.verdict's ``uninformative``)."""
+    if ratio is None:
+        return "-"
+    from enkf.scores import INFORMATIVE_RATIO
+
+    return f"{float(ratio):.2f} ({'learned' if float(ratio) <= INFORMATIVE_RATIO else 'not constrained: mostly the prior'})"
 
 
 def _scored(s: Mapping) -> str:

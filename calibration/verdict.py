@@ -20,8 +20,10 @@ Flags, in this order; the verdict is the first that applies:
   exceeds 1 by more than two of its own sampling sd under that model
   (:func:`enkf.diagnostics.member_standardized_misfit`): the fit needs model error to be explained, and the intervals are only
   as good as the discrepancy model (``summary.json``'s ``discrepancy`` gives its size).
-- ``uninformative``: a parameter's 90 % interval covers more than ``UNINFORMATIVE_FRACTION`` of its prior
-  box: the data did not constrain it (the posterior is the prior's).
+- ``uninformative``: a parameter's posterior expects to score more than ``INFORMATIVE_RATIO`` of the prior's
+  weighted interval score (``score_over_prior``, :mod:`enkf.scores`): the data did not take it far enough
+  beyond the prior box for its interval to be quoted as learned (the prior's own ratio is 1; a Gaussian
+  posterior's reaches the bar at a 90 % interval of about 0.53 of the box).
 - ``ok``: none of the above.
 """
 from __future__ import annotations
@@ -29,12 +31,11 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 
+from enkf.scores import INFORMATIVE_RATIO
+
 #: A posterior mean this close to a bound, as a fraction of the box width, is pinned to the box.
 PIN_FRACTION = 0.02
 
-#: A 90 % interval wider than this fraction of the prior box is the prior's, not the data's (a uniform
-#: prior's own 90 % interval is 0.9 of the box).
-UNINFORMATIVE_FRACTION = 0.8
 
 #: Flags in the order they decide the verdict.
 FLAG_ORDER = ("worse_than_prior", "mcmc_not_converged", "box_limited", "not_converged", "misfit_unexplained",
@@ -62,8 +63,9 @@ NEXT_STEP = {
                            "the intervals include an "
                            "estimated model discrepancy{discrepancy} and are as good as that model; "
                            "{diagnosis}"),
-    "uninformative": ("the data did not constrain {wide}: its 90 % interval covers more than "
-                      f"{int(UNINFORMATIVE_FRACTION * 100)} % of the prior box; fix it or observe where it acts"),
+    "uninformative": ("the data did not constrain {wide}: its posterior expects to score more than "
+                      f"{INFORMATIVE_RATIO:.2f} of the prior box's weighted interval score ({{wide_scores}}), so its "
+                      "interval is mostly the prior's, not a measurement; fix it or observe where it acts"),
     "ok": "none: the members fit within the error model inside the prior box and every parameter was learned",
 }
 #: Where the diagnosis is: a config to run, or the experiment's own report (``diagnosed``).
@@ -101,14 +103,15 @@ def pinned_parameters(posterior: Mapping[str, Mapping], lower: Sequence[float], 
     return out
 
 
-def uninformative_parameters(posterior: Mapping[str, Mapping], lower: Sequence[float], upper: Sequence[float],
-                             names: Sequence[str], fraction: float = UNINFORMATIVE_FRACTION) -> dict:
-    """``{name: width of the 90 % interval / box width}`` for the parameters above ``fraction``."""
+def uninformative_parameters(posterior: Mapping[str, Mapping], names: Sequence[str],
+                             ratio: float = INFORMATIVE_RATIO) -> dict:
+    """``{name: score_over_prior}`` for the parameters whose posterior expects to score more than ``ratio``
+    of the prior's (a posterior summary without the score, one written before it, flags nothing)."""
     out = {}
-    for j, p in enumerate(names):
-        width = (float(posterior[p]["q95"]) - float(posterior[p]["q05"])) / (float(upper[j]) - float(lower[j]))
-        if width > fraction:
-            out[p] = width
+    for p in names:
+        score = posterior[p].get("score_over_prior")
+        if score is not None and float(score) > ratio:
+            out[p] = float(score)
     return out
 
 
@@ -158,7 +161,7 @@ def calibration_verdict(*, misfits: Sequence[Mapping], decision: Mapping, poster
     else:  # files written before the standardised statistic
         noise_target = 1.0 + 2.0 * math.sqrt(2.0 / n_obs) if n_obs else (float(target) if target else math.nan)
     pinned = pinned_parameters(posterior, lower, upper, names)
-    wide = uninformative_parameters(posterior, lower, upper, names)
+    wide = uninformative_parameters(posterior, names)
     checks = {
         "worse_than_prior": math.isfinite(prior) and math.isfinite(last) and last > prior,
         "mcmc_not_converged": sampler is not None and not bool(sampler.get("converged_chain", True)),
@@ -174,7 +177,8 @@ def calibration_verdict(*, misfits: Sequence[Mapping], decision: Mapping, poster
         bounds=", ".join(f"its {side} bound" if len(pinned) == 1 else f"{p}'s {side} bound" for p, side in pinned.items()),
         reason=decision.get("reason"), chi2=float((decision.get("values") or {}).get("chi2_per_obs") or last),
         target=noise_target, chi2_noise=final_sim, stop_target=float(target) if target is not None else math.nan,
-        chain=_chain_words(sampler), wide=", ".join(wide), discrepancy=_discrepancy_words(discrepancy))
+        chain=_chain_words(sampler), wide=", ".join(wide),
+        wide_scores=", ".join(f"{p} {r:.2f}" for p, r in wide.items()), discrepancy=_discrepancy_words(discrepancy))
     if reported != len(chi2) - 1:
         text += (f"; the posterior reported (and forecast) is iteration {reported}'s ensemble (median member chi^2 "
                  f"per observation {final:.4g}), not the last ({last:.4g})")
@@ -192,7 +196,8 @@ def calibration_verdict(*, misfits: Sequence[Mapping], decision: Mapping, poster
         "pin_fraction": PIN_FRACTION,
         "interval_over_box": {p: (float(posterior[p]["q95"]) - float(posterior[p]["q05"])) /
                               (float(upper[j]) - float(lower[j])) for j, p in enumerate(names)},
-        "uninformative_fraction": UNINFORMATIVE_FRACTION,
+        "score_over_prior": {p: posterior[p].get("score_over_prior") for p in names},
+        "informative_ratio": INFORMATIVE_RATIO,
         "next_step": text,
     }
 

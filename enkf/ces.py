@@ -57,6 +57,7 @@ from .emulated import emulator_error_model
 from .emulator import design_arrays, smoothed_emulator
 from .hetero import emulated_deviance
 from .sampling import latin_hypercube
+from .scores import expected_score_over_prior
 from .selfcal import TEMPERINGS, box_minimum, self_calibration
 
 __all__ = ["EmulatorPosterior", "emulator_posterior", "interval_summary", "QUANTILES", "TEMPERINGS"]
@@ -65,28 +66,33 @@ __all__ = ["EmulatorPosterior", "emulator_posterior", "interval_summary", "QUANT
 QUANTILES = {"q05": 0.05, "q25": 0.25, "q50": 0.5, "q75": 0.75, "q95": 0.95}
 
 
-def interval_summary(samples, names: Sequence[str]) -> dict:
-    """``{param: {mean, std, q05, q25, q50, q75, q95}}`` of samples ``(S, n)``."""
+def interval_summary(samples, names: Sequence[str], lower=None, upper=None) -> dict:
+    """``{param: {mean, std, q05, q25, q50, q75, q95}}`` of samples ``(S, n)``; with the prior box
+    (``lower``, ``upper``) also ``score_over_prior``, the score the sample expects over the prior's
+    (:func:`enkf.scores.expected_score_over_prior`)."""
     S = np.asarray(samples, float)
     out = {}
     for j, name in enumerate(names):
         col = S[:, j]
         out[name] = {"mean": float(col.mean()), "std": float(col.std(ddof=1)),
                      **{k: float(np.quantile(col, q)) for k, q in QUANTILES.items()}}
+        if lower is not None:
+            out[name]["score_over_prior"] = expected_score_over_prior(col, lower[j], upper[j])
     return out
 
 
 class EmulatorPosterior:
     """``samples`` (S, n) of the emulator posterior, their ``summary`` and the sampler ``diagnostics``."""
 
-    def __init__(self, samples: np.ndarray, names: Sequence[str], diagnostics: dict):
+    def __init__(self, samples: np.ndarray, names: Sequence[str], diagnostics: dict, lower=None, upper=None):
         self.samples = samples
         self.names = list(names)
         self.diagnostics = diagnostics
+        self.lower, self.upper = lower, upper
 
     @property
     def summary(self) -> dict:
-        return interval_summary(self.samples, self.names)
+        return interval_summary(self.samples, self.names, self.lower, self.upper)
 
     def to_dict(self) -> dict:
         return jsonable({"posterior": self.summary, **self.diagnostics})
@@ -233,4 +239,4 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
         "effective_samples": float(walkers * (steps - burn) / tau_max),
         "emulated_mean_chi2_per_obs": float(np.dot(w, w) / d.size),
     }
-    return EmulatorPosterior(samples, names, jsonable(diagnostics))
+    return EmulatorPosterior(samples, names, jsonable(diagnostics), lo, hi)

@@ -24,6 +24,7 @@ import numpy as np
 import pandas as pd
 
 from .covariance import DiagonalError, ObservationError
+from .scores import expected_score_over_prior
 
 
 def _rows(sim) -> np.ndarray:
@@ -189,6 +190,9 @@ def parameter_summary(params, names: Sequence[str] | None = None, alive=None) ->
     )
 
 
+#: Draws of an ensemble's predictive distribution on which its expected score is read (quantiles at equal
+#: steps: deterministic).
+PREDICTIVE_DRAWS = 999
 #: Central levels of the reported intervals and the summary keys of their bounds.
 INTERVAL_LEVELS = {"90": ("q05", "q95", 0.90), "50": ("q25", "q75", 0.50)}
 
@@ -224,6 +228,13 @@ def prediction_interval_dict(params, names: Sequence[str] | None = None, alive=N
             bounds = [transform.to_bounded(b[None, :])[0] for b in bounds]
         for j, name in enumerate(names):
             out[name][lo_key], out[name][hi_key] = float(bounds[0][j]), float(bounds[1][j])
+    if transform is not None and n > 1:
+        # the score the predictive distribution expects, on its quantiles at PREDICTIVE_DRAWS equal steps
+        u = (np.arange(PREDICTIVE_DRAWS) + 0.5) / PREDICTIVE_DRAWS
+        draws = transform.to_bounded(zbar + np.outer(stats.t.ppf(u, n - 1), sz) * math.sqrt(1.0 + 1.0 / n))
+        for j, name in enumerate(names):
+            out[name]["score_over_prior"] = expected_score_over_prior(draws[:, j], transform.lower[j],
+                                                                      transform.upper[j])
     return out
 
 

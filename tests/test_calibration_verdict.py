@@ -2,10 +2,13 @@
 not met, each named with its numbers and what to do next; a clean calibration says ok."""
 import math
 
+import numpy as np
 import pytest
 
-from calibration.verdict import (PIN_FRACTION, REPORT_TOLERANCE, UNINFORMATIVE_FRACTION, calibration_verdict,
-                                 pinned_parameters, reported_iteration, uninformative_parameters)
+from calibration.verdict import (PIN_FRACTION, REPORT_TOLERANCE, calibration_verdict, pinned_parameters,
+                                 reported_iteration, uninformative_parameters)
+from enkf.ces import interval_summary
+from enkf.scores import INFORMATIVE_RATIO
 
 NAMES = ("sigma_t", "E_t")
 LOWER, UPPER = (4e6, 200.0), (60e6, 2400.0)
@@ -15,10 +18,17 @@ def _misfits(*chi2):
     return [{"iteration": k, "chi2_per_obs": c, "rmse_Pa": 1e6 * math.sqrt(c)} for k, c in enumerate(chi2)]
 
 
-def _post(st, et, rel=0.02):
-    """A posterior with 90 % intervals of +-rel around the means (informative by default)."""
-    return {"sigma_t": {"mean": st, "q05": st * (1 - rel), "q95": st * (1 + rel)},
-            "E_t": {"mean": et, "q05": et * (1 - rel), "q95": et * (1 + rel)}}
+def _sample(centre, sd, n=20000, seed=0, lower=LOWER, upper=UPPER):
+    """A Gaussian posterior sample of the two parameters (columns), kept inside the box."""
+    S = np.random.default_rng(seed).normal(centre, sd, (n, 2))
+    return np.clip(S, lower, upper)
+
+
+def _post(st, et, rel=0.02, lower=LOWER, upper=UPPER):
+    """A posterior sample's summary (the path the workflow takes) with 90 % intervals of about +-rel around
+    the means (informative by default)."""
+    S = _sample((st, et), (st * rel / 1.645, et * rel / 1.645), lower=lower, upper=upper)
+    return interval_summary(S, NAMES, lower, upper)
 
 
 def _decision(converged, reason="discrepancy", target=1.02):
@@ -56,12 +66,13 @@ def test_a_mean_within_two_percent_of_a_bound_is_pinned_and_one_just_outside_is_
     at 2 %; 1 % below it is."""
     lo, hi = (4e6, 200.0), (60e6, 5000.0)
     width = hi[1] - lo[1]
-    assert pinned_parameters(_post(45e6, hi[1] - 0.04 * width), lo, hi, NAMES) == {}
-    assert pinned_parameters(_post(45e6, hi[1] - 0.01 * width), lo, hi, NAMES) == {"E_t": "upper"}
-    assert pinned_parameters(_post(lo[0] + 0.5 * PIN_FRACTION * (hi[0] - lo[0]), 600.0), lo, hi, NAMES) == {
+    box = {"lower": lo, "upper": hi}
+    assert pinned_parameters(_post(45e6, hi[1] - 0.04 * width, **box), lo, hi, NAMES) == {}
+    assert pinned_parameters(_post(45e6, hi[1] - 0.01 * width, **box), lo, hi, NAMES) == {"E_t": "upper"}
+    assert pinned_parameters(_post(lo[0] + 0.5 * PIN_FRACTION * (hi[0] - lo[0]), 600.0, **box), lo, hi, NAMES) == {
         "sigma_t": "lower"}
     v = calibration_verdict(misfits=_misfits(100.0, 5.0), decision=_decision(True),
-                            posterior=_post(45e6, hi[1] - 0.01 * width), lower=lo, upper=hi, names=NAMES)
+                            posterior=_post(45e6, hi[1] - 0.01 * width, **box), lower=lo, upper=hi, names=NAMES)
     assert v["verdict"] == "box_limited" and v["pinned_to_box"] == {"E_t": "upper"}
     assert "widen the box" in v["next_step"] and "E_t" in v["next_step"]
 
@@ -175,21 +186,31 @@ def test_a_box_cutting_the_posterior_ends_box_limited_end_to_end(tmp_path):
 
 
 def test_a_posterior_equal_to_the_prior_is_flagged_uninformative():
-    """A uniform prior's own 90 % interval spans 0.9 of the box: reported as the posterior, it is
-    flagged, even when the fit is at the noise level and the stop rule was met."""
-    prior_like = {p: {"mean": 0.5 * (lo + hi), "q05": lo + 0.05 * (hi - lo), "q95": lo + 0.95 * (hi - lo)}
-                  for p, lo, hi in zip(NAMES, LOWER, UPPER)}
+    """The prior box itself, reported as the posterior (a uniform sample over the box), expects to score as
+    the prior does (ratio 1): flagged, even when the fit is at the noise level and the stop rule was met."""
+    prior_like = interval_summary(np.random.default_rng(1).uniform(LOWER, UPPER, (20000, 2)), NAMES, LOWER, UPPER)
     v = calibration_verdict(misfits=_misfits(1.1, 1.0), decision=_decision(True), posterior=prior_like,
                             lower=LOWER, upper=UPPER, names=NAMES, n_obs=161)
     assert v["verdict"] == "uninformative" and v["flags"] == ["uninformative"]
-    assert v["interval_over_box"]["E_t"] == pytest.approx(0.9)
-    assert "sigma_t, E_t" in v["next_step"]
-    # one parameter learned (interval 0.1 of the box), the other not
-    half = dict(prior_like, sigma_t={"mean": 45e6, "q05": 43e6, "q95": 48.6e6})
-    assert set(uninformative_parameters(half, LOWER, UPPER, NAMES)) == {"E_t"}
-    edge = {p: {"mean": 0.5 * (lo + hi), "q05": lo, "q95": lo + UNINFORMATIVE_FRACTION * (hi - lo)}
-            for p, lo, hi in zip(NAMES, LOWER, UPPER)}
-    assert uninformative_parameters(edge, LOWER, UPPER, NAMES) == {}
+    assert v["interval_over_box"]["E_t"] == pytest.approx(0.9, abs=0.01)
+    assert v["score_over_prior"]["E_t"] == pytest.approx(1.0, abs=0.02)
+    assert "sigma_t, E_t" in v["next_step"] and "E_t 1.00" in v["next_step"]
+    # one parameter learned (a 90 % interval of 0.1 of the box), the other not
+    half = dict(prior_like, sigma_t=_post(45e6, 500.0, rel=0.062)["sigma_t"])
+    assert set(uninformative_parameters(half, NAMES)) == {"E_t"}
+
+
+@pytest.mark.parametrize("width, flagged", [(0.45, False), (0.62, True)])
+def test_the_flag_falls_where_a_gaussian_posterior_expects_the_bar(width, flagged):
+    """A Gaussian posterior with sd s expects 3.447 s / (box width) of the prior's score (enkf.scores), so
+    the bar INFORMATIVE_RATIO sits at a 90 % interval of 3.29 x 0.55 / 3.447 = 0.526 of the box: one a
+    little narrower is learned, one a little wider is not."""
+    sd = [width * (hi - lo) / 3.29 for lo, hi in zip(LOWER, UPPER)]
+    post = interval_summary(_sample([0.5 * (lo + hi) for lo, hi in zip(LOWER, UPPER)], sd), NAMES, LOWER, UPPER)
+    for p, (lo, hi), s in zip(NAMES, zip(LOWER, UPPER), sd):
+        assert post[p]["score_over_prior"] == pytest.approx(3.447 * s / (hi - lo), rel=0.02)
+    assert bool(uninformative_parameters(post, NAMES)) is flagged
+    assert INFORMATIVE_RATIO == 0.55
 
 
 def test_an_mcmc_chain_short_of_its_autocorrelation_rule_is_flagged():

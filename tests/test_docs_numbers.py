@@ -289,6 +289,8 @@ def _off_centre():
 
 
 HARNESS = "tests/test_harness_informative.py::test_the_committed_verdicts_are_the_readme_s"
+FLAG_BAR = "tests/test_calibration_verdict.py::test_the_flag_falls_where_a_gaussian_posterior_expects_the_bar"
+GAUSSIAN = "tests/test_parameter_scores.py::test_a_gaussian_posterior_expects_its_closed_form"
 README_RUN = "tests/test_docs_tables.py::test_the_readme_quotes_the_default_runs_time_from_its_run_json"
 KILL = "tests/test_docs_tables.py::test_the_workflow_docs_kill_figures_are_the_committed_benchmarks"
 
@@ -665,6 +667,14 @@ QUOTES: list[Quote] = [
                       lambda x: f"{round(x * 1e6, -1):.0f}")}),
     Quote(OD, "`init-config` gives 170 us",
           by="tests/test_init_config.py::test_the_granite_disc_gets_its_window_dt_and_table_2_box"),
+    Quote("README.md", "posterior expects to score more than 0.55 of its prior box's", by=FLAG_BAR),
+    Quote("docs/inference.md", "posterior expects to score more than 0.55 of the prior box's", by=FLAG_BAR),
+    Quote("docs/inference.md", "(0.144 of the box width)",
+          by="tests/test_parameter_scores.py::test_the_uniform_prior_scores_0144_of_its_box_on_its_own_truths"),
+    Quote("docs/inference.md", "a Gaussian posterior 3.45 sd over the box width, so the bar (0.55,", by=GAUSSIAN),
+    Quote("docs/inference.md", "a Gaussian 90 % interval of about 0.53 of the box", by=FLAG_BAR),
+    Quote("docs/inference.md", "a 90 % interval over 0.8 of the box, the flag of their time",
+          by="tests/test_harness_informative.py::test_the_uninformative_share_reads_each_record_s_own_flag"),
 ]
 
 

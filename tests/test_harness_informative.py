@@ -14,9 +14,10 @@ import numpy as np
 import pytest
 
 from benchmarks import bench_coverage as bc
-from benchmarks.scores import (WIS_BAR, interval_score, median_of, misspecified_verdict, prior_records, prior_row,
-                               set_verdict_of, shrunk_records, verdict, weighted_interval_score)
+from benchmarks.scores import (WIS_BAR, median_of, misspecified_verdict, prior_records, prior_row, set_verdict_of,
+                               shrunk_records, verdict, weighted_interval_score)
 from calibration.experiment import ExperimentSpec
+from enkf.scores import interval_score
 from tools import coverage_table
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -250,3 +251,19 @@ def test_a_misspecified_set_is_held_to_its_own_bar(spec, committed):
     assert all(prior["params"][p]["wis_over_prior"] == 1.0 for p in spec.names)
     with pytest.raises(ValueError, match="not the harness's"):
         misspecified_verdict({"params": {}})
+
+
+def test_the_uninformative_share_reads_each_record_s_own_flag():
+    """A twin's record with the expected score is flagged by it (the product's flag since the score); one
+    written before it by the flag of its time, a 90 % interval over 0.8 of the box."""
+    from benchmarks.scores import WIDTH_FLAG_OF_OLD_RECORDS, proper_scores
+
+    lo, hi = 0.0, 1.0
+    narrow_but_unlearned = {"q05": 0.3, "q25": 0.4, "q50": 0.5, "q75": 0.6, "q95": 0.7, "score_over_prior": 0.6}
+    wide_old = {"q05": 0.05, "q25": 0.25, "q50": 0.5, "q75": 0.75, "q95": 0.95}
+    narrow_old = {"q05": 0.3, "q25": 0.4, "q50": 0.5, "q75": 0.6, "q95": 0.7}
+    learned = dict(narrow_old, score_over_prior=0.3)
+    rows = [narrow_but_unlearned, wide_old, narrow_old, learned]
+    res = proper_scores(rows, np.full(4, 0.5), lo, hi)
+    assert WIDTH_FLAG_OF_OLD_RECORDS == 0.8
+    assert res["uninformative_share"] == 0.5

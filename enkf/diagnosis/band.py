@@ -31,6 +31,7 @@ import numpy as np
 
 from ..covariance import DiagonalError
 from ..predictive import predictive_band
+from ..scores import interval_score as _interval_score
 from ..variability import SMOOTH_WINDOW, _smooth, smoothed_variance
 
 __all__ = ["RunBand", "informative", "interval_score", "replicate_variance", "residual_discrepancy", "run_band"]
@@ -70,9 +71,7 @@ class RunBand:
 
 def interval_score(lower, upper, y, level: float) -> float:
     """Mean interval score over the observations (module docstring; units of ``y``)."""
-    lo, hi, y = (np.asarray(v, float) for v in (lower, upper, y))
-    a = 1.0 - float(level)
-    return float(np.mean((hi - lo) + (2.0 / a) * (np.maximum(lo - y, 0.0) + np.maximum(y - hi, 0.0))))
+    return float(np.mean(_interval_score(lower, upper, y, 1.0 - float(level))))
 
 
 def informative(score: float, prior_score: float, bar: float = SCORE_RATIO_BAR) -> bool:
