@@ -25,8 +25,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run as a script: the harness's bars are benchmarks.scores
 
-from benchmarks.scores import (COVERAGE_90_BAR, COVERAGE_90_MISSPECIFIED_MIN, SBC_ALPHA, WIS_BAR,  # noqa: E402
-                               set_verdict_of)
+from benchmarks.scores import (COVERAGE_90_BAR, COVERAGE_90_MISSPECIFIED_MIN, SBC_ALPHA,  # noqa: E402
+                               WIDTH_FLAG_OF_OLD_RECORDS, WIS_BAR, set_verdict_of)
+from enkf.scores import INFORMATIVE_RATIO  # noqa: E402
 
 START, END = "<!-- coverage-table:start -->", "<!-- coverage-table:end -->"
 CENSORED_START, CENSORED_END = "<!-- censored-table:start -->", "<!-- censored-table:end -->"
@@ -139,12 +140,24 @@ def table(entries: list) -> str:
             f"{first['window_s'][0] * 1e6:.0f}-{first['window_s'][1] * 1e6:.0f} us; reported posterior: {posterior}; "
             "a sampler that failed counts as a miss; brackets: binomial 95 % intervals; WIS / prior's: the weighted "
             "interval score of the 50 % and 90 % intervals and the median, its mean over the twins over the prior "
-            "box's on the same truths (1: learned nothing); uninformative: twins whose 90 % interval spans over "
-            "0.8 of the box; the bars: 90 % coverage "
+            f"box's on the same truths (1: learned nothing); uninformative: {_flag_words(entries)}; the bars: "
+            "90 % coverage "
             f"{100 * COVERAGE_90_BAR[0]:.0f}-{100 * COVERAGE_90_BAR[1]:.0f} %, rank tests p >= {SBC_ALPHA}, "
             f"WIS / prior's <= {WIS_BAR['sigma_t']} (`sigma_t`) and {WIS_BAR['E_t']} (`E_t`); misspecified sets: "
             f"90 % coverage >= {100 * COVERAGE_90_MISSPECIFIED_MIN:.0f} %):")
     return "\n".join([head, "", *rows])
+
+
+def _flag_words(entries) -> str:
+    """What the uninformative column counts: each record's own flag (benchmarks.scores)."""
+    params = [p for _, bench in entries for name in SETS for t in (bench.get(name) or {}).get("twins") or []
+              for p in ((t.get("emulator_mcmc") or {}).get("params") or t.get("params") or {}).values()]
+    scored = sum(p.get("score_over_prior") is not None for p in params)
+    new = f"twins whose posterior expects over {INFORMATIVE_RATIO} of the prior's score"
+    old = f"twins whose 90 % interval spans over {WIDTH_FLAG_OF_OLD_RECORDS} of the box"
+    if scored == len(params):
+        return new
+    return old if scored == 0 else f"{new} (records written before that score: {old})"
 
 
 # A twin's post-peak is not in its window when the observed maximum lies this close to the window's end
