@@ -267,7 +267,8 @@ def plot_diagnosis_check(path, curves: Mapping[str, Mapping], errors: Mapping[st
 
 def check_figure(curves, errors, added, confirmation=None, bands=None, band_records=None):
     """:func:`plot_diagnosis_check`'s figure."""
-    fig, axes = plt.subplots(1, len(curves), figsize=(4.2 * len(curves), 3.6), squeeze=False)
+    # the legends go under the axes: inside, they hid the rise and the peak the check is about
+    fig, axes = plt.subplots(1, len(curves), figsize=(4.2 * len(curves), 4.6), squeeze=False)
     after_label = "with " + ", ".join(added) if added else "after (nothing added)"
     shipped = "after" if added else "before"  # the model the check ships: its band is the one a lab reads
     for ax, (r, c) in zip(axes[0], curves.items()):
@@ -292,7 +293,7 @@ def check_figure(curves, errors, added, confirmation=None, bands=None, band_reco
                             label=f"FDEM, {name} (RMSE {rmse:.1f} MPa{reps})" if k == 0 else None)
         ax.set_title(f"{r} ({c['data']})", fontsize=9)
         ax.set_xlabel("time [us]")
-        ax.legend(fontsize=7)
+        ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.2), frameon=False)
     axes[0][0].set_ylabel("stress [MPa]")
     if confirmation:
         fig.suptitle(textwrap.fill(confirmation, width=int(55 * len(curves))), fontsize=9)

@@ -27,6 +27,7 @@ SHPB = "benchmarks/results/bench_shpb.json"
 ENGINE = "benchmarks/results/bench_engine.json"
 ENGINE_JOINTS = "benchmarks/results/bench_engine_joints.json"
 VAR = "benchmarks/results/bench_sim_variability.json"
+BLAS = "benchmarks/results/bench_blas_kernel.json"
 
 
 def _planted_gap(J) -> dict:
@@ -338,7 +339,7 @@ QUOTES: list[Quote] = [
               if rep["added"] == [rep["selection"]["rounds"][0]["chosen"]] else {})(
               [t["planted"]["face_gap.gap_m"] for t in J("data/examples/planted_gap/truth.json")["tests"]],
               J(f"{RUN}/planted_gap/diagnosis/report.json"), J(f"{RUN}/planted_gap/diagnosis/check.json"))),
-    Quote(CL, "On the real runs `face_gap` is told apart from `{a}` (z = {za:.2f}), not from `{b}` (z = {zb:.2f})",
+    Quote(CL, "On the real runs `face_gap` is told apart from `{a}` (z = {za:.2f}), not from `{b}` (z = {zb:.2f}",
           lambda J: (lambda ev: {"a": ev[0]["effect"], "za": ev[0]["z"], "b": ev[1]["effect"], "zb": ev[1]["z"]}
                      if [e["told_apart"] for e in ev] == [True, False] else {})(
               J(f"{RUN}/planted_gap/diagnosis/report.json")["identification"][-1]["real_evidence"])),
@@ -379,10 +380,14 @@ QUOTES: list[Quote] = [
           by="tests/test_anchored_selection.py::test_on_the_anchored_model_the_selection_names_a_planted_face_gap"),
     Quote(CL, "none of 12 covers its planted gap, with it 11 of 12 cover",
           by="tests/test_anchored_selection.py::test_the_anchored_models_own_error_makes_the_fitted_gaps_intervals_hold_the_planted_ones"),
-    Quote("docs/workflow.md", "Both intervals hold their truths; `E_t`'s spans {frac} of its box, so the verdict is "
-          "`uninformative`", lambda J: {"frac": f"{_twin()['verdict']['interval_over_box']['E_t']:.2f}"}
-          if all(_twin()["posterior"][p]["q05"] < _twin()["truth"][p] < _twin()["posterior"][p]["q95"]
-                 for p in ("sigma_t", "E_t")) and _twin()["verdict"]["interval_over_box"]["E_t"] > 0.8 else {}),
+    Quote("docs/workflow.md", "`sigma_t`'s interval holds its\n  truth; `E_t`'s posterior expects to score {r:.2f} of the "
+          "prior's, so the verdict is `uninformative`, and its\n  interval misses the truth, {t:.0f} J/m^2", lambda J: {
+              "r": _twin()["verdict"]["score_over_prior"]["E_t"], "t": _twin()["truth"]["E_t"]}
+          if (_twin()["posterior"]["sigma_t"]["q05"] < _twin()["truth"]["sigma_t"] < _twin()["posterior"]["sigma_t"]["q95"]
+              and not _twin()["posterior"]["E_t"]["q05"] < _twin()["truth"]["E_t"] < _twin()["posterior"]["E_t"]["q95"]
+              and _twin()["verdict"]["flags"] == ["uninformative"]) else {}),
+    Quote("README.md", "(`uninformative`: its\nposterior expects to score {r:.2f} of the prior's", lambda J: {
+        "r": _twin()["verdict"]["score_over_prior"]["E_t"]}),
     Quote("docs/workflow.md", "({pre} MPa before the peak, {post} after", lambda J: {
         "pre": _span([x for r in _marble()["discrepancy"]["records"].values() for x in r["sigma_phases"][:2]],
                      lambda x: f"{x / 1e6:.0f}"),
@@ -416,8 +421,8 @@ QUOTES: list[Quote] = [
         "us": coverage_table.CENSOR_S * 1e6}),
     Quote("docs/workflow.md", "(a `fast` cylinder member about {wall:.0f} s there)", lambda J: {
         "wall": J(ENGINE)["cases"]["marble_fast"]["new"]["wall_s"]}),
-    Quote("docs/workflow.md", "is predicted with {rb} MPa RMSE and a peak {pb:.0f} %\n  high by the base model, {ra} MPa "
-          "and {pa:.0f} % with the gauge gain and the face gap",
+    Quote("docs/workflow.md", "is predicted with\n  {rb} MPa RMSE and a peak {pb:.0f} % high by the base model, {ra} MPa "
+          "and {pa:.0f} % with the face gap and the gauge\n  gain",
           lambda J: {"rb": _mpa(_heldout()["before"]["rmse"]), "pb": 100 * _heldout()["before"]["peak_rel_error"],
                      "ra": _mpa(_heldout()["after"]["rmse"]), "pa": 100 * _heldout()["after"]["peak_rel_error"]}),
     Quote("docs/workflow.md", "lowered the cross-validated RMSE from {b0} to {a0} MPa\n  with `{e0}`, and its weighted error "
@@ -429,11 +434,11 @@ QUOTES: list[Quote] = [
               "k0": round(0.05 / _walk_step(0)["level"]), "e1": _walk_step(1)["effect"],
               "a1": _mpa(_walk_step(1)["real_cv_rmse_after"]), "z1": _walk_step(1)["z"]}
           if _walk_step(0)["confirmed"] and _walk_step(1)["confirmed"] and _walk_step(1)["alternative_to"] is None else {}),
-    Quote("docs/workflow.md", "`face_gap` predicts better than the other\n  models of its round, `closure` (z = {zc:.2f}) and "
-          "`baseline` (z = {zb:.2f})", lambda J: {
-              "z" + e["effect"][0]: e["z"] for e in J(f"{RUN}/marble_loop/diagnosis/report.json")["identification"][-1]
-              ["real_evidence"]} if all(e["told_apart"] for e in J(f"{RUN}/marble_loop/diagnosis/report.json")
-                                        ["identification"][-1]["real_evidence"]) else {}),
+    Quote("docs/workflow.md", "On those runs `{e}` predicts better than the\n  other models of its round, `{a}` (z = {za:.2f}) "
+          "and `{b}` (z = {zb:.2f})", lambda J: (lambda rep: (lambda ev: {
+              "e": rep["added"][-1], "a": ev[0]["effect"], "za": ev[0]["z"], "b": ev[1]["effect"], "zb": ev[1]["z"]}
+              if all(x["told_apart"] for x in ev) else {})(rep["identification"][-1]["real_evidence"]))(
+              J(f"{RUN}/marble_loop/diagnosis/report.json"))),
     Quote("docs/workflow.md", "The weighted errors per observation, {b:.0f} before and {a:.0f} after", lambda J: {
         "b": J(f"{RUN}/marble_loop/diagnosis/report.json")["confirmation"]["real_cv_loss"]["0"],
         "a": J(f"{RUN}/marble_loop/diagnosis/report.json")["confirmation"]["real_cv_loss"]["2"]}),
@@ -668,6 +673,15 @@ QUOTES: list[Quote] = [
     Quote(OD, "`init-config` gives 170 us",
           by="tests/test_init_config.py::test_the_granite_disc_gets_its_window_dt_and_table_2_box"),
     Quote("README.md", "posterior expects to score more than 0.55 of its prior box's", by=FLAG_BAR),
+    Quote("README.md", "put its `sigma_t` means {ds:.2f} posterior\nsd apart", lambda J: {
+        "ds": J(BLAS)["posterior"]["sigma_t"]["mean_difference_over_sd"]}),
+    Quote("docs/inference.md", "iteration 1's parameters {p1:.0e} apart (relative), its runs' curves {r1:.0e}, iteration 3's\n"
+          "  parameters {p3:.0e}; the reported `sigma_t` means {ds:.2f} of the posterior sd apart, `E_t`'s {de:.2f}",
+          lambda J: (lambda d, it: {"p1": it[1]["params_max_rel_diff"], "r1": it[1]["responses_max_rel_diff"],
+                                    "p3": it[3]["params_max_rel_diff"],
+                                    "ds": d["posterior"]["sigma_t"]["mean_difference_over_sd"],
+                                    "de": d["posterior"]["E_t"]["mean_difference_over_sd"]})(
+              J(BLAS), {r["iteration"]: r for r in J(BLAS)["iterations"]})),
     Quote("docs/inference.md", "posterior expects to score more than 0.55 of the prior box's", by=FLAG_BAR),
     Quote("docs/inference.md", "(0.144 of the box width)",
           by="tests/test_parameter_scores.py::test_the_uniform_prior_scores_0144_of_its_box_on_its_own_truths"),
