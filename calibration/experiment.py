@@ -439,19 +439,26 @@ def reported_ensemble(spec: ExperimentSpec, analyses: Sequence[Mapping],
 
 
 def final_verdict(spec: ExperimentSpec, analyses: Sequence[Mapping], params: Sequence[pd.DataFrame],
-                  exp: Mapping | None = None) -> dict | None:
-    """The ``verdict`` block of ``summary.json`` from the stored iterations alone (for the plots, which
-    run beside the summary): None while the stored iterations never stop."""
+                  exp: Mapping | None = None, posterior_samples: pd.DataFrame | None = None,
+                  posterior_sampler: Mapping | None = None) -> dict | None:
+    """The ``verdict`` block of ``summary.json`` from the stored iterations and, with ``posterior:
+    emulator_mcmc``, the posterior sample and its sampler's record (for the plots, which run beside the
+    summary: the same verdict on the same posterior): None while the stored iterations never stop."""
     K, decision = final_iteration(spec, analyses)
     if decision is None:
         return None
     misfits = [{"iteration": int(a["iteration"]), **a["misfit"]} for a in analyses[:K + 1]]
-    _, P, alive = reported_ensemble(spec, analyses, params)
-    post = prediction_interval_dict(P[list(spec.names)].to_numpy(float), list(spec.names), alive, spec.transform)
-    R = reported_ensemble(spec, analyses, params)[0]
+    R, P, alive = reported_ensemble(spec, analyses, params)
+    names = list(spec.names)
+    if posterior_samples is None:
+        post = prediction_interval_dict(P[names].to_numpy(float), names, alive, spec.transform)
+    else:
+        from enkf.ces import interval_summary
+
+        post = interval_summary(posterior_samples[names].to_numpy(float), names, spec.lower, spec.upper)
     return calibration_verdict(misfits=misfits, decision=decision, posterior=post, lower=spec.lower,
                                upper=spec.upper, names=spec.names, diagnosed=_diagnosed(exp),
-                               n_obs=int(analyses[0]["n_obs"]),
+                               sampler=posterior_sampler, n_obs=int(analyses[0]["n_obs"]),
                                discrepancy=(analyses[R].get("model_error") or {}).get("discrepancy"))
 
 

@@ -23,7 +23,10 @@ plots.plot_parameters(out.parameters, params, alive, spec.names, spec.lower, spe
 plots.plot_ensemble_curves(out.ensemble_curves, obs, Ys, title)
 K = min(final_iteration(spec, analyses)[0], len(analyses) - 1)
 misfits = [{"iteration": a["iteration"], **a["misfit"]} for a in analyses[:K + 1]]
-verdict = final_verdict(spec, analyses, params, snakemake.params.exp)
+# the summary's verdict on the same posterior (the MCMC sample where the experiment reports one)
+verdict = final_verdict(spec, analyses, params, snakemake.params.exp,
+                        pd.read_csv(inp.samples) if "samples" in inp.keys() else None,
+                        read_json(inp.sampler) if "sampler" in inp.keys() else None)
 R = reported_ensemble(spec, analyses, params)[0]  # the ensemble reported as the posterior
 forecast = {r: read_curve(p) for r, p in zip(obs.records, inp.forecast_curves)}
 plots.plot_forecast(out.forecast, obs, np.nanmean(Ys[0][alive[0]], axis=0), forecast, title,

@@ -146,6 +146,17 @@ def test_summary_reports_the_best_ensemble_when_the_last_step_made_the_fit_worse
     v = final_verdict(spec, analyses, params)
     assert v["verdict"] == out["verdict"]["verdict"] and v["flags"] == out["verdict"]["flags"]
     assert v["chi2_per_obs"]["best_iteration"] == 1 and v["chi2_per_obs"]["final"] == 900.0
+    # with an MCMC posterior the plots read the same sample as the summary: one verdict, its flags included
+    import pandas as pd
+
+    wide = pd.DataFrame(np.random.default_rng(2).uniform(spec.lower, spec.upper, (4000, 2)), columns=list(spec.names))
+    out = summary(spec=spec, exp=exp, analyses=analyses, decision=decision, final_params=params[2],
+                  final_alive=np.ones(4, bool), forecast_misfit={"r": None}, n_simulations=13, wall_s=None,
+                  simulation_wall_s=0.0, iteration_params=params, posterior_samples=wide,
+                  posterior_sampler={"converged_chain": True})
+    v = final_verdict(spec, analyses, params, posterior_samples=wide, posterior_sampler={"converged_chain": True})
+    assert "uninformative" in out["verdict"]["flags"] and v["flags"] == out["verdict"]["flags"]
+    assert v["score_over_prior"] == out["verdict"]["score_over_prior"]
 
 
 def test_a_box_cutting_the_posterior_ends_box_limited_end_to_end(tmp_path):
