@@ -352,13 +352,7 @@ def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], 
     P, alive_R = (final_params, final_alive) if R == K else (iteration_params[R], analyses[R]["alive"])
     # the reported intervals hold one more draw of the members' distribution (enkf.prediction_interval_dict)
     post_ensemble = prediction_interval_dict(P[names].to_numpy(float), names, np.asarray(alive_R, bool), spec.transform)
-    # posterior: emulator_mcmc reports the MCMC sample of the emulator posterior (calibration.posterior)
-    if posterior_samples is None:
-        post = post_ensemble
-    else:
-        from enkf.ces import interval_summary  # the MCMC's summary; SciPy's statistics only where used
-
-        post = interval_summary(posterior_samples[names].to_numpy(float), names, spec.lower, spec.upper)
+    post = reported_posterior(spec, post_ensemble, posterior_samples)
     out = {
         "experiment": spec.name,
         "kind": exp["kind"],
@@ -428,6 +422,18 @@ def summary(*, spec: ExperimentSpec, exp: Mapping, analyses: Sequence[Mapping], 
     return jsonable(out)
 
 
+def reported_posterior(spec: ExperimentSpec, ensemble: Mapping, posterior_samples: pd.DataFrame | None) -> dict:
+    """The ``posterior`` block the summary reports and the verdict reads: with ``posterior: emulator_mcmc``
+    the MCMC sample's summary (calibration.posterior), else the reported ensemble's intervals
+    (``ensemble``, :func:`enkf.diagnostics.prediction_interval_dict`)."""
+    if posterior_samples is None:
+        return dict(ensemble)
+    from enkf.ces import interval_summary  # the MCMC's summary; SciPy's statistics only where used
+
+    names = list(spec.names)
+    return interval_summary(posterior_samples[names].to_numpy(float), names, spec.lower, spec.upper)
+
+
 def reported_ensemble(spec: ExperimentSpec, analyses: Sequence[Mapping],
                       params: Sequence[pd.DataFrame]) -> tuple[int, pd.DataFrame, np.ndarray]:
     """``(R, params[R], alive[R])``: the ensemble reported as the posterior (posterior.csv, summary.json,
@@ -450,12 +456,8 @@ def final_verdict(spec: ExperimentSpec, analyses: Sequence[Mapping], params: Seq
     misfits = [{"iteration": int(a["iteration"]), **a["misfit"]} for a in analyses[:K + 1]]
     R, P, alive = reported_ensemble(spec, analyses, params)
     names = list(spec.names)
-    if posterior_samples is None:
-        post = prediction_interval_dict(P[names].to_numpy(float), names, alive, spec.transform)
-    else:
-        from enkf.ces import interval_summary
-
-        post = interval_summary(posterior_samples[names].to_numpy(float), names, spec.lower, spec.upper)
+    post = reported_posterior(spec, prediction_interval_dict(P[names].to_numpy(float), names, alive, spec.transform),
+                              posterior_samples)
     return calibration_verdict(misfits=misfits, decision=decision, posterior=post, lower=spec.lower,
                                upper=spec.upper, names=spec.names, diagnosed=_diagnosed(exp),
                                sampler=posterior_sampler, n_obs=int(analyses[0]["n_obs"]),

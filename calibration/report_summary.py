@@ -15,6 +15,8 @@ import math
 from collections.abc import Mapping
 from html import escape
 
+from enkf.scores import INFORMATIVE_RATIO
+
 __all__ = ["summary_html"]
 
 #: Display units of the calibrated parameters (SI value x factor); other names are shown in SI.
@@ -110,8 +112,6 @@ def _learned(ratio) -> str:
     (calibration.verdict's ``uninformative``)."""
     if ratio is None:
         return "-"
-    from enkf.scores import INFORMATIVE_RATIO
-
     return f"{float(ratio):.2f} ({'learned' if float(ratio) <= INFORMATIVE_RATIO else 'not constrained: mostly the prior'})"
 
 

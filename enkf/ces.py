@@ -57,13 +57,11 @@ from .emulated import emulator_error_model
 from .emulator import design_arrays, smoothed_emulator
 from .hetero import emulated_deviance
 from .sampling import latin_hypercube
-from .scores import expected_score_over_prior
+from .scores import QUANTILES, expected_score_over_prior
 from .selfcal import TEMPERINGS, box_minimum, self_calibration
 
 __all__ = ["EmulatorPosterior", "emulator_posterior", "interval_summary", "QUANTILES", "TEMPERINGS"]
 
-#: Quantiles reported per parameter: the 90 % and 50 % central intervals and the median.
-QUANTILES = {"q05": 0.05, "q25": 0.25, "q50": 0.5, "q75": 0.75, "q95": 0.95}
 
 
 def interval_summary(samples, names: Sequence[str], lower=None, upper=None) -> dict:

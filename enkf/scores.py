@@ -21,9 +21,11 @@ from collections.abc import Mapping
 
 import numpy as np
 
-__all__ = ["INFORMATIVE_RATIO", "INTERVALS", "expected_score_over_prior", "expected_wis", "interval_score",
+__all__ = ["INFORMATIVE_RATIO", "INTERVALS", "QUANTILES", "expected_score_over_prior", "expected_wis", "interval_score",
            "prior_expected_wis", "prior_quantiles", "weighted_interval_score"]
 
+#: Quantiles reported per parameter: the 90 % and 50 % central intervals and the median.
+QUANTILES = {"q05": 0.05, "q25": 0.25, "q50": 0.5, "q75": 0.75, "q95": 0.95}
 #: the central intervals of the score: (alpha, lower quantile key, upper quantile key)
 INTERVALS = ((0.5, "q25", "q75"), (0.1, "q05", "q95"))
 #: A parameter is learned when its posterior expects to score at most this fraction of the prior's: the
@@ -57,8 +59,7 @@ def weighted_interval_score(q: Mapping, y, median: float | None = None) -> np.nd
 def prior_quantiles(lower: float, upper: float) -> dict:
     """The quantiles of the uniform prior on ``[lower, upper]``."""
     w = float(upper) - float(lower)
-    return {k: float(lower) + f * w for k, f in (("q05", 0.05), ("q25", 0.25), ("q50", 0.5), ("q75", 0.75),
-                                                  ("q95", 0.95))}
+    return {k: float(lower) + f * w for k, f in QUANTILES.items()}
 
 
 def prior_expected_wis(lower: float, upper: float) -> float:
@@ -71,8 +72,7 @@ def prior_expected_wis(lower: float, upper: float) -> float:
 def expected_wis(draws) -> float:
     """A posterior's WIS expected under itself: its draws' quantiles scored at the draws."""
     d = np.asarray(draws, float)
-    q = {k: float(np.quantile(d, f)) for k, f in (("q05", 0.05), ("q25", 0.25), ("q50", 0.5), ("q75", 0.75),
-                                                  ("q95", 0.95))}
+    q = {k: float(np.quantile(d, f)) for k, f in QUANTILES.items()}
     return float(weighted_interval_score(q, d).mean())
 
 

@@ -318,6 +318,13 @@ QUOTES: list[Quote] = [
     # docs/workflow.md: the default run
     Quote("docs/workflow.md", "(2 cores, not an idle figure: {beside} run\nbeside it: install {install_s} s in a new virtual environment, run {run_s} s, exit {exit_code}; "
           "{fdem_runs} FDEM runs, {refine_runs} of them the refinement batches", lambda J: J(f"{RUN}/run.json")),
+    Quote("docs/workflow.md", "the default twin's `sigma_t` means {ds:.2f} posterior sd apart", lambda J: {
+        "ds": J(BLAS)["posterior"]["sigma_t"]["mean_difference_over_sd"]}),
+    Quote("docs/workflow.md", "Its FDEM runs took {s:.0f} solver-seconds, two\nat a time on shared cores: {m:.0f} in "
+          "`marble_loop`, {p:.0f} in `planted_gap`, {t:.0f} in `twin_ref`", lambda J: (lambda d: {
+              "s": d["solver_s"], **{k: sum(v["solver_s"] for v in d["fdem_runs"][e].values())
+                                     for k, e in (("m", "marble_loop"), ("p", "planted_gap"), ("t", "twin_ref"))}})(
+              J("benchmarks/results/default_run_costs.json"))),
     Quote("docs/workflow.md", "is {stat} against the statistic's target {target}", lambda J: {
         "stat": f"{_twin()['verdict']['chi2_per_obs']['reported_against_noise_and_simulator']:.2f}",
         "target": f"{_twin()['verdict']['chi2_per_obs']['stop_target']:.2f}"}),
