@@ -43,6 +43,7 @@ import os
 import pickle
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
@@ -66,10 +67,12 @@ GRID = 161
 RATIOS = (0.85, 0.9, 0.95, 1.0, 1.05, 1.1, 1.15)
 
 
-def twin_likelihood(keep: Path, i: int, seed: int):
-    """``(chi2 on P (k, 2), lambda, lower, upper)`` of twin ``i``'s reported posterior (untempered)."""
-    spec, params, responses, analyses, obs = pickle.loads((keep / f"well_specified_{seed}_{i:03d}.pkl").read_bytes())
-    P_ref, Y_ref = pickle.loads((keep / f"well_specified_{seed}_{i:03d}.refine.pkl").read_bytes())
+def kept_posterior(keep: Path, i: int, seed: int, kind: str = "well_specified") -> SimpleNamespace:
+    """The reported posterior's ingredients of a kept twin, as :func:`enkf.ces.emulator_posterior` builds
+    them: the design ``X, Y, latest``, the data ``d``, the box ``lo, hi``, the emulator ``em`` (its
+    ``smoothing``), the error terms ``terms``, the emulator-error model ``error_model`` and ``lam``."""
+    spec, params, responses, analyses, obs = pickle.loads((keep / f"{kind}_{seed}_{i:03d}.pkl").read_bytes())
+    P_ref, Y_ref = pickle.loads((keep / f"{kind}_{seed}_{i:03d}.refine.pkl").read_bytes())
     K = len(analyses) - 1
     P_ref = pd.DataFrame(np.asarray(P_ref, float), columns=list(spec.names))
     Y_ref = np.asarray(Y_ref, float)
@@ -80,17 +83,42 @@ def twin_likelihood(keep: Path, i: int, seed: int):
     X, Y, latest, d = design_arrays(X, Y, latest, obs.values)
     em, info = smoothed_emulator(X, Y, lo, hi, list(spec.names), latest, spec.smoothing, terms.likelihood().std)
     times, groups = obs.time, obs.frame["record"].to_numpy(str)
-    emu_err, _ = emulator_error_model(em.loo_residuals()[latest], times, groups)
+
+    def error_model(r):
+        return emulator_error_model(r, times, groups)[0]
+
     lam = self_calibration(X, Y, latest, terms.emulated(), lower=lo, upper=hi, smoothing=info["smoothing"],
-                           error_model=lambda r: emulator_error_model(r, times, groups)[0],
-                           rng=rng_for(spec.seed, "posterior"))["lambda"]
-    C = terms.emulated().dense() + emu_err.dense()
+                           error_model=error_model, rng=rng_for(spec.seed, "posterior"))["lambda"]
+    return SimpleNamespace(spec=spec, X=X, Y=Y, latest=latest, d=d, lo=lo, hi=hi, em=em, smoothing=info["smoothing"],
+                           terms=terms, error_model=error_model, lam=float(lam))
+
+
+def whitener(em, C):
+    """``(P, y) -> W``, the emulator's residuals from ``y`` at ``P`` (k, n) whitened by ``C``: the deviance
+    is ``|W|^2`` per row."""
     Linv_T = linalg.solve_triangular(linalg.cholesky(C, lower=True), np.eye(C.shape[0]), lower=True).T
 
-    def chi2(P):
-        out = [np.einsum("ij,ij->i", w, w) for w in ((em(P[k:k + 4000]) - d) @ Linv_T for k in range(0, len(P), 4000))]
-        return np.concatenate(out)
-    return chi2, float(lam), lo, hi
+    def whiten(P, y):
+        return np.concatenate([(em(P[k:k + 4000]) - y) @ Linv_T for k in range(0, len(P), 4000)])
+    return whiten
+
+
+def deviance(em, C):
+    """``(P, y) -> chi2`` of the emulated likelihood with covariance ``C``."""
+    whiten = whitener(em, C)
+
+    def chi2(P, y):
+        W = whiten(P, y)
+        return np.einsum("ij,ij->i", W, W)
+    return chi2
+
+
+def twin_likelihood(keep: Path, i: int, seed: int):
+    """``(chi2 on P (k, 2), lambda, lower, upper)`` of twin ``i``'s reported posterior (untempered)."""
+    k = kept_posterior(keep, i, seed)
+    C = k.terms.emulated().dense() + k.error_model(k.em.loo_residuals()[k.latest]).dense()
+    chi2 = deviance(k.em, C)
+    return (lambda P: chi2(P, k.d)), k.lam, k.lo, k.hi
 
 
 def _median(logp: np.ndarray, s: np.ndarray) -> float:
