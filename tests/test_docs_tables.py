@@ -5,7 +5,7 @@ committed run.json's."""
 import json
 from pathlib import Path
 
-from tools import coverage_table, engine_table, loro_table, results_table, shpb_table
+from tools import coverage_table, engine_table, loro_table, planted_table, results_table, shpb_table
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -102,3 +102,20 @@ def test_the_shpb_models_tables_are_generated_from_the_committed_benchmark_json(
     for start, end, block in ((shpb_table.PRESET_START, shpb_table.PRESET_END, shpb_table.preset_block()),
                               (shpb_table.VAR_START, shpb_table.VAR_END, shpb_table.variability_block())):
         assert text[text.index(start):text.index(end) + len(end)] == block
+
+
+def test_the_planted_benchmark_s_score_is_generated_from_its_committed_json():
+    """docs/closing-the-loop.md's score of the planted-effect benchmark is what tools/planted_table.py makes
+    from benchmarks/results/bench_planted.json, which pools every case x benchmark seed of the committed plan
+    once (the series' files in bench_planted_records/)."""
+    text = (ROOT / "docs" / "closing-the-loop.md").read_text()
+    path = "benchmarks/results/bench_planted.json"
+    assert _block(text, planted_table) == planted_table.block(path)
+    doc = json.loads((ROOT / path).read_text())
+    plan = json.loads((ROOT / "benchmarks" / "planted_plan.json").read_text())
+    planned = {(c["case"], s) for c in plan["cases"] for s in plan["seeds"]["benchmark"]["per_case"]}
+    assert sorted((r["case"]["case"], r["seed"]) for r in doc["series"]) == sorted(planned)
+    # each pooled series is the one committed in the records folder
+    for r in doc["series"]:
+        rec = json.loads((ROOT / "benchmarks/results/bench_planted_records" / f"{r['case']['case']}_{r['seed']}.json").read_text())
+        assert rec["series"][0]["named"] == r["named"] and rec["series"][0]["wall_s"] == r["wall_s"]
