@@ -14,7 +14,7 @@ import json
 import os
 import re
 import tempfile
-from statistics import NormalDist, median
+from statistics import NormalDist
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -147,17 +147,6 @@ def _planted_score(J) -> dict:
     big = [r for r in rows if r["case"]["class"] == "physical" and r.get("above_scatter")]
     return {"n_ok": sum(r["named"] in ("base_kept", "unexplained") for r in nulls), "n": len(nulls),
             "k": sum(bool(r["correct"]) for r in big), "K": len(big)}
-
-
-def _sigma_t_shift(J) -> dict:
-    """The well-specified twins' reported sigma_t median against the truth, below 40 MPa and above 50 MPa
-    (where the window ends before the post-peak) of the one-posterior benchmark."""
-    rows = [(t["truth"]["sigma_t"], t["emulator_mcmc"]["params"]["sigma_t"]["q50"])
-            for t in J("benchmarks/results/coverage_one_posterior.json")["well_specified"]["twins"]]
-    low = [m / t for t, m in rows if t < 40e6]
-    top = [m / t for t, m in rows if t >= 50e6]
-    return {"hi_n": sum(r > 1 for r in low), "lo_n": len(low), "shift": 100 * (median(low) - 1),
-            "lo_top": sum(r < 1 for r in top), "top_n": len(top)}
 
 
 def _error_models(experiment):
@@ -331,8 +320,8 @@ QUOTES: list[Quote] = [
     Quote("README.md", "(`sigma_t` 94 %, `E_t` 85 %, the bar's lower edge)", by=HARNESS),
     Quote("README.md", "on the planted-effect benchmark the nulls added nothing in {n_ok} of {n} series, but a physical effect "
           "beyond the mesh scatter was named first in {k} of {K}", lambda J: _planted_score(J)),
-    Quote("README.md", "sits above the truth in {hi_n} of {lo_n} twins below 40 MPa, by a median {shift:.0f} %, and below it "
-          "in {lo_top} of {top_n} above 50 MPa", lambda J: _sigma_t_shift(J)),
+    Quote("README.md", "sits above the truth in 53 of 64 twins below 40 MPa, by a median 7 %, and below it in 17 of 18 "
+          "above 50 MPa", by=HARNESS),
     Quote("README.md", "`sigma_t` 0.26 of the prior's against 0.25, `E_t` 0.67 against 0.55", by=HARNESS),
     Quote("README.md", "span a median 0.71 of the box", by=HARNESS),
     Quote("README.md", "held 83 % / 83 % (bar 80 %)", by=HARNESS),

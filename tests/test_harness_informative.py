@@ -146,9 +146,14 @@ def test_the_committed_verdicts_are_the_readme_s(spec, committed):
                       spec.upper, spec.names)["params"][p]["coverage_90"]["fraction"]
              for f, n in README_SETS for p in spec.names]
     assert set(prior) == {0.9} and "covers 90 % with uniform ranks" in flat
-    rel = [r["emulator_mcmc"]["params"]["sigma_t"]["q50"] / r["truth"]["sigma_t"] - 1.0
+    # ... above the truth below 40 MPa, below it above 50 MPa (where the window ends before the post-peak)
+    rel = [(r["truth"]["sigma_t"], r["emulator_mcmc"]["params"]["sigma_t"]["q50"] / r["truth"]["sigma_t"] - 1.0)
            for r in committed[README_FILE]["well_specified"]["twins"]]
-    assert f"sits a median {100 * float(np.median(rel)):.0f} % above the truth" in flat
+    low = [x for t, x in rel if t < 40e6]
+    top = [x for t, x in rel if t >= 50e6]
+    assert (f"sits above the truth in {sum(x > 0 for x in low)} of {len(low)} twins below 40 MPa, by a median "
+            f"{100 * float(np.median(low)):.0f} %, and below it in {sum(x < 0 for x in top)} of {len(top)} above "
+            "50 MPa") in flat
     width = committed[README_FILE]["well_specified"]["summary_emulator_mcmc"]["params"]["E_t"]
     assert f"span a median {width['width_over_prior_median']:.2f} of the box" in flat
     ens = committed[README_FILE]["well_specified"]["summary"]["params"]
