@@ -82,19 +82,18 @@ PIT_STREAM = 52
 
 
 def kept_twin(keep: Path, kind: str, i: int, seed: int):
-    """``(chi2, d, lambda, lo, hi, pseudo)`` of a kept twin: ``chi2(P, y)`` the untempered deviance on the
-    full emulator (``chi2.whiten`` its whitened residuals), ``pseudo`` a list of ``(theta_i, chi2_i, y_i)``,
+    """``(whiten, d, lambda, lo, hi, pseudo)`` of a kept twin: ``whiten(P, y)`` the residuals on the full
+    emulator whitened by its covariance (the untempered deviance is their squared norm), ``pseudo`` a list of ``(theta_i, chi2_i, y_i)``,
     each pseudo-run's parameters, deviance on the emulator of the other runs and data (its curve plus a
     noise draw)."""
     k = kept_posterior(keep, i, seed, kind)
     C = k.terms.emulated().dense() + k.error_model(k.em.loo_residuals()[k.latest]).dense()
-    full = deviance(k.em, C)
-    full.whiten = whitener(k.em, C)
+    whiten = whitener(k.em, C)
     pseudo = [(k.X[j], deviance(em_j, C_j), y_j)
               for j, em_j, C_j, y_j in pseudo_runs(k.X, k.Y, k.latest, k.terms.emulated(), lower=k.lo, upper=k.hi,
                                                      smoothing=k.smoothing, error_model=k.error_model,
                                                      rng=np.random.default_rng([int(k.spec.seed), PIT_STREAM]))]
-    return full, k.d, k.lam, k.lo, k.hi, pseudo
+    return whiten, k.d, k.lam, k.lo, k.hi, pseudo
 
 
 def grid_weights(chi2_grid: np.ndarray, lam: float) -> np.ndarray:
@@ -142,11 +141,11 @@ def recalibration(pits: np.ndarray) -> dict:
 
 
 def study_twin(keep: Path, kind: str, i: int, seed: int, truth: np.ndarray) -> dict:
-    full, d, lam, lo, hi, pseudo = kept_twin(keep, kind, i, seed)
+    whiten, d, lam, lo, hi, pseudo = kept_twin(keep, kind, i, seed)
     edges = [np.linspace(lo[a], hi[a], GRID + 1) for a in (0, 1)]
     mids = [0.5 * (e[1:] + e[:-1]) for e in edges]
     P = np.column_stack([g.ravel() for g in np.meshgrid(*mids, indexing="ij")])
-    W = full.whiten(P, d)
+    W = whiten(P, d)
     cdfs = marginal_cdfs(np.einsum("ij,ij->i", W, W).reshape(GRID, GRID), lam)
     z_rng = np.random.default_rng([seed, i, PIT_STREAM])
     extra = {"untempered": marginal_cdfs(np.einsum("ij,ij->i", W, W).reshape(GRID, GRID), 1.0),
@@ -179,7 +178,7 @@ def study_twin(keep: Path, kind: str, i: int, seed: int, truth: np.ndarray) -> d
     return out
 
 
-def summarise(rows: list[dict], lo, hi) -> dict:
+def summarise(rows: list[dict]) -> dict:
     prior = {n: prior_expected_wis(0.0, 1.0) for n in ("sigma_t", "E_t")}
     out = {}
     for form in FORMS:
@@ -241,9 +240,9 @@ def main(argv=None) -> dict:
                   file=sys.stderr, flush=True)
         if rows:
             low = [r for r in rows if r["truth"]["sigma_t"] < LOW_SIGMA_T]
-            out["sets"][kind] = {"twins": len(rows), "summary": summarise(rows, spec.lower, spec.upper),
+            out["sets"][kind] = {"twins": len(rows), "summary": summarise(rows),
                                  "twins_below_40MPa": len(low),
-                                 "summary_below_40MPa": summarise(low, spec.lower, spec.upper) if low else None,
+                                 "summary_below_40MPa": summarise(low) if low else None,
                                  "rows": rows}
             if args.cache:
                 out["sets"][kind]["grid_against_sampler"] = grid_against_sampler(rows, Path(args.cache), kind, seed)

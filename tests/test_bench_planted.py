@@ -15,7 +15,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from benchmarks.bench_planted import (acceptance, effect_size, is_correct, named, named_group,  # noqa: E402
+from benchmarks.bench_planted import (acceptance, bar_counts, effect_size, is_correct, named, named_group,  # noqa: E402
                                       parameter_coverage, proposals, score)
 from tools.make_planted_series import ar1_noise, make_series, planted_values  # noqa: E402
 
@@ -112,6 +112,9 @@ def test_score_gives_the_matrix_and_the_rates():
     assert named_group(_report("base_kept")) == [] and named_group(_report("confirmed", ["lowpass"])) == ["lowpass"]
     assert s["null_false_positive_rate"] == pytest.approx(1 / 4)
     assert s["out_of_catalogue_ok_share"] == pytest.approx(1 / 2)
+    # the counts behind the bars' shares, the unfinished series left out
+    assert bar_counts(rows) == {"physical_named_top": (2, 4), "parameter_in_90": (1, 2), "null_adds_nothing": (3, 4),
+                                "out_of_catalogue_ok": (1, 2)}
     assert len(s["misses"]) == 2 + 1 + 1 + 1 + 1                      # 2 rate, damping, null, ringing, the error
     assert [m["case"] for m in s["misses"] if m.get("below_scatter")] == ["damping"]
     acc = acceptance(s, PLAN["acceptance"])

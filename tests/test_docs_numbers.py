@@ -142,11 +142,11 @@ def _step(preset):
 
 def _planted_score(J) -> dict:
     """The planted-effect benchmark's null and physical-effect counts (benchmarks/results/bench_planted.json)."""
-    rows = [r for r in J("benchmarks/results/bench_planted.json")["series"] if not r.get("error")]
-    nulls = [r for r in rows if r["case"]["class"] == "null"]
-    big = [r for r in rows if r["case"]["class"] == "physical" and r.get("above_scatter")]
-    return {"n_ok": sum(r["named"] in ("base_kept", "unexplained") for r in nulls), "n": len(nulls),
-            "k": sum(bool(r["correct"]) for r in big), "K": len(big)}
+    from benchmarks.bench_planted import bar_counts
+
+    c = bar_counts(J("benchmarks/results/bench_planted.json")["series"])
+    (n_ok, n), (k, K) = c["null_adds_nothing"], c["physical_named_top"]
+    return {"n_ok": n_ok, "n": n, "k": k, "K": K}
 
 
 def _error_models(experiment):
