@@ -69,8 +69,8 @@ RATIOS = (0.85, 0.9, 0.95, 1.0, 1.05, 1.1, 1.15)
 
 def kept_posterior(keep: Path, i: int, seed: int, kind: str = "well_specified") -> SimpleNamespace:
     """The reported posterior's ingredients of a kept twin, as :func:`enkf.ces.emulator_posterior` builds
-    them: the design ``X, Y, latest``, the data ``d``, the box ``lo, hi``, the emulator ``em`` (its
-    ``smoothing``), the error terms ``terms``, the emulator-error model ``error_model`` and ``lam``."""
+    them: the design ``X, Y, latest``, the data ``d`` (at ``times``), the box ``lo, hi``, the emulator ``em``
+    (its ``smoothing``), the error terms ``terms``, the emulator-error model ``error_model`` and ``lam``."""
     spec, params, responses, analyses, obs = pickle.loads((keep / f"{kind}_{seed}_{i:03d}.pkl").read_bytes())
     P_ref, Y_ref = pickle.loads((keep / f"{kind}_{seed}_{i:03d}.refine.pkl").read_bytes())
     K = len(analyses) - 1
@@ -90,7 +90,7 @@ def kept_posterior(keep: Path, i: int, seed: int, kind: str = "well_specified") 
     lam = self_calibration(X, Y, latest, terms.emulated(), lower=lo, upper=hi, smoothing=info["smoothing"],
                            error_model=error_model, rng=rng_for(spec.seed, "posterior"))["lambda"]
     return SimpleNamespace(spec=spec, X=X, Y=Y, latest=latest, d=d, lo=lo, hi=hi, em=em, smoothing=info["smoothing"],
-                           terms=terms, error_model=error_model, lam=float(lam))
+                           terms=terms, error_model=error_model, lam=float(lam), times=times)
 
 
 def whitener(em, C):
