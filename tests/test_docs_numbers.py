@@ -140,6 +140,14 @@ def _step(preset):
     return J("studies/results/bench_time_step.json")["presets"][preset]
 
 
+def _synthetic_likelihood(J) -> dict:
+    """studies/identification_ceiling.py's oracle: its meshes per grid point and how many twins' 90 %
+    intervals held each truth."""
+    d = J("studies/results/identification_ceiling_dev70.json")
+    held = {p: sum(t[p]["q05"] <= t["truth"][p] <= t[p]["q95"] for t in d["twins"]) for p in ("sigma_t", "E_t")}
+    return {"m": d["meshes"], "st": held["sigma_t"], "et": held["E_t"], "n": len(d["twins"])}
+
+
 def _planted_score(J) -> dict:
     """The planted-effect benchmark's null and physical-effect counts (benchmarks/results/bench_planted.json)."""
     from benchmarks.bench_planted import bar_counts
@@ -701,6 +709,8 @@ QUOTES: list[Quote] = [
                                     "ds": d["posterior"]["sigma_t"]["mean_difference_over_sd"],
                                     "de": d["posterior"]["E_t"]["mean_difference_over_sd"]})(
               J(BLAS), {r["iteration"]: r for r in J(BLAS)["iterations"]})),
+    Quote("docs/inference.md", "point of a grid from {m} mesh realizations with the other parameter at its truth and no emulator,\n"
+          "  held the truth in {st} and {et} of {n} twins' 90 % intervals", lambda J: _synthetic_likelihood(J)),
     Quote("docs/inference.md", "posterior expects to score more than 0.55 of the prior box's", by=FLAG_BAR),
     Quote("docs/inference.md", "(0.144 of the box width)",
           by="tests/test_parameter_scores.py::test_the_uniform_prior_scores_0144_of_its_box_on_its_own_truths"),
