@@ -73,7 +73,7 @@ from enkf.scores import QUANTILES, prior_expected_wis, weighted_interval_score  
 from enkf.variability import lag1_correlation  # noqa: E402
 from studies.pit_recalibration import GRID, LOW_SIGMA_T, cdf_at, cdfs_of, grid_weights, quantile_at  # noqa: E402
 from studies.sigma_t_bias import write  # noqa: E402
-from studies.tempering_forms import kept_posterior, whitener  # noqa: E402
+from studies.tempering_forms import deviance, kept_posterior  # noqa: E402
 
 FORMS = ("power", "untempered", "median_center", "median_center_untempered", "stretch_mean", "stretch_median",
          "stretch_mode")
@@ -96,12 +96,8 @@ def grid_of(lo, hi):
 
 def chi2_of(em, C, d):
     """``P -> chi2`` of the emulated likelihood with covariance ``C`` at data ``d``."""
-    whiten = whitener(em, C)
-
-    def chi2(P):
-        W = whiten(P, d)
-        return np.einsum("ij,ij->i", W, W)
-    return chi2
+    chi2 = deviance(em, C)
+    return lambda P: chi2(P, d)
 
 
 def form_cdfs(k, P, edges) -> dict:
@@ -180,10 +176,11 @@ class RegisteredDeviance:
         return out
 
 
-def registered_cdfs(k, P, edges, seed: int) -> dict:
-    """The registered likelihood untempered and power-tempered by its own ``lambda``: the median rule of
-    :mod:`enkf.selfcal` on its pseudo-runs (each latest run plus a noise draw, on the emulator of the
-    other runs, the deviance's log-determinant included as the heteroscedastic form does)."""
+def registered_cdfs(k, P, seed: int) -> tuple[dict, float]:
+    """``({form: cdfs}, lambda)``: the registered likelihood untempered and power-tempered by its own
+    ``lambda``, the median rule of :mod:`enkf.selfcal` on its pseudo-runs (each latest run plus a noise
+    draw, on the emulator of the other runs, the log-determinant in the deviance as the heteroscedastic
+    form has it)."""
     B = k.terms.emulated().dense()
     times = np.asarray(k.times, float)
     L_R = linalg.cholesky(B, lower=True)
@@ -208,7 +205,7 @@ def study_twin(keep: Path, i: int, seed: int, truth: np.ndarray, registered: boo
     row = {"seed": 1000 * seed + i, "truth": dict(zip(NAMES, map(float, truth))), "lambda": k.lam, "forms": {}}
     forms = form_cdfs(k, P, edges)
     if registered:
-        extra, row["lambda_registered"] = registered_cdfs(k, P, edges, 1000 * seed + i)
+        extra, row["lambda_registered"] = registered_cdfs(k, P, 1000 * seed + i)
         forms.update(extra)
     for form, cdfs in forms.items():
         row["forms"][form] = {}
