@@ -366,6 +366,10 @@ QUOTES: list[Quote] = [
           "90 % predictive band covering {c:.2f} of its curve. The fitted gaps' 90 % intervals hold {k} of the {n}\n"
           "calibration records' planted gaps, and the held-out record's predicted interval holds its own; the\n"
           "shipped model's `sigma_t` interval misses its truth ({m} [{lo}, {hi}] MPa for {t:.0f})", _planted_gap),
+    Quote(CL, "real `fast` runs at that `sigma_t` and `E_t` fit PlantGap_02\nbest at a gap of {best:.0f} um, outside the "
+          "surrogate's {lo:.0f}-{hi:.0f} um", lambda J: (lambda r: {
+              "best": r["least_rmse_gap_m"] * 1e6, "lo": r["reported_90_m"][0] * 1e6, "hi": r["reported_90_m"][1] * 1e6})(
+              J("studies/results/added_parameter_real_runs.json")["records"]["PlantGap_02"])),
     Quote("docs/workflow.md", "face gaps of {lo:.0f}-{hi:.0f} um that the calibration does not declare): `{e}` is proposed first "
           "and\n  confirmed on real FDEM runs, and the held-out record's RMSE falls from {rb} to {ra} MPa", lambda J: (
               lambda g, rep, chk: {"lo": min(g) * 1e6, "hi": max(g) * 1e6, "e": rep["selection"]["rounds"][0]["chosen"],
