@@ -271,6 +271,14 @@ def _loro_costs(name: str = "new", refine: bool = False) -> dict:
             "n": sum(v["runs"] for v in run["fdem_runs"].values())}
 
 
+def _loro_idle(J) -> dict:
+    """The idle run of the shipped series (bench_loro.json ``anchored_idle``): its wall [min], refused unless
+    its answers are those of run ``anchored``."""
+    runs = J("benchmarks/results/bench_loro.json")["runs"]
+    idle, busy = runs["anchored_idle"], runs["anchored"]
+    return {"m": idle["wall_s"] / 60} if idle["answers"] == busy["answers"] and idle["exit_code"] == 0 else {}
+
+
 def _pop():
     return J("studies/results/population_average_cv.json")
 
@@ -332,6 +340,8 @@ QUOTES: list[Quote] = [
           "an upper bound: a development study ran beside it at the lowest priority). Of its job time, {d:.0f} % went "
           "to the selection's design, {r:.0f} % to the refinement runs, {c:.0f} % to the calibrations' ensembles and "
           "replicates and {k:.0f} % to the real-run check", lambda J: _loro_costs("anchored", refine=True)),
+    Quote("docs/workflow.md", "On an idle machine, with later code that gave the same answers,\n  it took {m:.0f} min (run `anchored_idle`)",
+          lambda J: _loro_idle(J)),
     Quote("README.md", "covers 90 % with uniform ranks", by=HARNESS),
     Quote("README.md", "(`sigma_t` 94 %, `E_t` 85 %, the bar's lower edge)", by=HARNESS),
     Quote("README.md", "on the planted-effect benchmark the nulls added nothing in {n_ok} of {n} series, but a physical effect "
