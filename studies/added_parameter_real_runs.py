@@ -30,6 +30,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from calibration.observations import curve_on_grid, measured_observations, observation_grid  # noqa: E402
 from studies.sigma_t_bias import write  # noqa: E402
 
 RUN = ROOT / "benchmarks" / "results" / "default_run" / "planted_gap"
@@ -46,13 +47,10 @@ def config() -> dict:
     return yaml.safe_load((ROOT / "config" / "config.yaml").read_text())["experiments"]["planted_gap"]
 
 
-def observed(sheet: Path, grid: np.ndarray) -> np.ndarray:
-    """The record's reduced specimen stress on the calibration's observation grid."""
-    from shpb.lab.lab_reduce import reduce_sheet
-    from shpb.lab.sheet import load_sheet
-
-    red = reduce_sheet(load_sheet(sheet))
-    return np.interp(grid, np.asarray(red.time), np.asarray(red.stress))
+def observed(sheet: Path, o: dict) -> np.ndarray:
+    """The record's data as the calibration reads them (its observation grid)."""
+    obs, _ = measured_observations({sheet.stem: sheet}, t_start=o["t_start"], t_end=o["t_end"], dt=o["dt"])
+    return obs.values
 
 
 def _run(task) -> list[float]:
@@ -60,7 +58,7 @@ def _run(task) -> list[float]:
     from shpb.simulate import simulate
 
     out = simulate("cylinder", "fast", params=params, record=sheet, mesh_seed=seed, t_end=t_end)
-    return np.interp(grid, np.asarray(out.columns["time_s"]), np.asarray(out.columns["stress_Pa"])).tolist()
+    return curve_on_grid(out.columns["time_s"], out.columns["stress_Pa"], grid).tolist()
 
 
 def main(argv=None) -> dict:
@@ -74,7 +72,7 @@ def main(argv=None) -> dict:
     post = rep["selection"]["steps"][rep["shipped_step"]]["posterior"]
     planted = {t["name"]: t["planted"][PARAM] for t in json.loads(TRUTH.read_text())["tests"]}
     o = exp["observations"]
-    grid = np.arange(o["t_start"], o["t_end"] + 0.5 * o["dt"], o["dt"])
+    grid = observation_grid(o["t_start"], o["t_end"], o["dt"])
     base = {p: float(post[p]["mean"]) for p in ("sigma_t", "E_t")}
     out = {"study": "added_parameter_real_runs", "what": __doc__.split("\n\n")[0].replace("\n", " "),
            "source": str(RUN.relative_to(ROOT)), "posterior_source": rep["selection"]["steps"][rep["shipped_step"]]["posterior_source"],
@@ -82,7 +80,7 @@ def main(argv=None) -> dict:
     with ProcessPoolExecutor(args.cores) as pool:
         for sheet in o["records"]:
             name = Path(sheet).stem
-            d = observed(ROOT / sheet, grid)
+            d = observed(ROOT / sheet, o)
             peak = grid <= grid[int(np.argmax(d))]
             tasks = [(sheet, {**base, PARAM: g}, s, float(exp["simulation"]["t_end"]), grid)
                      for g in GAPS_M for s in MESH_SEEDS[:args.meshes]]

@@ -71,7 +71,8 @@ from calibration.experiment import ExperimentSpec  # noqa: E402
 from enkf.emulator import CurveEmulator  # noqa: E402
 from enkf.scores import QUANTILES, prior_expected_wis, weighted_interval_score  # noqa: E402
 from enkf.variability import lag1_correlation  # noqa: E402
-from studies.pit_recalibration import GRID, LOW_SIGMA_T, cdf_at, cdfs_of, grid_weights, quantile_at  # noqa: E402
+from studies.pit_recalibration import (GRID, LOW_SIGMA_T, cdf_at, cdfs_of, grid_of, grid_weights,  # noqa: E402
+                                       quantile_at)
 from studies.sigma_t_bias import write  # noqa: E402
 from studies.tempering_forms import deviance, kept_posterior  # noqa: E402
 
@@ -85,13 +86,6 @@ KINK_SLOPE = 0.5
 MIN_ALIGNED = 3
 # the registered form's pseudo-runs' noise draws: a stream of this study's own
 PSEUDO_STREAM = 53
-
-
-def grid_of(lo, hi):
-    """``(edges, P)``: the grid's cell edges per parameter and its cell centres (GRID^2, 2)."""
-    edges = [np.linspace(lo[a], hi[a], GRID + 1) for a in (0, 1)]
-    mids = [0.5 * (e[1:] + e[:-1]) for e in edges]
-    return edges, np.column_stack([g.ravel() for g in np.meshgrid(*mids, indexing="ij")])
 
 
 def chi2_of(em, C, d):

@@ -60,9 +60,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from benchmarks.bench_coverage import _simulate, twin_task  # noqa: E402
+from benchmarks.scores import weighted_interval_score as record_wis  # noqa: E402
 from calibration.experiment import mesh_seed  # noqa: E402
 from enkf.scores import QUANTILES, prior_expected_wis, weighted_interval_score  # noqa: E402
 from enkf.variability import simulator_variability  # noqa: E402
+from studies.pit_recalibration import cdf_at, quantile_at  # noqa: E402
 from studies.sigma_t_bias import each_twin, twin_data, write  # noqa: E402
 
 CELLS = 12
@@ -96,9 +98,8 @@ def oracle_posterior(loglik: np.ndarray, centres: np.ndarray, lo: float, hi: flo
     w = np.exp(lp - lp.max())
     cdf = np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(x))])
     cdf /= cdf[-1]
-    q = {k: float(np.interp(level, cdf, x)) for k, level in QUANTILES.items()}
-    return {**q, "pit": float(np.interp(truth, x, cdf)),
-            "wis_over_width": float(weighted_interval_score(q, truth)) / (hi - lo)}
+    q = {k: quantile_at(cdf, x, level) for k, level in QUANTILES.items()}
+    return {**q, "pit": cdf_at(cdf, x, truth), "wis_over_width": float(weighted_interval_score(q, truth)) / (hi - lo)}
 
 
 def study_twin(exp, truth, seed, pool, meshes: int) -> dict:
@@ -126,8 +127,7 @@ def reported(records: Path | None, lo, hi) -> dict:
     if records is None:
         return {}
     twins = json.loads(records.read_text())["well_specified"]["twins"]
-    return {int(t["seed"]): {n: float(weighted_interval_score(t["emulator_mcmc"]["params"][n], t["truth"][n],
-                                                               t["emulator_mcmc"]["params"][n]["q50"])) / (hi[a] - lo[a])
+    return {int(t["seed"]): {n: record_wis(t["emulator_mcmc"]["params"][n], t["truth"][n]) / (hi[a] - lo[a])
                              for a, n in enumerate(NAMES)} for t in twins}
 
 

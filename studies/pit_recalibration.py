@@ -140,11 +140,16 @@ def recalibration(pits: np.ndarray) -> dict:
     return {"power": (0.0, 1.0), "location": (mu, 1.0), "location_scale": (mu, s)}
 
 
-def study_twin(keep: Path, kind: str, i: int, seed: int, truth: np.ndarray) -> dict:
-    whiten, d, lam, lo, hi, pseudo = kept_twin(keep, kind, i, seed)
+def grid_of(lo, hi):
+    """``(edges, P)``: the grid's cell edges per parameter and its cell centres (GRID^2, 2)."""
     edges = [np.linspace(lo[a], hi[a], GRID + 1) for a in (0, 1)]
     mids = [0.5 * (e[1:] + e[:-1]) for e in edges]
-    P = np.column_stack([g.ravel() for g in np.meshgrid(*mids, indexing="ij")])
+    return edges, np.column_stack([g.ravel() for g in np.meshgrid(*mids, indexing="ij")])
+
+
+def study_twin(keep: Path, kind: str, i: int, seed: int, truth: np.ndarray) -> dict:
+    whiten, d, lam, lo, hi, pseudo = kept_twin(keep, kind, i, seed)
+    edges, P = grid_of(lo, hi)
     W = whiten(P, d)
     cdfs = marginal_cdfs(np.einsum("ij,ij->i", W, W).reshape(GRID, GRID), lam)
     z_rng = np.random.default_rng([seed, i, PIT_STREAM])
