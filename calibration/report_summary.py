@@ -197,6 +197,29 @@ def _diagnosis(check: Mapping) -> list[str]:
     return out + _covariates(check.get("covariate_trends"))
 
 
+def _refit(refit) -> list[str]:
+    """The shipped model's parameters on real FDEM runs (diagnosis/refit.json, calibration.refit) beside the
+    selection's surrogate fit the walk tested."""
+    post = refit.get("posterior") if isinstance(refit, Mapping) else None
+    if not isinstance(post, Mapping) or not post:
+        return []
+    sel = refit.get("selection_posterior") if isinstance(refit.get("selection_posterior"), Mapping) else {}
+    rows = []
+    for p, q in post.items():
+        f, unit = _unit(str(p).split("@")[0])
+        s = sel.get(p) if isinstance(sel.get(p), Mapping) else {}
+        rows.append([escape(str(p)), f"{_num(s.get('mean'), f)} [{_num(s.get('q05'), f)}, {_num(s.get('q95'), f)}]",
+                     f"{_num(q.get('mean'), f)} [{_num(q.get('q05'), f)}, {_num(q.get('q95'), f)}]", escape(unit)])
+    conv = {True: "its last round's means lay within their runs",
+            False: "its last round's means still lay outside their runs: read them as a direction, not a value"}
+    return ['<p style="margin:0.4em 0 0 0">' + f"The shipped model ({escape(str(refit.get('model') or '?'))}) re-fitted "
+            f"on real FDEM runs around its fit ({escape(str(refit.get('runs', '?')))} runs on the calibration records, "
+            f"{escape(str(refit.get('rounds', '?')))} rounds; {conv.get(refit.get('converged'), '?')}; "
+            "diagnosis/refit.json). The selection's fit is on its surrogate, which blends the curves of runs far "
+            "apart; the held-out errors above are that fit's:</p>",
+            _table(["parameter", "selection's surrogate: mean [90 %]", "on real runs: mean [90 %]", "unit"], rows)]
+
+
 #: covariate column: (label in the table, display scale, format, the step a trend's slope is quoted per)
 COVARIATE_DISPLAY = {"strain_rate_per_s": ("strain rate [1/s]", 1.0, ".0f", (100.0, "100 1/s")),
                      "length_to_diameter": ("L/D", 1.0, ".2f", (0.1, "0.1 of L/D")),
@@ -237,15 +260,17 @@ def _covariates(cov) -> list[str]:
     return out
 
 
-def summary_html(name: str, summary: Mapping, check: Mapping | None = None) -> str:
-    """The summary of experiment ``name`` as an HTML fragment (ASCII, inline styles)."""
+def summary_html(name: str, summary: Mapping, check: Mapping | None = None, refit: Mapping | None = None) -> str:
+    """The summary of experiment ``name`` as an HTML fragment (ASCII, inline styles); ``refit``:
+    diagnosis/refit.json where the shipped model was re-fitted on real runs."""
     try:
         parts = ['<meta charset="utf-8">', '<div class="experiment-summary" style="font-family:sans-serif">']
         parts += _headline(name, summary) + _parameters(summary) + _misfit(summary) + _records(summary)
         if isinstance(check, Mapping):
-            parts += _diagnosis(check)
+            parts += _diagnosis(check) + _refit(refit)
         parts.append(f"<p style=\"margin:0.2em 0;font-size:0.85em\">From results/{escape(name)}/summary.json"
                      + (f" and results/{escape(name)}/diagnosis/check.json" if isinstance(check, Mapping) else "")
+                     + (f" and results/{escape(name)}/diagnosis/refit.json" if isinstance(refit, Mapping) else "")
                      + "; the plots are under the experiment's own category.</p>")
     except Exception as exc:  # noqa: BLE001 - a page of the report must never fail the run
         parts = ['<meta charset="utf-8">', f"<div><p>{escape(name)}: summary not readable "

@@ -160,6 +160,72 @@ rule diagnosis_check:
         "../scripts/diagnosis_check.py"
 
 
+# The shipped model's parameters re-fitted on real FDEM runs around its fit (calibration.refit;
+# diagnosis.refit_rounds): each round a checkpoint that fits the last round's runs and lists the next
+# round's, on the calibration records only; the walk and the held-out errors above are not changed.
+checkpoint diagnosis_refit_round:
+    input:
+        unpack(refit_round_inputs),
+    output:
+        state="results/{exp}/diagnosis/refit/round_{r}.json",
+    wildcard_constraints:
+        r="[0-9]+",
+    log:
+        "results/{exp}/logs/diagnosis_refit_round_{r}.log",
+    conda:
+        CONDA_ENV
+    params:
+        exp=lambda wc: EXPERIMENTS[wc.exp],
+    script:
+        "../scripts/diagnosis_refit_round.py"
+
+
+# One real FDEM run of a refit round: a record's anchor or one parameter moved, on the record's k-th check
+# mesh (the check's own realizations).
+rule diagnosis_refit_member:
+    input:
+        batch=lambda wc: batch_file("diagnosis_refit_member", wc),
+    output:
+        curve="results/{exp}/diagnosis/refit/iter_{it}/{row}/curve.csv",
+        run="results/{exp}/diagnosis/refit/iter_{it}/{row}/run.json",
+    wildcard_constraints:
+        it="[0-9]+",
+        row="[0-9]+",
+    params:
+        parameters=lambda wc: {"values": refit_row(wc)["simulator"]},
+        record_file=lambda wc: design_records(wc.exp)[refit_row(wc)["record"]],
+        mesh_seed=lambda wc: run_mesh_seed(
+            EXPERIMENTS[wc.exp],
+            "check",
+            0,
+            int(refit_row(wc)["replicate"]),
+            list(design_records(wc.exp)).index(refit_row(wc)["record"]),
+        ),
+        run=lambda wc: {
+            "refit_round": int(wc.it),
+            "refit_row": int(wc.row),
+            **{k: refit_row(wc)[k] for k in ("record", "replicate", "axis")},
+        },
+
+
+rule diagnosis_refit:
+    """refit.json: the shipped model's parameters on real runs, beside the selection's surrogate fit."""
+    input:
+        last=lambda wc: refit_last_round(wc.exp),
+    output:
+        refit=report(
+            "results/{exp}/diagnosis/refit.json",
+            category="{exp}",
+            subcategory="diagnosis",
+        ),
+    log:
+        "results/{exp}/logs/diagnosis_refit.log",
+    conda:
+        CONDA_ENV
+    script:
+        "../scripts/diagnosis_refit.py"
+
+
 rule loro:
     """Leave one record out over a series: the folds' held-out errors before and after, per fold and in
     total, and the figure."""

@@ -63,12 +63,17 @@ SIMULATION_STAGES = (
     "sensitivity_member",
     "diagnosis_member",
     "diagnosis_check_member",
+    "diagnosis_refit_member",
 )
 
 
 def stage_key(stage, wc):
     """The folder of one instance of a stage: the ensemble iteration, or `all`."""
-    return f"iter_{wc.it}" if stage in ("member", "replicate") else "all"
+    return (
+        f"iter_{wc.it}"
+        if stage in ("member", "replicate", "diagnosis_refit_member")
+        else "all"
+    )
 
 
 def stage_runs(exp, stage, key):
@@ -99,6 +104,9 @@ def stage_runs(exp, stage, key):
         return [{"point": p, "record": r} for p in ids for r in design_records(exp)]
     if stage == "diagnosis_check_member":
         return [{"row": str(i)} for i in range(len(check_rows_of(exp)))]
+    if stage == "diagnosis_refit_member":
+        it = key.removeprefix("iter_")
+        return [{"it": it, "row": str(i)} for i in range(len(refit_rows_of(exp, it)))]
     raise ValueError(f"not a simulation stage: {stage!r}")
 
 
@@ -162,6 +170,11 @@ def batch_inputs(wc):
         rows = check_rows_of(exp)
         names = {rows[int(r["row"])]["record"] for r in runs}
         files = {"rows": f"results/{exp}/diagnosis/check_runs.json"}
+    elif wc.stage == "diagnosis_refit_member":
+        it = wc.key.removeprefix("iter_")
+        rows = refit_rows_of(exp, it)
+        names = {rows[int(r["row"])]["record"] for r in runs}
+        files = {"rows": refit_round_file(exp, it)}
     else:
         names = {r["record"] for r in runs}
         pattern = STAGE_PARAMETERS.get(wc.stage)
@@ -314,6 +327,8 @@ def report_summary_inputs(wc):
         wc.exp
     ):  # the diagnosis's FDEM check: errors before and after, held-out records too
         files["check"] = f"results/{wc.exp}/diagnosis/check.json"
+    if refit_on(wc.exp):  # the shipped model's parameters on real runs
+        files["refit"] = f"results/{wc.exp}/diagnosis/refit.json"
     return files
 
 
@@ -391,6 +406,61 @@ def diagnosis_check_inputs(wc):
 
 
 # rules/sensitivity.smk
+def refit_on(exp):
+    """Whether the experiment re-fits its shipped model on real runs (diagnosis.refit_rounds > 0); never
+    a leave-one-record-out fold (its table reports the walk and the held-out errors only)."""
+    d = diagnosis_cfg(exp)
+    return bool(d) and int(d["refit_rounds"]) > 0 and "loro_of" not in EXPERIMENTS[exp]
+
+
+def refitted_experiments():
+    return [e for e in diagnosed_experiments() if refit_on(e)]
+
+
+def refit_round_file(exp, r):
+    return f"results/{exp}/diagnosis/refit/round_{r}.json"
+
+
+def refit_rows_of(exp, r):
+    """The runs of refit round `r` (its checkpoint's file)."""
+    return read_json(checkpoints.diagnosis_refit_round.get(exp=exp, r=r).output.state)[
+        "rows"
+    ]
+
+
+def refit_row(wc):
+    return refit_rows_of(wc.exp, wc.it)[int(wc.row)]
+
+
+def refit_round_inputs(wc):
+    """Round r reads the walk's choice (round 0) or every earlier round's file and runs."""
+    r = int(wc.r)
+    files = {
+        "selection": f"results/{wc.exp}/diagnosis/selection.pkl",
+        "report": f"results/{wc.exp}/diagnosis/report.json",
+        "obs": f"results/{wc.exp}/observations/obs.csv",
+        "obs_meta": f"results/{wc.exp}/observations/obs.json",
+    }
+    if r > 0:
+        files["rounds"] = [refit_round_file(wc.exp, k) for k in range(r)]
+        files["runs"] = [
+            b
+            for k in range(r)
+            for b in stage_batch_files(wc.exp, "diagnosis_refit_member", f"iter_{k}")
+        ]
+    return files
+
+
+def refit_last_round(exp):
+    """Walk the refit's checkpoints until a round says it is done; that round's file."""
+    r = 0
+    while read_json(
+        checkpoints.diagnosis_refit_round.get(exp=exp, r=r).output.state
+    )["phase"] != "done":
+        r += 1
+    return refit_round_file(exp, r)
+
+
 def sensitivity_spec(exp):
     if EXPERIMENTS[exp].get("sensitivity") is None:
         raise _SensitivityWorkflowError(

@@ -8,4 +8,5 @@ from calibration.workflow_io import atomic_write_text, read_json
 
 inp = snakemake.input
 check = read_json(inp.check) if "check" in inp.keys() else None
-atomic_write_text(snakemake.output.html, summary_html(snakemake.wildcards.exp, read_json(inp.summary), check))
+refit = read_json(inp.refit) if "refit" in inp.keys() else None
+atomic_write_text(snakemake.output.html, summary_html(snakemake.wildcards.exp, read_json(inp.summary), check, refit))

@@ -1,0 +1,207 @@
+"""The shipped model's parameters re-fitted on real FDEM runs around its fit, after the confirmation walk
+(docs/closing-the-loop.md, "The confirmed model's parameters on real runs").
+
+Why: the selection fits every model on its anchored surrogate (:class:`enkf.emulator.AnchoredEmulator`),
+whose axes run from the base posterior's mean with every effect at its null to a quarter, a half and three
+quarters of each effect's range. Between two runs of an axis it blends their curves, and a blend of two
+onsets is not the onset between them: on the default run's planted series the fitted face gap of one
+record came out 44 um [37, 58] for a planted 80 um, where real runs fit best at 80 um
+(studies/added_parameter_real_runs.py). The walk tests the model, not these values.
+
+The refit, on the calibration records only (the held-out records are neither read nor run here):
+
+1. ``locate`` rounds: per calibration record, a one-at-a-time design anchored at the current fit's mean
+   (the record's own copies of per-record parameters), each simulator parameter of the model moved by
+   -+ twice its posterior sd (at least :data:`MIN_STEP` of its design box), on the record's first check
+   mesh; one anchored surrogate per record from those runs, exact at the anchor; the model re-fitted on
+   them by the protocol's ES-MDA, its error the instrument noise, the calibration's mesh scatter and the
+   surrogate's own leave-one-out error. Repeated from the new fit until every mean lies within its runs'
+   span, or ``rounds`` times.
+2. one ``spread`` round: the last design run again on the record's other check meshes, the model fitted
+   on each mesh's surrogates, the fits pooled: one mesh's fit cannot see how far another mesh moves it
+   (on the planted series two meshes put one record's gap at 78 and 76 um, each with a 90 % interval
+   under 6 um wide).
+
+Measurement effects need no runs: they act on the surrogate's curve (:class:`calibration.diagnose.EmulatedSHPB`).
+The state between rounds is a JSON dict (:func:`first_round`, :func:`next_round`), one file per round
+(``diagnosis/refit/round_<r>.json``); ``curves`` are the rows' FDEM runs, DataFrames or None (failed).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+
+import numpy as np
+
+from enkf.diagnosis.crossval import Fit, calibrate
+from enkf.diagnostics import posterior_dict
+from shpb import effects as fx
+
+from .diagnose import EmulatedSHPB, anchored_emulators, record_params
+from .protocol import protocol_model, record_errors
+
+__all__ = ["MIN_STEP", "first_round", "next_round", "refit_design", "refit_summary", "spans"]
+
+#: The smallest move of a parameter in a refit design, as a share of its design box: an ES-MDA fit's sd
+#: can be far below what the runs resolve (a few um of gap), and a step below the mesh's own scatter
+#: measures the mesh, not the parameter.
+MIN_STEP = 0.02
+#: How far each parameter is moved, in the current fit's posterior sd.
+STEP_SD = 2.0
+
+
+def refit_design(fit: Fit, records: Sequence[str], inputs: Sequence[str], lower, upper, *, replicate: int = 0,
+                 min_step: float = MIN_STEP) -> list[dict]:
+    """The rows of one refit design: per record, the anchor (``axis`` None) and each simulator parameter
+    of the model at anchor -+ its step, inside the box (``lower``, ``upper`` over ``inputs``). A row:
+    ``record``, ``replicate`` (the record's check mesh), ``axis`` (the input moved), ``simulator`` (the
+    run's parameters: the base ones and the model's physical ones, the record's own copies)."""
+    mean = fit.mean()
+    lower, upper = np.asarray(lower, float), np.asarray(upper, float)
+    rows = []
+    for rec in records:
+        point = record_params(mean, rec)
+        own = {fx.split_record(n)[0]: n for n in fit.names if fx.split_record(n)[1] in (None, rec)}
+        moved = [p for p in inputs if p in own]
+        anchor = {p: float(point[p]) for p in moved}
+        rows.append({"record": rec, "replicate": int(replicate), "axis": None, "simulator": dict(anchor)})
+        for p in moved:
+            j = list(inputs).index(p)
+            step = max(STEP_SD * float(np.std(fit.column(own[p]), ddof=1)), min_step * (upper[j] - lower[j]))
+            for v in (max(anchor[p] - step, lower[j]), min(anchor[p] + step, upper[j])):
+                if v != anchor[p]:
+                    rows.append({"record": rec, "replicate": int(replicate), "axis": p,
+                                 "simulator": {**anchor, p: float(v)}})
+    return rows
+
+
+def spans(rows: Sequence[Mapping], names: Sequence[str]) -> dict[str, tuple[float, float]]:
+    """Per fitted name the range its design's runs cover: a per-record copy its record's runs, a shared
+    parameter every record's."""
+    out: dict[str, list[float]] = {}
+    for row in rows:
+        for p, v in row["simulator"].items():
+            own = fx.record_param(p, row["record"])
+            name = own if own in names else p
+            if name in names:
+                out.setdefault(name, []).append(float(v))
+    return {n: (min(v), max(v)) for n, v in out.items()}
+
+
+def _surrogate(rows: Sequence[Mapping], curves: Sequence, model: EmulatedSHPB, records: Sequence[str]) -> EmulatedSHPB:
+    """One anchored surrogate per record from its rows' runs (one mesh), over the selection model's inputs
+    and box; parameters the rows do not move stay at their null."""
+    inputs = list(model.input_names)
+    emu0 = next(iter(model.emulators.values()))
+    nulls = {p: fx.null_values([p])[p] for p in inputs if "." in p}
+    emulators = {}
+    for rec in records:
+        mine = [(row, c) for row, c in zip(rows, curves) if row["record"] == rec]
+        anchor = mine[0][0]["simulator"]
+        X = np.array([[row["simulator"].get(p, anchor.get(p, nulls.get(p))) for p in inputs] for row, _ in mine],
+                     dtype=float)
+        axis = np.array([-1 if row["axis"] is None else inputs.index(row["axis"]) for row, _ in mine], dtype=int)
+        emu, _ = anchored_emulators(X, axis, {rec: [c for _, c in mine]}, model.model_times, emu0.lower, emu0.upper,
+                                    inputs, label="the refit on real runs")
+        emulators.update(emu)
+    return EmulatedSHPB(emulators, inputs, model.model_times, {r: model.obs_times[r] for r in records})
+
+
+def _fit(rows, curves, model: EmulatedSHPB, names, records, obs, noise, simulator, settings: Mapping, seed: int) -> Fit:
+    """The model re-fitted on one mesh's runs (the protocol's ES-MDA and error terms; the mesh scatter
+    common to every prediction of a record, all its runs being on one mesh)."""
+    sur = _surrogate(rows, curves, model, records)
+    errors = record_errors(sur, {r: noise[r] for r in records},
+                           simulator={r: simulator[r] for r in records if r in simulator}, simulator_correlation=1.0)
+    fit = calibrate(protocol_model(sur), list(names), list(records), {r: obs[r] for r in records}, errors, seed=seed,
+                    n_members=int(settings["n_members"]), esmda_steps=int(settings["esmda_steps"]))
+    fit.info["source"] = "real FDEM runs"
+    return fit
+
+
+def _fit_entry(fit: Fit) -> dict:
+    return {"draws": fit.params.tolist(), "source": fit.source}
+
+
+def _posterior(fit: Fit) -> dict:
+    return {n: {k: float(v[k]) for k in ("mean", "q05", "q95")} for n, v in fit.posterior().items()}
+
+
+def first_round(selection, shipped: int, model: EmulatedSHPB) -> dict:
+    """Round 0: the design around the shipped step's fit on the selection's surrogate (``phase``
+    ``locate``), or nothing to refit (``done``) when the base model is kept (its posterior is the
+    workflow's, fitted on real runs)."""
+    step = selection.step(int(shipped))
+    state = {"round": 0, "step": int(shipped), "model": step.spec.label(), "names": list(step.final.names),
+             "records": list(selection.calib_records), "history": [], "converged": None}
+    if int(shipped) == 0:
+        return {**state, "phase": "done", "rows": [], "fit": None,
+                "why": "base model kept: its posterior is the workflow's, on real runs"}
+    emu0 = next(iter(model.emulators.values()))
+    rows = refit_design(step.final, state["records"], model.input_names, emu0.lower, emu0.upper)
+    return {**state, "phase": "locate", "rows": rows, "fit": _fit_entry(step.final), "design_round": 0,
+            "selection_posterior": _posterior(step.final), "why": "locate: the design around the selection's fit"}
+
+
+def next_round(prev: Mapping, curves_of: Callable[[int], Sequence], model: EmulatedSHPB, obs: Mapping,
+               noise: Mapping, simulator: Mapping, settings: Mapping, *, rounds: int, replicates: int) -> dict:
+    """The round after ``prev``: fit its runs (``curves_of(r)``: round r's curves in its rows' order), then
+    the next design, the spread round or the end (module docstring). ``rounds``: the most ``locate``
+    rounds; ``replicates``: the check's meshes per record."""
+    if prev["phase"] == "done":
+        raise ValueError("the refit is done: there is no next round")
+    r = int(prev["round"]) + 1
+    names, records = list(prev["names"]), list(prev["records"])
+    seed = int(settings["seed"]) + 7919 * r
+    state = {k: prev[k] for k in ("step", "model", "names", "records", "selection_posterior")}
+    state.update({"round": r, "history": list(prev["history"])})
+    if prev["phase"] == "locate":
+        rows = prev["rows"]
+        fit = _fit(rows, curves_of(r - 1), model, names, records, obs, noise, simulator, settings, seed)
+        post = _posterior(fit)
+        cover = spans(rows, names)
+        inside = {n: bool(cover[n][0] <= post[n]["mean"] <= cover[n][1]) for n in cover}
+        state["history"].append({"round": r - 1, "phase": "locate", "runs": len(rows), "posterior": post,
+                                 "mean_inside_runs": inside})
+        if all(inside.values()) or r >= int(rounds):
+            state["converged"] = bool(all(inside.values()))
+            if int(replicates) > 1:
+                spread = [{**row, "replicate": k} for k in range(1, int(replicates)) for row in rows]
+                return {**state, "phase": "spread", "rows": spread, "fit": _fit_entry(fit), "design_round": r - 1,
+                        "design_rows": rows,
+                        "why": f"spread: the design of round {r - 1} on the other {int(replicates) - 1} check meshes"}
+            return {**state, "phase": "done", "rows": [], "fit": _fit_entry(fit), "why": "one check mesh: no spread"}
+        emu0 = next(iter(model.emulators.values()))
+        return {**state, "phase": "locate", "converged": None, "fit": _fit_entry(fit), "design_round": r,
+                "rows": refit_design(fit, records, model.input_names, emu0.lower, emu0.upper),
+                "why": f"locate: a mean outside its runs after round {r - 1}"}
+    # spread: one fit per mesh, pooled; mesh 0's runs are the design round's
+    fits = [_fit(prev["design_rows"], curves_of(int(prev["design_round"])), model, names, records, obs, noise, simulator, settings, seed)]
+    for k in range(1, int(replicates)):
+        sel = [i for i, row in enumerate(prev["rows"]) if row["replicate"] == k]
+        cur = curves_of(r - 1)
+        fits.append(_fit([prev["rows"][i] for i in sel], [cur[i] for i in sel], model, names, records, obs, noise,
+                         simulator, settings, seed + k))
+    pooled = Fit(names, tuple(records), np.vstack([f.params for f in fits]), fits[0].lower, fits[0].upper,
+                 {"source": "real FDEM runs"})
+    state["history"].append({"round": r - 1, "phase": "spread", "runs": len(prev["rows"]),
+                             "posterior_per_mesh": [_posterior(f) for f in fits]})
+    return {**state, "phase": "done", "rows": [], "fit": _fit_entry(pooled), "converged": prev["converged"],
+            "why": f"done: the fits on {len(fits)} check meshes pooled"}
+
+
+def refit_summary(state: Mapping) -> dict:
+    """refit.json from the last round's state: the pooled posterior (mean, q05, q95 per name) beside the
+    selection's, where it comes from, the rounds and whether the last locate round's means lay within
+    their runs."""
+    out = {k: state.get(k) for k in ("step", "model", "names", "records", "converged", "why", "history",
+                                     "selection_posterior")}
+    out["rounds"] = int(state["round"])
+    out["runs"] = int(sum(h.get("runs", 0) for h in state.get("history") or []))
+    if state.get("fit") is None:
+        out["posterior"] = None
+        return out
+    out["posterior"] = posterior_dict(np.asarray(state["fit"]["draws"], float), list(state["names"]))
+    out["source"] = ("real FDEM runs: ES-MDA on anchored surrogates re-centred on the fit, one per calibration "
+                     "record and check mesh, the meshes' fits pooled")
+    return out

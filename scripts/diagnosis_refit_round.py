@@ -1,0 +1,33 @@
+"""diagnosis/refit/round_<r>.json: round r of the shipped model's refit on real runs (calibration.refit):
+round 0 the design around the selection's fit, each later round the fit of the runs before it and the
+next design, the spread over the check's meshes, or the end."""
+from calibration.job_log import log_to
+
+log_to(snakemake.log[0])  # the job's output goes to its log (rules/*.smk)
+
+import pickle
+from pathlib import Path
+
+from calibration.model_error import check_replicate_count
+from calibration.observations import read_curve, read_observations
+from calibration.refit import first_round, next_round
+from calibration.workflow_io import atomic_write_json, read_json
+
+inp, e = snakemake.input, snakemake.params.exp
+saved = pickle.loads(Path(inp.selection).read_bytes())
+selection, model = saved["selection"], saved["model"]
+if int(snakemake.wildcards.r) == 0:
+    state = first_round(selection, int(read_json(inp.report)["shipped_step"]), model)
+else:
+    rounds = [read_json(p) for p in inp.rounds]
+    folder = Path(inp.rounds[0]).parent
+    obs = read_observations(inp.obs, inp.obs_meta)
+
+    def curves_of(k):
+        # round k's runs (rule diagnosis_refit_member), in its rows' order
+        return [read_curve(folder / f"iter_{k}" / str(i) / "curve.csv") for i in range(len(rounds[k]["rows"]))]
+
+    state = next_round(rounds[-1], curves_of, model, {r: obs.values[obs.record_slice(r)] for r in obs.records},
+                       saved["noise"], saved["simulator"], selection.settings,
+                       rounds=int(e["diagnosis"]["refit_rounds"]), replicates=check_replicate_count(e))
+atomic_write_json(snakemake.output.state, state)

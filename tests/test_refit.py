@@ -1,0 +1,121 @@
+"""The confirmed model re-fitted on real runs (calibration.refit): on the analytic stand-in of
+tests/_protocol_standin.py, where the anchored surrogate's chords between runs at 0, 100 and 200 um blend
+two onsets and put the fitted face gaps 10-16 um short of the planted ones, the refit's rounds of runs
+around the fit move them onto the planted gaps; the design, the spans and the pooling of meshes against
+exact values."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from _protocol_standin import BASE, OBS_T, StandIn, noise_model
+from calibration.refit import MIN_STEP, STEP_SD, first_round, next_round, refit_design, refit_summary, spans
+from enkf.diagnosis.crossval import Fit
+from test_anchored_selection import ANCHOR, GAP_K, GAPS, _anchored_standin, _select, _with_own_error
+
+SETTINGS = {"seed": 3, "n_members": 60, "esmda_steps": 4}
+#: each "mesh" k of the stand-in starts its record's load this much late: a realization's own departure
+MESH_SHIFT_S = {0: 0.0, 1: 0.3e-6, 2: -0.3e-6}
+
+
+def _selection():
+    model = _anchored_standin(ANCHOR)
+    sel = _select(model, 3, errors=_with_own_error(model))
+    assert sel.rounds[0]["chosen"] == "face_gap"
+    return sel, model.emulated
+
+
+def _runs(rows):
+    """The stand-in as the simulator: each row's parameters, its mesh as a small onset shift."""
+    out = []
+    for row in rows:
+        names = list(row["simulator"]) + ["trigger_shift.dt_s"]
+        x = list(row["simulator"].values()) + [MESH_SHIFT_S[row["replicate"]]]
+        y = StandIn(GAP_K).forward(names, [row["record"]])(np.array([x]))[0]
+        out.append(pd.DataFrame({"time_s": OBS_T, "stress_Pa": y}))
+    return out
+
+
+def _walk(sel, model, obs, replicates, rounds=3):
+    state, curves = first_round(sel, 1, model), {}
+    while state["phase"] != "done":
+        curves[state["round"]] = _runs(state["rows"])
+        state = next_round(state, curves.__getitem__, model, obs, {r: noise_model() for r in GAP_K}, {}, SETTINGS,
+                           rounds=rounds, replicates=replicates)
+    return state
+
+
+def _obs():
+    from _protocol_standin import TRUTH, observe
+    return observe(StandIn(GAP_K), {r: {**TRUTH, "gap": GAPS[r]} for r in GAP_K}, seed=3)
+
+
+def test_the_refit_moves_the_blended_gaps_onto_the_planted_ones():
+    """Seed 3 with the anchored model's own error: the selection's gaps 0.5-5.9 um off the planted ones
+    (49.5, 144.9, 88.5, 114.1 um for 50, 150, 90, 120); one locate round of 7 runs per record puts them
+    at 48.3, 147.7, 89.8, 120.1 um, its means inside its runs (converged), 3 of 4 planted inside the 90 %
+    intervals (B's 145.5-149.8 um misses 150: ES-MDA's 60 members on the noise, 0.3 MPa)."""
+    sel, model = _selection()
+    shipped = sel.steps[1].final.posterior()
+    before = [abs(shipped[f"face_gap.gap_m@{r}"]["mean"] - GAPS[r]) for r in GAP_K]
+    assert max(before) > 5e-6
+    state = _walk(sel, model, _obs(), replicates=1)
+    out = refit_summary(state)
+    assert out["converged"] and [h["phase"] for h in out["history"]] == ["locate"] and out["runs"] == 4 * 7
+    post = [out["posterior"][f"face_gap.gap_m@{r}"] for r in GAP_K]
+    after = [abs(p["mean"] - GAPS[r]) for p, r in zip(post, GAP_K)]
+    assert max(after) < 3e-6 and max(after) < 0.5 * max(before), (before, after)
+    assert sum(p["q05"] <= GAPS[r] <= p["q95"] for p, r in zip(post, GAP_K)) >= 3
+    assert out["selection_posterior"] == {n: {k: v[k] for k in ("mean", "q05", "q95")} for n, v in shipped.items()}
+
+
+def test_the_spread_round_pools_one_fit_per_mesh():
+    sel, model = _selection()
+    state = _walk(sel, model, _obs(), replicates=3)
+    spread = state["history"][-1]
+    assert [h["phase"] for h in state["history"]] == ["locate", "spread"] and len(spread["posterior_per_mesh"]) == 3
+    means = [p["face_gap.gap_m@A"]["mean"] for p in spread["posterior_per_mesh"]]
+    # a mesh that starts the load 0.3 us later reads as a gap 3 um smaller (the face closes at 10 m/s)
+    assert means[1] - means[0] == pytest.approx(-3e-6, abs=0.5e-6)
+    assert means[2] - means[0] == pytest.approx(3e-6, abs=0.5e-6)
+    members = SETTINGS["n_members"]
+    assert np.asarray(state["fit"]["draws"]).shape == (3 * members, len(state["names"]))
+    pooled = refit_summary(state)["posterior"]["face_gap.gap_m@A"]
+    assert pooled["mean"] == pytest.approx(np.mean(means), abs=1e-9)
+    assert pooled["q05"] < min(means) < max(means) < pooled["q95"]
+    # the other two meshes repeat the locate round's 7 runs per record
+    assert refit_summary(state)["runs"] == 4 * 7 * 3
+
+
+def test_the_design_moves_each_fitted_simulator_parameter_by_two_sd_or_the_least_step():
+    names = ["sigma_p", "tau_d", "face_gap.gap_m@A", "face_gap.gap_m@B", "gauge_gain.g@A", "gauge_gain.g@B"]
+    rng = np.random.default_rng(0)
+    sd = np.array([1e6, 0.4e-6, 5e-6, 1e-7, 0.01, 0.01])
+    P = np.array([40e6, 45e-6, 100e-6, 150e-6, 1.0, 1.0]) + rng.standard_normal((200, 6)) * sd
+    fit = Fit(names, ("A", "B"), P, np.zeros(6), np.ones(6))
+    inputs = BASE + ["face_gap.gap_m", "rate_strength.k"]
+    lower, upper = np.array([20e6, 10e-6, 0.0, 0.0]), np.array([60e6, 100e-6, 4e-4, 1.0])
+    rows = refit_design(fit, ["A", "B"], inputs, lower, upper)
+    # per record: the anchor and two runs per simulator parameter (the gauge gain acts on the curve)
+    assert [row["axis"] for row in rows[:7]] == [None, "sigma_p", "sigma_p", "tau_d", "tau_d", "face_gap.gap_m",
+                                                 "face_gap.gap_m"]
+    assert len(rows) == 14 and {row["record"] for row in rows[7:]} == {"B"}
+    a = rows[0]["simulator"]
+    step_s = STEP_SD * np.std(P[:, 0], ddof=1)
+    assert rows[1]["simulator"]["sigma_p"] == pytest.approx(a["sigma_p"] - step_s)
+    # twice tau_d's sd (0.8 us) is below the least step: 2 % of its 90 us box
+    assert rows[4]["simulator"]["tau_d"] - a["tau_d"] == pytest.approx(MIN_STEP * 90e-6)
+    assert rows[7]["simulator"]["face_gap.gap_m"] == pytest.approx(P[:, 3].mean())
+    assert rows[12]["simulator"]["face_gap.gap_m"] == pytest.approx(P[:, 3].mean() - MIN_STEP * 4e-4)
+    cover = spans(rows, names)
+    assert cover["face_gap.gap_m@A"] == pytest.approx((P[:, 2].mean() - STEP_SD * np.std(P[:, 2], ddof=1),
+                                                      P[:, 2].mean() + STEP_SD * np.std(P[:, 2], ddof=1)))
+    assert "gauge_gain.g@A" not in cover and cover["sigma_p"][0] < a["sigma_p"] < cover["sigma_p"][1]
+
+
+def test_nothing_is_refitted_when_the_base_model_is_kept():
+    sel, model = _selection()
+    state = first_round(sel, 0, model)
+    assert state["phase"] == "done" and state["rows"] == [] and refit_summary(state)["posterior"] is None
+    with pytest.raises(ValueError, match="done"):
+        next_round(state, lambda r: [], model, {}, {}, {}, SETTINGS, rounds=3, replicates=3)
