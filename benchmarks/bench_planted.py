@@ -83,13 +83,16 @@ def _shipped_posterior(report: dict) -> dict:
     return {}
 
 
-def parameter_coverage(report: dict, truth: dict) -> dict:
-    """Whether each planted parameter lies inside the shipped model's reported 90 % interval.
+def parameter_coverage(report: dict, truth: dict, refit: dict | None = None) -> dict:
+    """Whether each planted parameter lies inside the shipped model's reported 90 % interval: its refit on
+    real runs (diagnosis/refit.json, ``refit``) where the run made one, else the selection's fit in the
+    report.
 
     A shared parameter is read once; a per-record one (``<param>@<record>`` in the report) per calibration
     record, against that record's planted value (truth.json ``tests[].planted``). A parameter the shipped
-    model does not carry is not covered. Returns ``{"checks": [...], "covered": share or None}``."""
-    post = _shipped_posterior(report)
+    model does not carry is not covered. Returns ``{"checks": [...], "covered": share or None, "source"}``."""
+    refitted = (refit or {}).get("posterior")
+    post = refitted or _shipped_posterior(report)
     planted = {t["name"]: t.get("planted") or {} for t in truth.get("tests", [])}
     checks = []
     for param, value in (truth.get("plant") or {}).items():
@@ -107,7 +110,7 @@ def parameter_coverage(report: dict, truth: dict) -> dict:
             checks.append({"param": param, "truth": value, "q05": None, "q95": None, "inside": False,
                            "why": "the shipped model does not carry it"})
     share = sum(c["inside"] for c in checks) / len(checks) if checks else None
-    return {"checks": checks, "covered": share}
+    return {"checks": checks, "covered": share, "source": "refit on real runs" if refitted else "selection's fit"}
 
 
 def named_group(report: dict) -> list[str]:
@@ -343,7 +346,8 @@ def run_series(plan: dict, case: dict, seed: int, work: Path, preset: str, recor
         row["group"] = named_group(report)
         row["correct"] = is_correct(case, row["named"], report)
         row["proposals"] = proposals(report, case)
-        row["coverage"] = parameter_coverage(report, truth)
+        refit = json.loads((diag / "refit.json").read_text()) if (diag / "refit.json").exists() else None
+        row["coverage"] = parameter_coverage(report, truth, refit)
         row["why"] = report.get("why", "")
         row["heldout"] = heldout_summary(check)
     except (subprocess.CalledProcessError, OSError, KeyError, ValueError, SystemExit) as exc:

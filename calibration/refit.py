@@ -15,7 +15,8 @@ The refit, on the calibration records only (the held-out records are neither rea
    -+ twice its posterior sd (at least :data:`MIN_STEP` of its design box), on the record's first check
    mesh; one anchored surrogate per record from those runs, exact at the anchor; the model re-fitted on
    them by the protocol's ES-MDA, its error the instrument noise, the calibration's mesh scatter and the
-   surrogate's own leave-one-out error. Repeated from the new fit until every mean lies within its runs'
+   surrogate's own leave-one-out error, scaled up by the fit's chi-square per degree of freedom where
+   the fit misses the records by more than those terms allow (:func:`misfit_scale`). Repeated from the new fit until every mean lies within its runs'
    span, or ``rounds`` times.
 2. one ``spread`` round: the last design run again on the record's other check meshes, the model fitted
    on each mesh's surrogates, the fits pooled: one mesh's fit cannot see how far another mesh moves it
@@ -33,6 +34,8 @@ from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
+from enkf.covariance import DenseError
+from enkf.diagnosis import RecordErrors
 from enkf.diagnosis.crossval import Fit, calibrate
 from enkf.diagnostics import posterior_dict
 from shpb import effects as fx
@@ -40,7 +43,7 @@ from shpb import effects as fx
 from .diagnose import EmulatedSHPB, anchored_emulators, record_params
 from .protocol import protocol_model, record_errors
 
-__all__ = ["MIN_STEP", "first_round", "next_round", "refit_design", "refit_summary", "spans"]
+__all__ = ["MIN_STEP", "first_round", "misfit_scale", "next_round", "refit_design", "refit_summary", "spans"]
 
 #: The smallest move of a parameter in a refit design, as a share of its design box: an ES-MDA fit's sd
 #: can be far below what the runs resolve (a few um of gap), and a step below the mesh's own scatter
@@ -109,14 +112,42 @@ def _surrogate(rows: Sequence[Mapping], curves: Sequence, model: EmulatedSHPB, r
 
 def _fit(rows, curves, model: EmulatedSHPB, names, records, obs, noise, simulator, settings: Mapping, seed: int) -> Fit:
     """The model re-fitted on one mesh's runs (the protocol's ES-MDA and error terms; the mesh scatter
-    common to every prediction of a record, all its runs being on one mesh)."""
-    sur = _surrogate(rows, curves, model, records)
-    errors = record_errors(sur, {r: noise[r] for r in records},
+    common to every prediction of a record, all its runs being on one mesh), then again with those terms
+    scaled by the fit's chi-square per degree of freedom where it exceeds 1 (:func:`misfit_scale`)."""
+    sur = protocol_model(_surrogate(rows, curves, model, records))
+    errors = record_errors(sur.emulated, {r: noise[r] for r in records},
                            simulator={r: simulator[r] for r in records if r in simulator}, simulator_correlation=1.0)
-    fit = calibrate(protocol_model(sur), list(names), list(records), {r: obs[r] for r in records}, errors, seed=seed,
-                    n_members=int(settings["n_members"]), esmda_steps=int(settings["esmda_steps"]))
-    fit.info["source"] = "real FDEM runs"
+    y = {r: obs[r] for r in records}
+    kw = {"seed": seed, "n_members": int(settings["n_members"]), "esmda_steps": int(settings["esmda_steps"])}
+    fit = calibrate(sur, list(names), list(records), y, errors, **kw)
+    scale = misfit_scale(sur, fit, y, errors)
+    if scale > 1.0:
+        fit = calibrate(sur, list(names), list(records), y, _scaled(errors, scale), **kw)
+    fit.info.update({"source": "real FDEM runs", "misfit_scale": scale})
     return fit
+
+
+def misfit_scale(model, fit: Fit, obs: Mapping[str, np.ndarray], errors: RecordErrors) -> float:
+    """The calibration records' chi-square per degree of freedom at the fit's mean, under the error terms
+    it was fitted with, at least 1. Why: those terms (noise, the mesh scatter at the calibration's mesh,
+    the surrogate's own error) leave out what the model still lacks, e.g. the records' finer mesh, and a
+    fit that misses the records by more than they allow is surer than its misfit warrants; scaling the
+    covariance by this factor (Birge's ratio, the unknown-variance scale of weighted least squares) widens
+    the posterior by its square root. Never below 1: a fit inside its errors is left as it is."""
+    records, names = list(fit.records), list(fit.names)
+    y = np.concatenate([np.asarray(obs[r], float) for r in records])
+    mean = fit.params.mean(axis=0)
+    r = y - model.forward(names, records)(mean[None, :])[0]
+    chi2 = float(errors.calibration_error(records, names).chi2(r[:, None])[0])
+    return max(1.0, chi2 / max(1, y.size - len(names)))
+
+
+def _scaled(errors: RecordErrors, factor: float) -> RecordErrors:
+    """Every term of ``errors`` times ``factor`` (their correlations unchanged)."""
+    def times(terms):
+        return {r: DenseError(factor * e.dense(), _symmetric=True) for r, e in terms.items()}
+    return RecordErrors(times(errors.noise), times(errors.model), times(errors.simulator), errors.model_correlation,
+                        errors.simulator_correlation)
 
 
 def _fit_entry(fit: Fit) -> dict:
@@ -162,7 +193,7 @@ def next_round(prev: Mapping, curves_of: Callable[[int], Sequence], model: Emula
         cover = spans(rows, names)
         inside = {n: bool(cover[n][0] <= post[n]["mean"] <= cover[n][1]) for n in cover}
         state["history"].append({"round": r - 1, "phase": "locate", "runs": len(rows), "posterior": post,
-                                 "mean_inside_runs": inside})
+                                 "mean_inside_runs": inside, "misfit_scale": fit.info["misfit_scale"]})
         if all(inside.values()) or r >= int(rounds):
             state["converged"] = bool(all(inside.values()))
             if int(replicates) > 1:
@@ -185,7 +216,8 @@ def next_round(prev: Mapping, curves_of: Callable[[int], Sequence], model: Emula
     pooled = Fit(names, tuple(records), np.vstack([f.params for f in fits]), fits[0].lower, fits[0].upper,
                  {"source": "real FDEM runs"})
     state["history"].append({"round": r - 1, "phase": "spread", "runs": len(prev["rows"]),
-                             "posterior_per_mesh": [_posterior(f) for f in fits]})
+                             "posterior_per_mesh": [_posterior(f) for f in fits],
+                             "misfit_scale_per_mesh": [f.info["misfit_scale"] for f in fits]})
     return {**state, "phase": "done", "rows": [], "fit": _fit_entry(pooled), "converged": prev["converged"],
             "why": f"done: the fits on {len(fits)} check meshes pooled"}
 

@@ -70,6 +70,11 @@ def test_named_and_coverage_of_hand_made_reports():
     rep = _report("confirmed", ["face_gap"], {"face_gap.gap_m@A": _q(0.7e-4, 0.9e-4),
                                               "face_gap.gap_m@B": _q(0.9e-4, 1.1e-4)})
     assert parameter_coverage(rep, gap)["covered"] == 0.5
+    # a refit on real runs (diagnosis/refit.json) is read instead of the selection's fit where there is one
+    refit = {"posterior": {"face_gap.gap_m@A": _q(0.75e-4, 0.85e-4), "face_gap.gap_m@B": _q(1.25e-4, 1.35e-4)}}
+    cov = parameter_coverage(rep, gap, refit)
+    assert cov["covered"] == 1.0 and cov["source"] == "refit on real runs"
+    assert parameter_coverage(rep, gap, {"posterior": None})["source"] == "selection's fit"
     # an effect confirmed as a round's alternative (its choice refuted) is read from the alternatives
     damping = {"plant": {"damping.beta": 0.1}, "tests": []}
     rep = _report("confirmed", ["trigger_shift"], {})

@@ -9,7 +9,8 @@ import pandas as pd
 import pytest
 
 from _protocol_standin import BASE, OBS_T, StandIn, noise_model
-from calibration.refit import MIN_STEP, STEP_SD, first_round, next_round, refit_design, refit_summary, spans
+from calibration.refit import (MIN_STEP, STEP_SD, first_round, misfit_scale, next_round, refit_design, refit_summary,
+                              spans)
 from enkf.diagnosis.crossval import Fit
 from test_anchored_selection import ANCHOR, GAP_K, GAPS, _anchored_standin, _select, _with_own_error
 
@@ -119,3 +120,24 @@ def test_nothing_is_refitted_when_the_base_model_is_kept():
     assert state["phase"] == "done" and state["rows"] == [] and refit_summary(state)["posterior"] is None
     with pytest.raises(ValueError, match="done"):
         next_round(state, lambda r: [], model, {}, {}, {}, SETTINGS, rounds=3, replicates=3)
+
+
+class _Line:
+    """y = a t on one record: the forward model misfit_scale reads."""
+    t = np.linspace(0.0, 1.0, 21)
+
+    def forward(self, names, records):
+        return lambda P: np.asarray(P)[:, :1] * self.t
+
+
+def test_the_misfit_scale_is_the_chi_square_per_degree_of_freedom_at_the_fit_and_never_below_one():
+    from enkf import DiagonalError
+    from enkf.diagnosis import RecordErrors
+
+    fit = Fit(["a"], ("A",), np.array([[1.9], [2.1]]), np.zeros(1), np.full(1, 5.0))
+    sigma = 0.1
+    errors = RecordErrors({"A": DiagonalError(np.full(21, sigma))})
+    wiggle = np.where(np.arange(21) % 2 == 0, 1.0, -1.0)  # +-1 alternating: |r|^2 = 21 sigma^2 k
+    for k, expected in ((9.0, 9.0 * 21 / 20), (0.25, 1.0)):
+        obs = {"A": 2.0 * _Line.t + np.sqrt(k) * sigma * wiggle}
+        assert misfit_scale(_Line(), fit, obs, errors) == pytest.approx(expected)
