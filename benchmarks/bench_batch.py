@@ -74,7 +74,7 @@ def old_and_new(argv, out: str, **extra) -> tuple[argparse.Namespace, str]:
     ap.add_argument("--new", default="HEAD")
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / out))
     for name, default in extra.items():
-        ap.add_argument(f"--{name}", type=int, default=default)
+        ap.add_argument(f"--{name.replace('_', '-')}", type=str if default is None else type(default), default=default)
     a = ap.parse_args(argv)
     return a, subprocess.run(["git", "rev-parse", "--short", a.new], cwd=REPO, check=True, capture_output=True,
                              text=True).stdout.strip()

@@ -2,6 +2,7 @@
 files are the same (issue 54: the default run's time; the same answers where the arithmetic is unchanged).
 
     python benchmarks/bench_default_run.py [--old REV] [--new REV] [--out benchmarks/results/bench_default_run.json]
+        [--keep-results DIR]
 
 Each commit is cloned into an empty temporary folder and runs ``snakemake --cores 2`` there as a user
 starts it (the clone's packages first on the path, its own Numba cache compiled by the run, as in a
@@ -15,6 +16,7 @@ import json
 import os
 import platform
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -42,12 +44,14 @@ def default_run(clone: Path) -> dict:
 
 
 def main(argv=None) -> dict:
-    a, new = old_and_new(argv, "bench_default_run.json")
+    a, new = old_and_new(argv, "bench_default_run.json", keep_results=None)
     load0, t0 = list(os.getloadavg()), time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         old_clone, new_clone = clone_at(a.old, tmp / "old"), clone_at(new, tmp / "new")
         runs = {"old": default_run(old_clone), "new": default_run(new_clone)}
+        if a.keep_results:  # the new run's results/, for benchmarks/results/default_run (its README)
+            shutil.copytree(new_clone / "results", a.keep_results, dirs_exist_ok=True)
         cmp = subprocess.run([sys.executable, str(REPO / "tools" / "compare_runs.py"), str(old_clone / "results"),
                               str(new_clone / "results"), "--out", str(tmp / "compare.json")],
                              capture_output=True, text=True)
