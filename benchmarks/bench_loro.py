@@ -43,11 +43,13 @@ _COPIED = re.compile(r"^(\S+): copied from ")
 
 
 def run_stage(run_json: Path, results: Path) -> str:
-    """``member iter_0``, ``replicate iter_2``, ``design``, ``check``, ``forecast`` of a run's folder."""
+    """``member iter_0``, ``replicate iter_2``, ``design``, ``check``, ``refit``, ``forecast`` of a run's folder."""
     parts = run_json.relative_to(results).parts
     if parts[1].startswith("iter_"):
         return f"{parts[2].rstrip('s')} {parts[1]}"
-    return {"diagnosis": "design" if parts[2] == "design" else "check"}.get(parts[1], parts[1])
+    if parts[1] == "diagnosis":
+        return parts[2] if parts[2] in ("design", "refit") else "check"
+    return parts[1]
 
 
 def fdem_runs(clone: Path) -> dict:

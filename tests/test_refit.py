@@ -141,3 +141,13 @@ def test_the_misfit_scale_is_the_chi_square_per_degree_of_freedom_at_the_fit_and
     for k, expected in ((9.0, 9.0 * 21 / 20), (0.25, 1.0)):
         obs = {"A": 2.0 * _Line.t + np.sqrt(k) * sigma * wiggle}
         assert misfit_scale(_Line(), fit, obs, errors) == pytest.approx(expected)
+
+
+def test_the_cost_tables_count_the_refit_s_runs_apart_from_the_check_s(tmp_path):
+    from benchmarks.bench_loro import run_stage
+
+    res = tmp_path / "results"
+    assert run_stage(res / "e/diagnosis/refit/iter_1/4/run.json", res) == "refit"
+    assert run_stage(res / "e/diagnosis/check/12/run.json", res) == "check"
+    assert run_stage(res / "e/diagnosis/design/3/PlantGap_01/run.json", res) == "design"
+    assert run_stage(res / "e/iter_2/members/007/PlantGap_01/run.json", res) == "member iter_2"
