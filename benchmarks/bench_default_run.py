@@ -30,12 +30,14 @@ from benchmarks.bench_batch import clone_at, old_and_new  # noqa: E402
 from shpb.atomic import emit_json  # noqa: E402
 
 
-def default_run(clone: Path) -> dict:
+def default_run(clone: Path, log_to: Path | None = None) -> dict:
     t0 = time.perf_counter()
     proc = subprocess.run([sys.executable, "-m", "snakemake", "--cores", "2"], cwd=clone, capture_output=True,
                           text=True, env={**os.environ, "PYTHONPATH": str(clone)})
     wall = time.perf_counter() - t0
     log = proc.stdout + proc.stderr
+    if log_to is not None:  # the console log, for benchmarks/default_run_costs.py's job times
+        log_to.write_text(log)
     done = re.findall(r"Finished jobid: \d+ \(Rule: (\w+)\)", log)
     return {"wall_s": round(wall, 1), "exit_code": proc.returncode, "jobs": len(done),
             "jobs_per_rule": {r: done.count(r) for r in sorted(set(done))},
@@ -49,9 +51,13 @@ def main(argv=None) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         old_clone, new_clone = clone_at(a.old, tmp / "old"), clone_at(new, tmp / "new")
-        runs = {"old": default_run(old_clone), "new": default_run(new_clone)}
-        if a.keep_results:  # the new run's results/, for benchmarks/results/default_run (its README)
-            shutil.copytree(new_clone / "results", a.keep_results, dirs_exist_ok=True)
+        keep = Path(a.keep_results) if a.keep_results else None
+        if keep is not None:
+            keep.mkdir(parents=True, exist_ok=True)
+        runs = {"old": default_run(old_clone),
+                "new": default_run(new_clone, None if keep is None else keep / "snakemake.log")}
+        if keep is not None:  # the new run's results/ and log, for benchmarks/results/default_run (its README)
+            shutil.copytree(new_clone / "results", keep / "results", dirs_exist_ok=True)
         cmp = subprocess.run([sys.executable, str(REPO / "tools" / "compare_runs.py"), str(old_clone / "results"),
                               str(new_clone / "results"), "--out", str(tmp / "compare.json")],
                              capture_output=True, text=True)
