@@ -1,5 +1,5 @@
 """The shipped model's parameters re-fitted on real FDEM runs around its fit, after the confirmation walk
-(docs/closing-the-loop.md, "The confirmed model's parameters on real runs").
+(docs/closing-the-loop.md, step 7: "The shipped model's parameters on real runs").
 
 Why: the selection fits every model on its anchored surrogate (:class:`enkf.emulator.AnchoredEmulator`),
 whose axes run from the base posterior's mean with every effect at its null to a quarter, a half and three
@@ -16,12 +16,16 @@ The refit, on the calibration records only (the held-out records are neither rea
    mesh; one anchored surrogate per record from those runs, exact at the anchor; the model re-fitted on
    them by the protocol's ES-MDA, its error the instrument noise, the calibration's mesh scatter and the
    surrogate's own leave-one-out error, scaled up by the fit's chi-square per degree of freedom where
-   the fit misses the records by more than those terms allow (:func:`misfit_scale`). Repeated from the new fit until every mean lies within its runs'
-   span, or ``rounds`` times.
+   the fit misses the records by more than those terms allow (:func:`misfit_scale`). Repeated from the
+   new fit until every mean lies within its runs' span, or ``rounds`` times.
 2. one ``spread`` round: the last design run again on the record's other check meshes, the model fitted
    on each mesh's surrogates, the fits pooled: one mesh's fit cannot see how far another mesh moves it
    (on the planted series two meshes put one record's gap at 78 and 76 um, each with a 90 % interval
    under 6 um wide).
+
+What it does not carry: a bias common to every mesh of the calibration's preset, e.g. `fast` runs
+against records from a finer mesh; on the planted series the three check meshes agree to 3 um and sit
+a few um below the planted gap.
 
 Measurement effects need no runs: they act on the surrogate's curve (:class:`calibration.diagnose.EmulatedSHPB`).
 The state between rounds is a JSON dict (:func:`first_round`, :func:`next_round`), one file per round
@@ -207,12 +211,13 @@ def next_round(prev: Mapping, curves_of: Callable[[int], Sequence], model: Emula
                 "rows": refit_design(fit, records, model.input_names, emu0.lower, emu0.upper),
                 "why": f"locate: a mean outside its runs after round {r - 1}"}
     # spread: one fit per mesh, pooled; mesh 0's runs are the design round's
-    fits = [_fit(prev["design_rows"], curves_of(int(prev["design_round"])), model, names, records, obs, noise, simulator, settings, seed)]
+    cur = curves_of(r - 1)
+    meshes = [(prev["design_rows"], curves_of(int(prev["design_round"])))]
     for k in range(1, int(replicates)):
         sel = [i for i, row in enumerate(prev["rows"]) if row["replicate"] == k]
-        cur = curves_of(r - 1)
-        fits.append(_fit([prev["rows"][i] for i in sel], [cur[i] for i in sel], model, names, records, obs, noise,
-                         simulator, settings, seed + k))
+        meshes.append(([prev["rows"][i] for i in sel], [cur[i] for i in sel]))
+    fits = [_fit(rows_k, curves_k, model, names, records, obs, noise, simulator, settings, seed + k)
+            for k, (rows_k, curves_k) in enumerate(meshes)]
     pooled = Fit(names, tuple(records), np.vstack([f.params for f in fits]), fits[0].lower, fits[0].upper,
                  {"source": "real FDEM runs"})
     state["history"].append({"round": r - 1, "phase": "spread", "runs": len(prev["rows"]),
