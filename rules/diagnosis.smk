@@ -168,10 +168,10 @@ checkpoint diagnosis_refit_round:
         unpack(refit_round_inputs),
     output:
         state="results/{exp}/diagnosis/refit/round_{r}.json",
-    wildcard_constraints:
-        r="[0-9]+",
     log:
         "results/{exp}/logs/diagnosis_refit_round_{r}.log",
+    wildcard_constraints:
+        r="[0-9]+",
     conda:
         CONDA_ENV
     params:

@@ -405,10 +405,10 @@ def diagnosis_check_inputs(wc):
     return files
 
 
-# rules/sensitivity.smk
 def refit_on(exp):
     """Whether the experiment re-fits its shipped model on real runs (diagnosis.refit_rounds > 0); never
-    a leave-one-record-out fold (its table reports the walk and the held-out errors only)."""
+    a leave-one-record-out fold (its table reports the walk and the held-out errors only).
+    """
     d = diagnosis_cfg(exp)
     return bool(d) and int(d["refit_rounds"]) > 0 and "loro_of" not in EXPERIMENTS[exp]
 
@@ -421,11 +421,14 @@ def refit_round_file(exp, r):
     return f"results/{exp}/diagnosis/refit/round_{r}.json"
 
 
+def refit_state(exp, r):
+    """Refit round `r`'s state: its checkpoint's file."""
+    return read_json(checkpoints.diagnosis_refit_round.get(exp=exp, r=r).output.state)
+
+
 def refit_rows_of(exp, r):
-    """The runs of refit round `r` (its checkpoint's file)."""
-    return read_json(checkpoints.diagnosis_refit_round.get(exp=exp, r=r).output.state)[
-        "rows"
-    ]
+    """The runs of refit round `r`."""
+    return refit_state(exp, r)["rows"]
 
 
 def refit_row(wc):
@@ -454,13 +457,12 @@ def refit_round_inputs(wc):
 def refit_last_round(exp):
     """Walk the refit's checkpoints until a round says it is done; that round's file."""
     r = 0
-    while read_json(
-        checkpoints.diagnosis_refit_round.get(exp=exp, r=r).output.state
-    )["phase"] != "done":
+    while refit_state(exp, r)["phase"] != "done":
         r += 1
     return refit_round_file(exp, r)
 
 
+# rules/sensitivity.smk
 def sensitivity_spec(exp):
     if EXPERIMENTS[exp].get("sensitivity") is None:
         raise _SensitivityWorkflowError(
