@@ -80,6 +80,8 @@ localrules:
     diagnosis_heldout_observations,
     diagnosis_select,
     diagnosis_check,
+    diagnosis_refit_round,
+    diagnosis_refit,
     loro,
 
 
