@@ -411,6 +411,10 @@ QUOTES: list[Quote] = [
           "and {g2:.1f} [{l2:.1f}, {h2:.1f}] um for the planted {p1:.1f} and {p2:.1f}, and `sigma_t` {s} [{sl}, {sh}] MPa: nearer,\n"
           "but {k} of the {n} planted gaps inside. The three check meshes give {ml:.1f}-{mh:.1f} um for PlantGap_02", _planted_refit),
     Quote(CL, "still falls, from {is1:.0f} to {ir1:.0f} um and from {is2:.0f} to {ir2:.0f} um", _planted_refit),
+    Quote(CL, "the same series made at `fast` is missed alike, its gaps at\n{a:.1f} and {b:.1f} um", lambda J: (
+        lambda d: {"a": d["PlantGap_01"]["mean_m"] * 1e6, "b": d["PlantGap_02"]["mean_m"] * 1e6}
+        if not any(v["inside_90"] for v in d.values()) else {})(
+            J("studies/results/refit_resolution_bias.json")["sets"]["fast"]["records"])),
     Quote("README.md", "re-fitted on\nreal runs its gaps are {g1:.0f} and {g2:.0f} um for the planted {p1:.0f} and {p2:.0f} (the selection's "
           "surrogate put them at {s1:.0f} and {s2:.0f}", _planted_refit),
     Quote("docs/workflow.md", "face gaps of {lo:.0f}-{hi:.0f} um that the calibration does not declare): `{e}` is proposed first "
