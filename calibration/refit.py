@@ -38,16 +38,15 @@ from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
-from enkf.covariance import DenseError
-from enkf.diagnosis import RecordErrors
-from enkf.diagnosis.crossval import Fit, calibrate
+from enkf.diagnosis import Fit, RecordErrors, calibrate
 from enkf.diagnostics import posterior_dict
 from shpb import effects as fx
 
 from .diagnose import EmulatedSHPB, anchored_emulators, record_params
 from .protocol import protocol_model, record_errors
 
-__all__ = ["MIN_STEP", "first_round", "misfit_scale", "next_round", "refit_design", "refit_summary", "spans"]
+__all__ = ["MIN_STEP", "first_round", "misfit_scale", "next_round", "refit_design", "refit_summary", "refit_surrogate",
+           "spans"]
 
 #: The smallest move of a parameter in a refit design, as a share of its design box: an ES-MDA fit's sd
 #: can be far below what the runs resolve (a few um of gap), and a step below the mesh's own scatter
@@ -95,7 +94,8 @@ def spans(rows: Sequence[Mapping], names: Sequence[str]) -> dict[str, tuple[floa
     return {n: (min(v), max(v)) for n, v in out.items()}
 
 
-def _surrogate(rows: Sequence[Mapping], curves: Sequence, model: EmulatedSHPB, records: Sequence[str]) -> EmulatedSHPB:
+def refit_surrogate(rows: Sequence[Mapping], curves: Sequence, model: EmulatedSHPB,
+                    records: Sequence[str]) -> EmulatedSHPB:
     """One anchored surrogate per record from its rows' runs (one mesh), over the selection model's inputs
     and box; parameters the rows do not move stay at their null."""
     inputs = list(model.input_names)
@@ -118,7 +118,7 @@ def _fit(rows, curves, model: EmulatedSHPB, names, records, obs, noise, simulato
     """The model re-fitted on one mesh's runs (the protocol's ES-MDA and error terms; the mesh scatter
     common to every prediction of a record, all its runs being on one mesh), then again with those terms
     scaled by the fit's chi-square per degree of freedom where it exceeds 1 (:func:`misfit_scale`)."""
-    sur = protocol_model(_surrogate(rows, curves, model, records))
+    sur = protocol_model(refit_surrogate(rows, curves, model, records))
     errors = record_errors(sur.emulated, {r: noise[r] for r in records},
                            simulator={r: simulator[r] for r in records if r in simulator}, simulator_correlation=1.0)
     y = {r: obs[r] for r in records}
@@ -126,7 +126,7 @@ def _fit(rows, curves, model: EmulatedSHPB, names, records, obs, noise, simulato
     fit = calibrate(sur, list(names), list(records), y, errors, **kw)
     scale = misfit_scale(sur, fit, y, errors)
     if scale > 1.0:
-        fit = calibrate(sur, list(names), list(records), y, _scaled(errors, scale), **kw)
+        fit = calibrate(sur, list(names), list(records), y, errors.scaled(scale), **kw)
     fit.info.update({"source": "real FDEM runs", "misfit_scale": scale})
     return fit
 
@@ -144,14 +144,6 @@ def misfit_scale(model, fit: Fit, obs: Mapping[str, np.ndarray], errors: RecordE
     r = y - model.forward(names, records)(mean[None, :])[0]
     chi2 = float(errors.calibration_error(records, names).chi2(r[:, None])[0])
     return max(1.0, chi2 / max(1, y.size - len(names)))
-
-
-def _scaled(errors: RecordErrors, factor: float) -> RecordErrors:
-    """Every term of ``errors`` times ``factor`` (their correlations unchanged)."""
-    def times(terms):
-        return {r: DenseError(factor * e.dense(), _symmetric=True) for r, e in terms.items()}
-    return RecordErrors(times(errors.noise), times(errors.model), times(errors.simulator), errors.model_correlation,
-                        errors.simulator_correlation)
 
 
 def _fit_entry(fit: Fit) -> dict:

@@ -45,9 +45,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from calibration.closing import anchored  # noqa: E402
-from calibration.diagnose import EmulatedSHPB, anchored_emulators, model_grid, record_params  # noqa: E402
 from calibration.observations import read_observations  # noqa: E402
 from calibration.protocol import protocol_model, record_errors  # noqa: E402
+from calibration.refit import refit_design, refit_surrogate, spans  # noqa: E402
 from enkf.diagnosis.crossval import calibrate  # noqa: E402
 from shpb import effects as fx  # noqa: E402
 from studies.sigma_t_bias import write  # noqa: E402
@@ -66,16 +66,6 @@ def _run(task):
     except Exception:  # a failed run is left out of its axis, as in the workflow
         return None
     return pd.DataFrame({"time_s": out.columns["time_s"], "stress_Pa": out.columns["stress_Pa"]})
-
-
-def local_design(anchor: np.ndarray, steps: np.ndarray, moved: np.ndarray, lower, upper):
-    """``(X, axis)``: the anchor, then each moved parameter at anchor -+ its step (kept inside the box)."""
-    rows, axis = [anchor], [-1]
-    for j in np.flatnonzero(moved):
-        for v in (max(anchor[j] - steps[j], lower[j]), min(anchor[j] + steps[j], upper[j])):
-            if v != anchor[j]:
-                rows.append(np.where(np.arange(anchor.size) == j, v, anchor)), axis.append(j)
-    return np.array(rows), np.array(axis, dtype=int)
 
 
 def summary_of(fit, names) -> dict:
@@ -120,52 +110,28 @@ def main(argv=None) -> dict:
     s = sel.settings
     emu0 = next(iter(model.emulators.values()))
     inputs, lower, upper = list(model.input_names), np.array(emu0.lower), np.array(emu0.upper)
-    plain_of = {n: fx.split_record(n)[0] for n in names}
     out = {"study": "reanchored_refit", "what": __doc__.split("\n\n")[0].replace("\n", " "), "run": str(run),
-           "exp": args.exp, "model": step.spec.label(), "names": names, "truth": truth, "cores": args.cores, "mesh_seed": args.mesh_seed,
+           "exp": args.exp, "model": step.spec.label(), "names": names, "truth": truth, "cores": args.cores,
+           "mesh_seed": args.mesh_seed,
            "selection_anchored": anchored(model), "shipped": summary_of(fit, names), "rounds": []}
     print(f"{args.exp}: {step.spec.label()}; shipped {out['shipped']}", file=sys.stderr, flush=True)
+    nulls = fx.null_values([p for p in inputs if "." in p])
     with ProcessPoolExecutor(args.cores) as pool:
         for rnd in range(args.rounds):
-            mean, post = fit.mean(), fit.posterior()
-            designs, tasks = {}, []
-            for i, rec in enumerate(calib):
-                point = record_params(mean, rec)
-                sd = {plain_of[n]: float(np.std(fit.column(n), ddof=1)) for n in names
-                      if fx.split_record(n)[1] in (None, rec)}
-                anchor = np.array([point[p] if p in point else fx.null_values([p])[p] for p in inputs])
-                moved = np.array([p in sd for p in inputs])
-                steps = np.array([max(2.0 * sd.get(p, 0.0), args.min_step * (upper[j] - lower[j]))
-                                  for j, p in enumerate(inputs)])
-                X, axis = local_design(anchor, steps, moved, lower, upper)
-                designs[rec] = (X, axis)
-                meas = {p: v for p, v in point.items() if p not in inputs}
-                for x in X:
-                    params = {p: float(v) for p, v in zip(inputs, x)}
-                    tasks.append((exp["geometry"], exp["preset"], sheets[rec], params, args.mesh_seed + i,
-                                  float(exp["simulation"]["t_end"])))
+            # the product's design and surrogate (calibration.refit); every input given, the others at null
+            mean = fit.mean()
+            rows = refit_design(fit, calib, inputs, lower, upper, min_step=args.min_step)
+            tasks = [(exp["geometry"], exp["preset"], sheets[row["record"]], {**nulls, **row["simulator"]},
+                      args.mesh_seed + calib.index(row["record"]), float(exp["simulation"]["t_end"])) for row in rows]
             curves = list(pool.map(_run, tasks))
-            emulators, k = {}, 0
-            for rec in calib:
-                X, axis = designs[rec]
-                emu, _ = anchored_emulators(X, axis, {rec: curves[k:k + len(X)]}, model.model_times, lower, upper,
-                                            inputs, label="re-anchored refit")
-                emulators.update(emu)
-                k += len(X)
-            new = EmulatedSHPB(emulators, inputs, model.model_times, {r: model.obs_times[r] for r in calib})
+            new = refit_surrogate(rows, curves, model, calib)
             errors = record_errors(new, {r: noise[r] for r in calib}, simulator={r: simulator[r] for r in calib
                                                                                  if r in simulator},
                                    simulator_correlation=1.0)  # own_error: the schema's default, pooled
             fit_new = calibrate(protocol_model(new), names, calib, obs, errors, seed=int(s["seed"]) + rnd + 1,
                                 n_members=int(s["n_members"]), esmda_steps=int(s["esmda_steps"]))
             post_new = summary_of(fit_new, names)
-            spans = {}
-            for rec in calib:
-                X, axis = designs[rec]
-                for j in set(axis[1:].tolist()):
-                    spans.setdefault(inputs[j] if fx.record_param(inputs[j], rec) not in names
-                                     else fx.record_param(inputs[j], rec), []).extend(X[axis == j, j].tolist())
-            inside = {n: bool(min(v) <= post_new[n]["mean"] <= max(v)) for n, v in spans.items() if n in post_new}
+            inside = {n: bool(lo <= post_new[n]["mean"] <= hi) for n, (lo, hi) in spans(rows, names).items()}
             out["rounds"].append({"anchor": {n: float(mean[n]) for n in names}, "runs": len(tasks),
                                   "failed": sum(c is None for c in curves), "posterior": post_new,
                                   "mean_inside_runs": inside,

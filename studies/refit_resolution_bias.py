@@ -38,15 +38,11 @@ sys.path.insert(0, str(ROOT))
 from calibration.model_error import run_mesh_seed  # noqa: E402
 from calibration.observations import measured_observations  # noqa: E402
 from calibration.refit import first_round, next_round, refit_summary  # noqa: E402
+from enkf.scores import interval_score  # noqa: E402
 from studies.reanchored_refit import _run  # noqa: E402
 from studies.sigma_t_bias import write  # noqa: E402
 
 PARAM = "face_gap.gap_m"
-
-
-def interval_score(q: dict, x: float) -> float:
-    """The 90 % interval score (Gneiting & Raftery 2007) of ``q`` (q05, q95) at ``x``."""
-    return q["q95"] - q["q05"] + 20.0 * max(0.0, q["q05"] - x) + 20.0 * max(0.0, x - q["q95"])
 
 
 def refit_on(data: dict, saved: dict, shipped: int, exp: dict, sheets: dict, pool, records: list) -> dict:
@@ -98,7 +94,7 @@ def main(argv=None) -> dict:
                 q = ref["posterior"][f"{PARAM}@{r}"]
                 rows[r] = {"planted_m": planted[r], "mean_m": q["mean"], "q05_m": q["q05"], "q95_m": q["q95"],
                            "inside_90": bool(q["q05"] <= planted[r] <= q["q95"]),
-                           "interval_score_m": interval_score(q, planted[r])}
+                           "interval_score_m": float(interval_score(q["q05"], q["q95"], planted[r], 0.1))}
             out["sets"][label] = {"truth_preset": truth["preset"], "records": rows, "rounds": ref["rounds"],
                                   "runs": ref["runs"], "converged": ref["converged"], "refit": ref}
             print(label, {r: (round(v["mean_m"] * 1e6, 1), round(v["q05_m"] * 1e6, 1), round(v["q95_m"] * 1e6, 1),

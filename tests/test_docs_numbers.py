@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from enkf.scores import interval_score
 from tools import coverage_table, docs_numbers
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -63,8 +64,8 @@ def _planted_refit(J) -> dict:
     out = {"runs": ref["runs"], "rounds": ref["rounds"], "k": sum(g["q05"] <= planted[r] <= g["q95"] for r, g in gap.items()),
            "n": len(gap), "s": _mpa(post["sigma_t"]["mean"]), "sl": _mpa(post["sigma_t"]["q05"]),
            "sh": _mpa(post["sigma_t"]["q95"]), "ml": min(per_mesh) * 1e6, "mh": max(per_mesh) * 1e6}
-    def score(q, x):  # the 90 % interval score (Gneiting & Raftery 2007), um
-        return (q["q95"] - q["q05"] + 20.0 * max(0.0, q["q05"] - x) + 20.0 * max(0.0, x - q["q95"])) * 1e6
+    def score(q, x):  # the 90 % interval score, um
+        return float(interval_score(q["q05"], q["q95"], x, 0.1)) * 1e6
 
     for i, r in enumerate(("PlantGap_01", "PlantGap_02"), 1):
         out.update({f"g{i}": gap[r]["mean"] * 1e6, f"l{i}": gap[r]["q05"] * 1e6, f"h{i}": gap[r]["q95"] * 1e6,

@@ -151,3 +151,18 @@ def test_the_cost_tables_count_the_refit_s_runs_apart_from_the_check_s(tmp_path)
     assert run_stage(res / "e/diagnosis/check/12/run.json", res) == "check"
     assert run_stage(res / "e/diagnosis/design/3/PlantGap_01/run.json", res) == "design"
     assert run_stage(res / "e/iter_2/members/007/PlantGap_01/run.json", res) == "member iter_2"
+
+
+def test_scaled_errors_multiply_every_term_and_keep_their_correlations():
+    from enkf import AR1Error, DiagonalError
+    from enkf.diagnosis import RecordErrors
+
+    t = np.linspace(0.0, 1e-4, 11)
+    ar = AR1Error(2.0, t, 2e-5)
+    errors = RecordErrors({"A": DiagonalError(np.full(11, 1.0))}, {"A": ar}, {"A": ar}, 0.3, 1.0,
+                          {"A": {"sigma_p": ar}})
+    big = errors.scaled(4.0)
+    assert np.allclose(big.calibration_error(["A"]).dense(), 4.0 * errors.calibration_error(["A"]).dense())
+    assert np.allclose(big.calibration_error(["A"], ["sigma_p"]).dense(),
+                       4.0 * errors.calibration_error(["A"], ["sigma_p"]).dense())
+    assert (big.model_correlation, big.simulator_correlation) == (0.3, 1.0)

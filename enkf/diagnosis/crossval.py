@@ -184,6 +184,14 @@ class RecordErrors:
         if not 0.0 <= self.model_correlation <= 1.0 or not 0.0 <= self.simulator_correlation <= 1.0:
             raise ValueError("model_correlation and simulator_correlation must lie in [0, 1]")
 
+    def scaled(self, factor: float) -> "RecordErrors":
+        """Every term (noise, pooled and per-axis model errors, simulator) times ``factor``, the
+        correlations unchanged: the error model of a likelihood whose variance scale is ``factor``."""
+        def times(terms):
+            return {k: DenseError(factor * e.dense(), _symmetric=True) for k, e in terms.items()}
+        return RecordErrors(times(self.noise), times(self.model), times(self.simulator), self.model_correlation,
+                            self.simulator_correlation, {r: times(a) for r, a in self.model_axes.items()})
+
     def axes(self, rec: str, names: Sequence[str] | None) -> tuple[str, ...] | None:
         """The parameters of ``names`` with an own error term for ``rec`` (None: the pooled error applies)."""
         if names is None or rec not in self.model_axes:
