@@ -42,11 +42,11 @@ from enkf.diagnosis import Fit, RecordErrors, calibrate
 from enkf.diagnostics import posterior_dict
 from shpb import effects as fx
 
-from .diagnose import EmulatedSHPB, anchored_emulators, record_params
+from .diagnose import EmulatedSHPB, anchored_emulators, measured_curve, record_params
 from .protocol import protocol_model, record_errors
 
-__all__ = ["MIN_STEP", "first_round", "misfit_scale", "next_round", "refit_design", "refit_summary", "refit_surrogate",
-           "spans"]
+__all__ = ["MIN_STEP", "first_round", "inflate", "misfit_scale", "next_round", "real_misfit", "refit_design",
+           "refit_summary", "refit_surrogate", "spans", "verify_inflation"]
 
 #: The smallest move of a parameter in a refit design, as a share of its design box: an ES-MDA fit's sd
 #: can be far below what the runs resolve (a few um of gap), and a step below the mesh's own scatter
@@ -182,6 +182,8 @@ def next_round(prev: Mapping, curves_of: Callable[[int], Sequence], model: Emula
     seed = int(settings["seed"]) + 7919 * r
     state = {k: prev[k] for k in ("step", "model", "names", "records", "selection_posterior")}
     state.update({"round": r, "history": list(prev["history"])})
+    if prev["phase"] == "verify":
+        return _verified(prev, state, curves_of(r - 1), model, obs, noise, simulator)
     if prev["phase"] == "locate":
         rows = prev["rows"]
         fit = _fit(rows, curves_of(r - 1), model, names, records, obs, noise, simulator, settings, seed)
@@ -197,7 +199,7 @@ def next_round(prev: Mapping, curves_of: Callable[[int], Sequence], model: Emula
                 return {**state, "phase": "spread", "rows": spread, "fit": _fit_entry(fit), "design_round": r - 1,
                         "design_rows": rows,
                         "why": f"spread: the design of round {r - 1} on the other {int(replicates) - 1} check meshes"}
-            return {**state, "phase": "done", "rows": [], "fit": _fit_entry(fit), "why": "one check mesh: no spread"}
+            return _to_verify(state, fit, [fit.info["misfit_scale"]], 1, model, "one check mesh: no spread")
         emu0 = next(iter(model.emulators.values()))
         return {**state, "phase": "locate", "converged": None, "fit": _fit_entry(fit), "design_round": r,
                 "rows": refit_design(fit, records, model.input_names, emu0.lower, emu0.upper),
@@ -212,11 +214,82 @@ def next_round(prev: Mapping, curves_of: Callable[[int], Sequence], model: Emula
             for k, (rows_k, curves_k) in enumerate(meshes)]
     pooled = Fit(names, tuple(records), np.vstack([f.params for f in fits]), fits[0].lower, fits[0].upper,
                  {"source": "real FDEM runs"})
+    scales = [f.info["misfit_scale"] for f in fits]
     state["history"].append({"round": r - 1, "phase": "spread", "runs": len(prev["rows"]),
-                             "posterior_per_mesh": [_posterior(f) for f in fits],
-                             "misfit_scale_per_mesh": [f.info["misfit_scale"] for f in fits]})
-    return {**state, "phase": "done", "rows": [], "fit": _fit_entry(pooled), "converged": prev["converged"],
-            "why": f"done: the fits on {len(fits)} check meshes pooled"}
+                             "posterior_per_mesh": [_posterior(f) for f in fits], "misfit_scale_per_mesh": scales})
+    state["converged"] = prev["converged"]
+    return _to_verify(state, pooled, scales, int(replicates), model, f"the fits on {len(fits)} check meshes pooled")
+
+
+def _to_verify(state: dict, fit: Fit, scales: Sequence[float], replicates: int, model: EmulatedSHPB,
+               what: str) -> dict:
+    """The verify round: the design's anchor at ``fit``'s mean, one real run per calibration record on each
+    check mesh (:func:`verify_inflation`); ``scales``: the misfit scales the fit was made with."""
+    emu0 = next(iter(model.emulators.values()))
+    anchors = [row for row in refit_design(fit, state["records"], model.input_names, emu0.lower, emu0.upper)
+               if row["axis"] is None]
+    rows = [{**row, "replicate": k} for row in anchors for k in range(int(replicates))]
+    return {**state, "phase": "verify", "rows": rows, "fit": _fit_entry(fit), "fit_scale": float(np.mean(scales)),
+            "why": f"verify: {what}; real runs at the fit's mean on {int(replicates)} check mesh(es)"}
+
+
+def real_misfit(rows: Sequence[Mapping], curves: Sequence, model: EmulatedSHPB, mean: Mapping[str, float],
+                obs: Mapping[str, np.ndarray], noise: Mapping, simulator: Mapping) -> list[float]:
+    """Per check mesh, the calibration records' chi-square per degree of freedom of real runs at the fit's
+    mean (``rows``: one per record and mesh, ``curves`` their runs), under the instrument noise and the
+    mesh scatter, the terms a real run's residual carries; a mesh with a failed run is left out."""
+    post = {n: {"mean": v} for n, v in mean.items()}
+    chi2: dict[int, float] = {}
+    size: dict[int, int] = {}
+    failed = set()
+    for row, run in zip(rows, curves):
+        rec, k = row["record"], int(row["replicate"])
+        y = measured_curve(run, model.model_times, post, model.obs_times[rec], record=rec)
+        if y is None:
+            failed.add(k)
+            continue
+        d = np.asarray(obs[rec], float) - y
+        C = noise[rec].dense() + (simulator[rec].dense() if rec in simulator else 0.0)
+        chi2[k] = chi2.get(k, 0.0) + float(d @ np.linalg.solve(C, d))
+        size[k] = size.get(k, 0) + d.size
+    return [chi2[k] / max(1, size[k] - len(mean)) for k in sorted(chi2) if k not in failed]
+
+
+def verify_inflation(real: Sequence[float], fit_scale: float) -> float:
+    """The factor on the refit's posterior spread: ``sqrt(max(1, mean(real) / fit_scale))``, 1 without a
+    real run. Why: the fit's misfit scale (:func:`misfit_scale`) is read off the surrogate at the fit's
+    mean, and the surrogate is exact only at its anchor; on the default run's planted series real runs at
+    the refit's mean missed the records by 5-10 times the chi-square the surrogate claimed there, and the
+    planted values fitted better than that mean on every mesh (studies/refit_real_misfit.py). Birge's
+    ratio measured where it matters, on real runs at the reported point, sets the spread; the real
+    ratio leaves out the surrogate's own error term, which a real run does not carry."""
+    if not real:
+        return 1.0
+    return float(np.sqrt(max(1.0, float(np.mean(real)) / max(float(fit_scale), 1.0))))
+
+
+def inflate(draws: np.ndarray, factor: float, lower, upper) -> np.ndarray:
+    """``draws`` spread about their mean by ``factor``, inside the box (the prior's support: a value the
+    model cannot take is not a posterior draw)."""
+    draws = np.asarray(draws, float)
+    centre = draws.mean(axis=0)
+    return np.clip(centre + float(factor) * (draws - centre), lower, upper)
+
+
+def _verified(prev: Mapping, state: dict, curves: Sequence, model: EmulatedSHPB, obs, noise, simulator) -> dict:
+    """The end: the verify round's real misfit and the fit's draws spread by :func:`verify_inflation`."""
+    names = list(prev["names"])
+    draws = np.asarray(prev["fit"]["draws"], float)
+    real = real_misfit(prev["rows"], curves, model, dict(zip(names, draws.mean(axis=0).tolist())), obs, noise,
+                       simulator)
+    factor = verify_inflation(real, prev["fit_scale"])
+    lower, upper = protocol_model(model).box(names)
+    state["history"].append({"round": int(prev["round"]), "phase": "verify", "runs": len(prev["rows"]),
+                             "chi2_per_dof_real_per_mesh": real, "fit_misfit_scale": float(prev["fit_scale"]),
+                             "inflation": factor})
+    return {**state, "phase": "done", "rows": [], "converged": prev["converged"],
+            "fit": {"draws": inflate(draws, factor, lower, upper).tolist(), "source": prev["fit"]["source"]},
+            "why": f"done: the fit's spread times {factor:.2f}, from real runs at its mean"}
 
 
 def refit_summary(state: Mapping) -> dict:

@@ -9,8 +9,8 @@ import pandas as pd
 import pytest
 
 from _protocol_standin import BASE, OBS_T, StandIn, noise_model
-from calibration.refit import (MIN_STEP, STEP_SD, first_round, misfit_scale, next_round, refit_design, refit_summary,
-                              spans)
+from calibration.refit import (MIN_STEP, STEP_SD, first_round, inflate, misfit_scale, next_round, real_misfit,
+                              refit_design, refit_summary, spans, verify_inflation)
 from enkf.diagnosis.crossval import Fit
 from test_anchored_selection import ANCHOR, GAP_K, GAPS, _anchored_standin, _select, _with_own_error
 
@@ -26,21 +26,22 @@ def _selection():
     return sel, model.emulated
 
 
-def _runs(rows):
-    """The stand-in as the simulator: each row's parameters, its mesh as a small onset shift."""
+def _runs(rows, late=0.0):
+    """The stand-in as the simulator: each row's parameters, its mesh as a small onset shift (``late``
+    more: a departure of the real model the surrogate's runs did not show)."""
     out = []
     for row in rows:
         names = list(row["simulator"]) + ["trigger_shift.dt_s"]
-        x = list(row["simulator"].values()) + [MESH_SHIFT_S[row["replicate"]]]
+        x = list(row["simulator"].values()) + [MESH_SHIFT_S[row["replicate"]] + late]
         y = StandIn(GAP_K).forward(names, [row["record"]])(np.array([x]))[0]
         out.append(pd.DataFrame({"time_s": OBS_T, "stress_Pa": y}))
     return out
 
 
-def _walk(sel, model, obs, replicates, rounds=3):
+def _walk(sel, model, obs, replicates, rounds=3, verify_late=0.0):
     state, curves = first_round(sel, 1, model), {}
     while state["phase"] != "done":
-        curves[state["round"]] = _runs(state["rows"])
+        curves[state["round"]] = _runs(state["rows"], verify_late if state["phase"] == "verify" else 0.0)
         state = next_round(state, curves.__getitem__, model, obs, {r: noise_model() for r in GAP_K}, {}, SETTINGS,
                            rounds=rounds, replicates=replicates)
     return state
@@ -62,7 +63,8 @@ def test_the_refit_moves_the_blended_gaps_onto_the_planted_ones():
     assert max(before) > 5e-6
     state = _walk(sel, model, _obs(), replicates=1)
     out = refit_summary(state)
-    assert out["converged"] and [h["phase"] for h in out["history"]] == ["locate"] and out["runs"] == 4 * 7
+    assert out["converged"] and [h["phase"] for h in out["history"]] == ["locate", "verify"]
+    assert out["runs"] == 4 * 7 + 4  # the verify round: one real run per record at the fit's mean
     post = [out["posterior"][f"face_gap.gap_m@{r}"] for r in GAP_K]
     after = [abs(p["mean"] - GAPS[r]) for p, r in zip(post, GAP_K)]
     assert max(after) < 3e-6 and max(after) < 0.5 * max(before), (before, after)
@@ -73,8 +75,9 @@ def test_the_refit_moves_the_blended_gaps_onto_the_planted_ones():
 def test_the_spread_round_pools_one_fit_per_mesh():
     sel, model = _selection()
     state = _walk(sel, model, _obs(), replicates=3)
-    spread = state["history"][-1]
-    assert [h["phase"] for h in state["history"]] == ["locate", "spread"] and len(spread["posterior_per_mesh"]) == 3
+    spread = state["history"][-2]
+    assert [h["phase"] for h in state["history"]] == ["locate", "spread", "verify"]
+    assert len(spread["posterior_per_mesh"]) == 3 and len(state["history"][-1]["chi2_per_dof_real_per_mesh"]) == 3
     means = [p["face_gap.gap_m@A"]["mean"] for p in spread["posterior_per_mesh"]]
     # a mesh that starts the load 0.3 us later reads as a gap 3 um smaller (the face closes at 10 m/s)
     assert means[1] - means[0] == pytest.approx(-3e-6, abs=0.5e-6)
@@ -84,8 +87,8 @@ def test_the_spread_round_pools_one_fit_per_mesh():
     pooled = refit_summary(state)["posterior"]["face_gap.gap_m@A"]
     assert pooled["mean"] == pytest.approx(np.mean(means), abs=1e-9)
     assert pooled["q05"] < min(means) < max(means) < pooled["q95"]
-    # the other two meshes repeat the locate round's 7 runs per record
-    assert refit_summary(state)["runs"] == 4 * 7 * 3
+    # the other two meshes repeat the locate round's 7 runs per record; the verify round one run per mesh
+    assert refit_summary(state)["runs"] == 4 * 7 * 3 + 4 * 3
 
 
 def test_the_design_moves_each_fitted_simulator_parameter_by_two_sd_or_the_least_step():
@@ -166,3 +169,60 @@ def test_scaled_errors_multiply_every_term_and_keep_their_correlations():
     assert np.allclose(big.calibration_error(["A"], ["sigma_p"]).dense(),
                        4.0 * errors.calibration_error(["A"], ["sigma_p"]).dense())
     assert (big.model_correlation, big.simulator_correlation) == (0.3, 1.0)
+
+
+def test_real_runs_at_the_fit_that_miss_the_records_widen_its_interval_by_birges_ratio():
+    """The verify round's real runs start the load 2 us late, a departure the design's runs did not show:
+    the real chi-square per degree of freedom at the fit's mean, recomputed here from those runs, sets
+    the factor on the spread; the means stay, the intervals widen by it."""
+    sel, model = _selection()
+    obs = _obs()
+    plain = _walk(sel, model, obs, replicates=1)
+    late = _walk(sel, model, obs, replicates=1, verify_late=2e-6)
+    verify = late["history"][-1]
+    assert plain["history"][-1]["inflation"] == pytest.approx(1.0, abs=0.05)
+    draws = np.asarray(plain["fit"]["draws"])  # the plain walk's last fit is this one's before the factor
+    fit = Fit(plain["names"], tuple(plain["records"]), draws, *_box(model))
+    anchor = [row for row in refit_design(fit, list(GAP_K), model.input_names, *_box(model)) if row["axis"] is None]
+    runs = _runs(anchor, 2e-6)
+    chi2, m = 0.0, 0
+    for row, run in zip(anchor, runs):
+        y = np.interp(model.obs_times[row["record"]], run["time_s"], run["stress_Pa"])
+        d = obs[row["record"]] - y
+        chi2 += float(d @ np.linalg.solve(noise_model().dense(), d))
+        m += d.size
+    real = chi2 / (m - len(plain["names"]))
+    assert verify["chi2_per_dof_real_per_mesh"] == [pytest.approx(real, rel=1e-6)]
+    assert real > 3.0 and verify["inflation"] == pytest.approx(np.sqrt(real / verify["fit_misfit_scale"]), rel=1e-6)
+    widened = np.asarray(late["fit"]["draws"])
+    assert widened.mean(axis=0) == pytest.approx(draws.mean(axis=0), rel=1e-9)
+    assert widened.std(axis=0) == pytest.approx(verify["inflation"] * draws.std(axis=0), rel=1e-9)
+
+
+def _box(model):
+    emu0 = next(iter(model.emulators.values()))
+    return emu0.lower, emu0.upper
+
+
+def test_the_factor_is_one_where_real_runs_fit_as_the_surrogate_claimed_and_the_box_bounds_the_draws():
+    assert verify_inflation([0.9, 1.1], 1.5) == 1.0
+    assert verify_inflation([], 3.0) == 1.0  # every verify run failed: nothing measured, nothing changed
+    assert verify_inflation([6.0, 12.0], 1.5) == pytest.approx(np.sqrt(6.0))
+    assert verify_inflation([4.0], 0.5) == pytest.approx(2.0)  # a scale below 1 was never applied
+    draws = np.array([[0.0, 10.0], [2.0, 20.0], [4.0, 30.0]])
+    out = inflate(draws, 3.0, [-1.0, 0.0], [100.0, 100.0])
+    assert out[:, 1].tolist() == [0.0, 20.0, 50.0] and out[:, 0].tolist() == [-1.0, 2.0, 8.0]
+
+
+def test_a_mesh_with_a_failed_verify_run_is_left_out_of_the_real_misfit():
+    """Runs at the truth on mesh 0 (no shift) read as the noise; mesh 1, with record A's run failed, is
+    left out rather than scored on three records."""
+    from _protocol_standin import TRUTH
+
+    _, model = _selection()
+    rows = [{"record": r, "replicate": k, "axis": None, "simulator": {**TRUTH, "face_gap.gap_m": GAPS[r]}}
+            for r in GAP_K for k in range(2)]
+    runs = _runs(rows)
+    runs[1] = None  # record A's run on mesh 1
+    real = real_misfit(rows, runs, model, dict(TRUTH), _obs(), {r: noise_model() for r in GAP_K}, {})
+    assert len(real) == 1 and 0.7 < real[0] < 1.3
