@@ -215,9 +215,21 @@ def _refit(refit) -> list[str]:
     return ['<p style="margin:0.4em 0 0 0">' + f"The shipped model ({escape(str(refit.get('model') or '?'))}) re-fitted "
             f"on real FDEM runs around its fit ({escape(str(refit.get('runs', '?')))} runs on the calibration records, "
             f"{escape(str(refit.get('rounds', '?')))} rounds; {conv.get(refit.get('converged'), '?')}; "
-            "diagnosis/refit.json). The selection's fit is on its surrogate, which blends the curves of runs far "
-            "apart; the held-out errors above are that fit's:</p>",
+            f"{_verified(refit)}diagnosis/refit.json). The selection's fit is on its surrogate, which blends the "
+            "curves of runs far apart; the held-out errors above are that fit's:</p>",
             _table(["parameter", "selection's surrogate: mean [90 %]", "on real runs: mean [90 %]", "unit"], rows)]
+
+
+def _verified(refit: Mapping) -> str:
+    """The verify round in words: how far real runs at the refit's mean miss the records, and the factor
+    on its intervals (calibration.refit.verify_inflation)."""
+    v = next((h for h in refit.get("history") or [] if isinstance(h, Mapping) and h.get("phase") == "verify"), None)
+    real = v.get("chi2_per_dof_real_per_mesh") if v else None
+    if not real:
+        return ""
+    return (f"real runs at its mean miss the records by a chi-square per degree of freedom of {min(real):.1f}-"
+            f"{max(real):.1f} on its check meshes, against {_num(v.get('fit_misfit_scale'), 1.0, '.1f')} on its "
+            f"surrogate, so its intervals are {_num(v.get('inflation'), 1.0, '.2f')} times as wide as the fit's; ")
 
 
 #: covariate column: (label in the table, display scale, format, the step a trend's slope is quoted per)

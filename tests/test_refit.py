@@ -226,3 +226,18 @@ def test_a_mesh_with_a_failed_verify_run_is_left_out_of_the_real_misfit():
     runs[1] = None  # record A's run on mesh 1
     real = real_misfit(rows, runs, model, dict(TRUTH), _obs(), {r: noise_model() for r in GAP_K}, {})
     assert len(real) == 1 and 0.7 < real[0] < 1.3
+
+
+def test_summary_html_says_how_far_real_runs_at_the_refit_miss_and_the_factor():
+    from calibration.report_summary import _refit
+
+    refit = {"model": "base + face_gap", "runs": 62, "rounds": 4, "converged": True,
+             "posterior": {"sigma_t": {"mean": 24.1e6, "q05": 23.6e6, "q95": 24.6e6}},
+             "selection_posterior": {"sigma_t": {"mean": 23.9e6, "q05": 23.0e6, "q95": 24.8e6}},
+             "history": [{"phase": "locate"}, {"phase": "spread"},
+                         {"phase": "verify", "chi2_per_dof_real_per_mesh": [9.93, 9.31, 9.90],
+                          "fit_misfit_scale": 1.61, "inflation": 2.4547}]}
+    text = "".join(_refit(refit))
+    assert "9.3-9.9 on its check meshes, against 1.6 on its surrogate" in text and "2.45 times as wide" in text
+    del refit["history"][-1]
+    assert "times as wide" not in "".join(_refit(refit)) and "24.1 [23.6, 24.6]" in "".join(_refit(refit))
