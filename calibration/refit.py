@@ -268,7 +268,7 @@ def verify_inflation(real: Sequence[float], fit_scale: float) -> float:
     """The factor on the refit's posterior spread: ``sqrt(max(1, mean(real) / fit_scale))``, 1 without a
     real run. Why: the fit's misfit scale (:func:`misfit_scale`) is read off the surrogate at the fit's
     mean, and the surrogate is exact only at its anchor; on the default run's planted series real runs at
-    the refit's mean missed the records by 5-10 times the chi-square the surrogate claimed there, and the
+    the refit's mean missed the records by about 6 times the chi-square the surrogate claimed there, and the
     planted values fitted better than that mean on every mesh (studies/refit_real_misfit.py). Birge's
     ratio measured where it matters, on real runs at the reported point, sets the spread; the real
     ratio leaves out the surrogate's own error term, which a real run does not carry."""
