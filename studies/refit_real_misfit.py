@@ -37,6 +37,7 @@ from calibration.model_error import check_replicate_count, run_mesh_seed  # noqa
 from calibration.observations import read_curve, read_observations  # noqa: E402
 from calibration.refit import refit_surrogate  # noqa: E402
 from shpb import effects as fx  # noqa: E402
+from studies.refit_check_scores import planted_values  # noqa: E402
 from studies.sigma_t_bias import write  # noqa: E402
 
 BASE = ("sigma_t", "E_t")
@@ -92,9 +93,7 @@ def main(argv=None) -> dict:
     names, calib = list(refit["names"]), list(refit["records"])
     obs_all = read_observations(run / "observations" / "obs.csv", run / "observations" / "obs.json")
     made = json.loads(Path(args.truth).read_text())
-    truth = {n: float(v) for n, v in made["params"].items()}
-    for t in made["tests"]:
-        truth.update({fx.record_param(p, t["name"]): float(v) for p, v in t["planted"].items()})
+    truth = planted_values(made, names)
     sheets = {Path(p).stem: str(ROOT / p) for p in exp["observations"]["records"]}
     order = [Path(p).stem for p in exp["observations"]["records"]]
     order += [Path(p).stem for p in exp.get("diagnosis", {}).get("heldout_records", [])]
