@@ -248,6 +248,7 @@ def real_misfit(rows: Sequence[Mapping], curves: Sequence, model: EmulatedSHPB, 
     mean (``rows``: one per record and mesh, ``curves`` their runs), under the instrument noise and the
     mesh scatter, the terms a real run's residual carries; a mesh with a failed run is left out."""
     post = {n: {"mean": v} for n, v in mean.items()}
+    errors = RecordErrors(dict(noise), simulator=dict(simulator))  # no surrogate term: these are real runs
     chi2: dict[int, float] = {}
     size: dict[int, int] = {}
     failed = set()
@@ -258,8 +259,7 @@ def real_misfit(rows: Sequence[Mapping], curves: Sequence, model: EmulatedSHPB, 
             failed.add(k)
             continue
         d = np.asarray(obs[rec], float) - y
-        C = noise[rec].dense() + (simulator[rec].dense() if rec in simulator else 0.0)
-        chi2[k] = chi2.get(k, 0.0) + float(d @ np.linalg.solve(C, d))
+        chi2[k] = chi2.get(k, 0.0) + float(errors.total(rec).chi2(d[:, None])[0])
         size[k] = size.get(k, 0) + d.size
     return [chi2[k] / max(1, size[k] - len(mean)) for k in sorted(chi2) if k not in failed]
 

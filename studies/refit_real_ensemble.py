@@ -33,9 +33,10 @@ from calibration.diagnose import measured_curve  # noqa: E402
 from calibration.model_error import run_mesh_seed  # noqa: E402
 from calibration.observations import read_observations  # noqa: E402
 from calibration.protocol import protocol_model  # noqa: E402
+from enkf.diagnosis import RecordErrors  # noqa: E402
 from shpb import effects as fx  # noqa: E402
 from studies.refit_check_scores import planted_values  # noqa: E402
-from studies.refit_real_misfit import _run  # noqa: E402
+from studies.reanchored_refit import _run  # noqa: E402
 from studies.sigma_t_bias import write  # noqa: E402
 
 
@@ -79,12 +80,7 @@ def main(argv=None) -> dict:
     names, calib = list(refit["names"]), list(refit["records"])
     obs_all = read_observations(run / "observations" / "obs.csv", run / "observations" / "obs.json")
     y = np.concatenate([obs_all.values[obs_all.record_slice(r)] for r in calib])
-    blocks = [noise[r].dense() + simulator[r].dense() for r in calib]
-    C = np.zeros((y.size, y.size))
-    i = 0
-    for b in blocks:
-        C[i:i + b.shape[0], i:i + b.shape[0]] = b
-        i += b.shape[0]
+    C = RecordErrors(dict(noise), simulator=dict(simulator)).calibration_error(calib).dense()  # block-diagonal
     lo, hi = (np.asarray(v, float) for v in protocol_model(model).box(names))
     sheets = {Path(p).stem: str(ROOT / p) for p in exp["observations"]["records"]}
     order = [Path(p).stem for p in exp["observations"]["records"]]

@@ -37,19 +37,11 @@ from calibration.model_error import check_replicate_count, run_mesh_seed  # noqa
 from calibration.observations import read_curve, read_observations  # noqa: E402
 from calibration.refit import refit_surrogate  # noqa: E402
 from shpb import effects as fx  # noqa: E402
+from studies.reanchored_refit import _run  # noqa: E402
 from studies.refit_check_scores import planted_values  # noqa: E402
 from studies.sigma_t_bias import write  # noqa: E402
 
 BASE = ("sigma_t", "E_t")
-
-
-def _run(task):
-    geometry, preset, sheet, params, seed, t_end = task
-    import pandas as pd
-    from shpb.simulate import simulate
-
-    out = simulate(geometry, preset, params=params, record=sheet, mesh_seed=seed, t_end=t_end)
-    return pd.DataFrame({"time_s": out.columns["time_s"], "stress_Pa": out.columns["stress_Pa"]})
 
 
 def misfit(y, f, C, peak: int) -> dict:
