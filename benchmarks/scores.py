@@ -13,7 +13,13 @@ the prior cannot match is sharpness *and* coverage at once, which a proper score
 * ``uninformative_share``: the share of twins the product flags ``uninformative``: a posterior that
   expects to score more than :data:`enkf.scores.INFORMATIVE_RATIO` of the prior's (the twin's
   ``score_over_prior``). Records written before that flag carry no such score; for them it is the flag of
-  their time, a 90 % interval over :data:`WIDTH_FLAG_OF_OLD_RECORDS` of the box.
+  their time, a 90 % interval over :data:`WIDTH_FLAG_OF_OLD_RECORDS` of the box;
+* ``product_flag``: the same twins split by the flag the product raises today, each part's coverage and
+  score. A calibrated posterior covers at its level whatever its data say, so also among the twins it
+  calls informative (conditioning on a function of the data keeps a Bayesian posterior's coverage); a
+  posterior that is sure only where it is wrong covers well overall and badly there. For records
+  written before the expected score it is estimated from their five quantiles
+  (:func:`score_over_prior_of`).
 
 The twins' records hold the reported intervals' quantiles, not the posterior members or samples, so the
 CRPS of the sample is not computed; a record's median is its ``q50`` where it holds one (the MCMC records
@@ -30,7 +36,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from enkf.scores import INFORMATIVE_RATIO, prior_quantiles
+from scipy import stats
+
+from enkf.scores import INFORMATIVE_RATIO, QUANTILES, expected_score_over_prior, prior_quantiles
 from enkf.scores import weighted_interval_score as _wis
 
 #: the ``uninformative`` flag of the records written before the expected score (their 90 % interval over
@@ -78,7 +86,61 @@ def proper_scores(rows: list, t: np.ndarray, lower: float, upper: float) -> dict
                     "twins_worse_than_prior": int(np.sum(wis > wis_prior)),
                     "median": " and ".join(sorted(medians)),
                     "reference": "Bracher et al. 2021, 50 % and 90 % central intervals and the median"},
-            "uninformative_share": float(np.mean(_flagged(rows, width))) if len(t) else None}
+            "uninformative_share": float(np.mean(_flagged(rows, width))) if len(t) else None,
+            "product_flag": product_flag_split(rows, t, lower, upper) if len(t) else None}
+
+
+#: how far a record's quantile function is extended beyond its 5 % and 95 % quantiles, as a fraction of
+#: the spacing to the next quantile inside (:func:`score_over_prior_of`)
+TAIL_FRACTION = 0.3
+_DRAWS = 4000
+
+
+def score_over_prior_of(row: dict, lower: float, upper: float) -> tuple[float, bool]:
+    """``(score_over_prior, estimated)`` of one twin's parameter: the record's own (the product's
+    :func:`enkf.scores.expected_score_over_prior` of its draws) where it holds one; else estimated from its
+    five quantiles as the expected score of draws from the piecewise-linear quantile function through them,
+    extended beyond the 5 % and 95 % quantiles by :data:`TAIL_FRACTION` of the spacing to the next one
+    (inside the box). Against the product's own on the default run's six posteriors: within 0.005 (the
+    fraction chosen on them, from 0 to 0.5 in steps: 0.3)."""
+    if row.get("score_over_prior") is not None:
+        return float(row["score_over_prior"]), False
+    q = [float(row[k]) for k in ("q05", "q25")] + [median_of(row)] + [float(row[k]) for k in ("q75", "q95")]
+    a = max(float(lower), q[0] - TAIL_FRACTION * (q[1] - q[0]))
+    b = min(float(upper), q[4] + TAIL_FRACTION * (q[4] - q[3]))
+    knots = np.maximum.accumulate(np.array([a, *q, b]))
+    levels = np.array([0.0, *QUANTILES.values(), 1.0])
+    draws = np.interp((np.arange(_DRAWS) + 0.5) / _DRAWS, levels, knots)
+    return float(expected_score_over_prior(draws, lower, upper)), True
+
+
+def _part(rows: list, t: np.ndarray, lower: float, upper: float) -> dict:
+    """Coverage (with a binomial test against the level) and the score over the prior's of some twins."""
+    n = len(rows)
+    out = {"n": n}
+    if not n:
+        return out
+    for level, (lo, hi), ref in (("50", ("q25", "q75"), 0.5), ("90", ("q05", "q95"), 0.9)):
+        k = int(sum(float(r[lo]) <= y <= float(r[hi]) for r, y in zip(rows, t)))
+        out[f"coverage_{level}"] = {"covered": k, "fraction": k / n,
+                                    "p_vs_level": float(stats.binomtest(k, n, ref).pvalue)}
+    prior = prior_row(lower, upper)
+    wis = sum(weighted_interval_score(r, y) for r, y in zip(rows, t))
+    out["wis_over_prior"] = float(wis / sum(weighted_interval_score(prior, y) for y in t))
+    return out
+
+
+def product_flag_split(rows: list, t, lower: float, upper: float) -> dict:
+    """The twins of one parameter split by the product's ``uninformative`` flag (module docstring):
+    ``{"uninformative_share", "estimated_from_quantiles", "informative": part, "uninformative": part}``,
+    each part's ``n``, 50 % and 90 % coverage and ``wis_over_prior``."""
+    t = np.asarray(t, float)
+    scored = [score_over_prior_of(r, lower, upper) for r in rows]
+    flag = np.array([s > INFORMATIVE_RATIO for s, _ in scored])
+    return {"uninformative_share": float(flag.mean()),
+            "estimated_from_quantiles": int(sum(e for _, e in scored)),
+            "informative": _part([r for r, f in zip(rows, flag) if not f], t[~flag], lower, upper),
+            "uninformative": _part([r for r, f in zip(rows, flag) if f], t[flag], lower, upper)}
 
 
 def _flagged(rows: list, width: np.ndarray) -> np.ndarray:

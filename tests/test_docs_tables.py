@@ -50,6 +50,29 @@ def test_the_censored_twins_table_is_generated_from_the_readme_table_s_json():
     assert float(wis[True]) > float(wis[False]) and int(well[True][5].split(" / ")[1].rstrip(" %")) >= 85
 
 
+def test_the_flag_split_table_is_generated_and_its_prose_is_its_rows():
+    """docs/inference.md splits the README table's twins by the product's uninformative flag
+    (tools/coverage_table.flag_table); the prose after it and the README quote its well-specified rows."""
+    sources = coverage_table.readme_block_sources((ROOT / "README.md").read_text())
+    text = (ROOT / "docs" / "inference.md").read_text()
+    start, end = text.index(coverage_table.FLAG_START), text.index(coverage_table.FLAG_END)
+    assert text[start:end + len(coverage_table.FLAG_END)] == coverage_table.flag_block(*sources)
+    rows = {tuple(c.strip() for c in r.split("|")[1:4]): [c.strip() for c in r.split("|")[4:8]]
+            for r in text[start:end].splitlines() if r.startswith("| well-specified")}
+    n_inf, cov_inf = rows[("well-specified", "`E_t`", "informative")][:2]
+    n_unin, _, _, wis_unin = rows[("well-specified", "`E_t`", "uninformative")]
+    k, n = cov_inf.split(" (")[0].split(" of ")
+    p = cov_inf.split("p = ")[1].rstrip(")")
+    flat = " ".join(text.split())
+    assert n == n_inf and float(p) < 0.01  # the informative E_t intervals are too sure
+    assert (f"it informative on {n} of the {int(n) + int(n_unin)} well-specified twins and those 90 % intervals hold the "
+            f"truth in {k} (binomial p = {p} against 90 %); the {n_unin} it flags cover at their level but score "
+            f"{wis_unin} of the prior's") in flat
+    assert float(rows[("well-specified", "`sigma_t`", "informative")][1].split("p = ")[1].rstrip(")")) > 0.05
+    readme = " ".join((ROOT / "README.md").read_text().split())
+    assert f"those the verdict does not flag held the truth in {k} of {n} twins at 90 %" in readme
+
+
 def test_the_readme_quotes_the_default_runs_time_from_its_idle_benchmark():
     # a fresh clone on an idle machine (benchmarks/bench_default_run.py, the current code as "new")
     bench = json.loads((ROOT / "benchmarks" / "results" / "bench_default_run_idle.json").read_text())

@@ -26,11 +26,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run as a script: the harness's bars are benchmarks.scores
 
 from benchmarks.scores import (COVERAGE_90_BAR, COVERAGE_90_MISSPECIFIED_MIN, SBC_ALPHA,  # noqa: E402
-                               WIDTH_FLAG_OF_OLD_RECORDS, WIS_BAR, set_verdict_of)
+                               WIS_BAR, set_verdict_of)
 from enkf.scores import INFORMATIVE_RATIO  # noqa: E402
 
 START, END = "<!-- coverage-table:start -->", "<!-- coverage-table:end -->"
 CENSORED_START, CENSORED_END = "<!-- censored-table:start -->", "<!-- censored-table:end -->"
+FLAG_START, FLAG_END = "<!-- flag-table:start -->", "<!-- flag-table:end -->"
 INFERENCE_DOC = ROOT / "docs" / "inference.md"
 NAMES = ("sigma_t", "E_t")
 #: a benchmark's sets with twins, in the table's order (bench_coverage.py)
@@ -69,6 +70,11 @@ def _label(bench: dict, name: str) -> str:
     return f"misspecified (data from the `standard` mesh{extra})"
 
 
+def _unin(q: dict) -> str:
+    """The share the product flags ``uninformative`` (benchmarks.scores.product_flag_split)."""
+    return _pct(q["product_flag"]["uninformative_share"])
+
+
 def _width(q: dict) -> str:
     return f"{q['width_over_prior_median']:.2f}"
 
@@ -92,7 +98,7 @@ def _failed(v: dict) -> str:
 def _row(bench: dict, name: str, source: str) -> str:
     rep, ens = reported(bench, name), bench[name]["summary"]
     p, e = rep["params"], ens["params"]
-    missing = [f"{name}.{x}.{k}" for x in NAMES for k in ("wis_over_prior", "uninformative_share")
+    missing = [f"{name}.{x}.{k}" for x in NAMES for k in ("wis_over_prior", "product_flag")
                if k not in p.get(x, {})]
     if missing:
         raise ValueError(f"coverage table: {source} has no {missing[0]} (scored before the proper scores): run "
@@ -106,7 +112,7 @@ def _row(bench: dict, name: str, source: str) -> str:
             f"| {both(lambda q: _cov(q['coverage_50']))} "
             f"| {both(_width)} "
             f"| {both(lambda q: _pct(q['coverage_90']['fraction']), e)} "
-            f"| {both(_wis)} | {both(lambda q: _pct(q['uninformative_share']))} "
+            f"| {both(_wis)} | {both(_unin)} "
             f"| {_failed(set_verdict_of(name, rep))} |")
 
 
@@ -149,15 +155,17 @@ def table(entries: list) -> str:
 
 
 def _flag_words(entries) -> str:
-    """What the uninformative column counts: each record's own flag (benchmarks.scores)."""
+    """What the uninformative column counts: the product's flag, read from each record or estimated from
+    its quantiles (benchmarks.scores.score_over_prior_of)."""
     params = [p for _, bench in entries for name in SETS for t in (bench.get(name) or {}).get("twins") or []
               for p in ((t.get("emulator_mcmc") or {}).get("params") or t.get("params") or {}).values()]
     scored = sum(p.get("score_over_prior") is not None for p in params)
-    new = f"twins whose posterior expects over {INFORMATIVE_RATIO} of the prior's score"
-    old = f"twins whose 90 % interval spans over {WIDTH_FLAG_OF_OLD_RECORDS} of the box"
+    words = f"twins whose posterior expects over {INFORMATIVE_RATIO} of the prior's score, the product's flag"
     if scored == len(params):
-        return new
-    return old if scored == 0 else f"{new} (records written before that score: {old})"
+        return words
+    if scored == 0:
+        return words + ", estimated from each record's five quantiles (the records predate that score)"
+    return words + ", estimated from the five quantiles of the records written before that score"
 
 
 # A twin's post-peak is not in its window when the observed maximum lies this close to the window's end
@@ -209,8 +217,45 @@ def censored_table(entries: list) -> str:
                 rows.append(f"| {_label(bench, name)} | `{Path(src).name}` | {label} | {len(part)} "
                             f"| {' / '.join(_pct(q[x]['coverage_90'].get('fraction_counting_failures_as_misses', q[x]['coverage_90']['fraction'])) for x in NAMES)} "
                             f"| {' / '.join(_wis(q[x]) for x in NAMES)} "
-                            f"| {' / '.join(_pct(q[x]['uninformative_share']) for x in NAMES)} |")
+                            f"| {' / '.join(_unin(q[x]) for x in NAMES)} |")
     return "\n".join(["The same posteriors scored apart by whether the twin's window holds its post-peak:", "", *rows])
+
+
+def _part_wis(part: dict) -> str:
+    return "-" if part.get("wis_over_prior") is None else f"{part['wis_over_prior']:.2f}"
+
+
+def _flag_cell(part: dict) -> str:
+    c = part.get("coverage_90")
+    return "-" if c is None else f"{c['covered']} of {part['n']} (p = {c['p_vs_level']:.3f})"
+
+
+def flag_table(entries: list) -> str:
+    """Per set and parameter, the reported posterior's twins split by the product's ``uninformative``
+    flag (benchmarks.scores.product_flag_split): a calibrated posterior covers at its level in both parts."""
+    rows = ["| twins | parameter | the product says | n | 90 % interval covers (binomial p against 90 %) "
+            "| 50 % interval covers | WIS / prior's |", "|---|---|---|---|---|---|---|"]
+    for src, bench in entries:
+        for name in SETS:
+            if not (bench.get(name) or {}).get("twins"):
+                continue
+            for x in NAMES:
+                split = reported(bench, name)["params"][x]["product_flag"]
+                for key in ("informative", "uninformative"):
+                    part = split[key]
+                    c50 = part.get("coverage_50")
+                    rows.append(f"| {_label(bench, name)} | `{x}` | {key} | {part['n']} | {_flag_cell(part)} "
+                                f"| {'-' if c50 is None else _pct(c50['fraction'])} "
+                                f"| {_part_wis(part)} |")
+    head = ("The same posteriors split by whether the product calls each parameter `uninformative` in a run's "
+            f"verdict ({_flag_words(entries)}):")
+    return "\n".join([head, "", *rows])
+
+
+def flag_block(*paths: str) -> str:
+    """docs/inference.md's block: :func:`flag_table` of the README table's JSONs ``paths``."""
+    entries = [(p, json.loads((ROOT / p).read_text())) for p in paths]
+    return f"{FLAG_START}\n{flag_table(entries)}\n{FLAG_END}"
 
 
 def block(*paths: str) -> str:
@@ -235,13 +280,15 @@ def main(argv) -> int:
     paths = [a for a in argv[1:] if a != "--readme"]
     if "--readme" in argv:
         for doc, (start, end), make in ((ROOT / "README.md", (START, END), block),
-                                        (INFERENCE_DOC, (CENSORED_START, CENSORED_END), censored_block)):
+                                        (INFERENCE_DOC, (CENSORED_START, CENSORED_END), censored_block),
+                                        (INFERENCE_DOC, (FLAG_START, FLAG_END), flag_block)):
             text = doc.read_text()
             a, b = text.index(start), text.index(end) + len(end)
             doc.write_text(text[:a] + make(*paths) + text[b:])
     else:
         print(block(*paths))
         print(censored_block(*paths))
+        print(flag_block(*paths))
     return 0
 
 
