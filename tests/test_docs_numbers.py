@@ -422,7 +422,7 @@ QUOTES: list[Quote] = [
     Quote("README.md", "held 83 % / 83 % (bar 80 %)", by=HARNESS),
     Quote("README.md", "rate dependence `E_t` 75 % (bar not met)", by=HARNESS),
     Quote("README.md", "78 % / 71 % well-specified", by=HARNESS),
-    Quote("README.md", "those the verdict does not flag held the truth in 10 of 16 twins at 90 %", by=FLAG_SPLIT),
+    Quote("README.md", "those the verdict calls informative held the truth in 10 of 16 twins at 90 %", by=FLAG_SPLIT),
     Quote("docs/inference.md", "it informative on 16 of the 100 well-specified twins and those 90 % intervals hold the truth "
           "in 10 (binomial p = 0.003 against 90 %); the 84 it flags cover at their level but score 0.75 of the prior's",
           by=FLAG_SPLIT),

@@ -70,7 +70,7 @@ def test_the_flag_split_table_is_generated_and_its_prose_is_its_rows():
             f"{wis_unin} of the prior's") in flat
     assert float(rows[("well-specified", "`sigma_t`", "informative")][1].split("p = ")[1].rstrip(")")) > 0.05
     readme = " ".join((ROOT / "README.md").read_text().split())
-    assert f"those the verdict does not flag held the truth in {k} of {n} twins at 90 %" in readme
+    assert f"those the verdict calls informative held the truth in {k} of {n} twins at 90 %" in readme
 
 
 def test_the_readme_quotes_the_default_runs_time_from_its_idle_benchmark():
