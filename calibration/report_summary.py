@@ -16,6 +16,7 @@ from collections.abc import Mapping
 from html import escape
 
 from enkf.scores import INFORMATIVE_RATIO
+from .scored import learned_holds
 
 __all__ = ["summary_html"]
 
@@ -90,13 +91,14 @@ def _parameters(s: Mapping) -> list[str]:
     header = (["parameter", "posterior mean", "90 % interval", "unit"] + (["expected score / prior's"] if scored else [])
               + (["truth"] if truth else []))
     rows = []
+    holds = learned_holds(s.get("posterior_form"))
     for p, q in post.items():
         q = q if isinstance(q, Mapping) else {}
         f, unit = _unit(p)
         row = [escape(str(p)), _num(q.get("mean"), f), f"[{_num(q.get('q05'), f)}, {_num(q.get('q95'), f)}]",
                escape(unit)]
         if scored:
-            row.append(_learned(q.get("score_over_prior")))
+            row.append(_learned(q.get("score_over_prior"), holds.get(p)))
         if truth:
             t = truth.get(p)
             inside = (t is not None and _num(q.get("q05")) != "?" and _num(q.get("q95")) != "?"
@@ -107,12 +109,18 @@ def _parameters(s: Mapping) -> list[str]:
             _table(header, rows)]
 
 
-def _learned(ratio) -> str:
+def _learned(ratio, holds: bool | None = None) -> str:
     """The score a parameter's posterior expects over the prior box's, and whether that counts as learned
-    (calibration.verdict's ``uninformative``)."""
+    (calibration.verdict's ``uninformative``); ``holds`` False: the coverage harness found this form's
+    intervals of the parameter too sure where it counts as learned (calibration.scored.learned_holds)."""
     if ratio is None:
         return "-"
-    return f"{float(ratio):.2f} ({'learned' if float(ratio) <= INFORMATIVE_RATIO else 'not constrained: mostly the prior'})"
+    if float(ratio) > INFORMATIVE_RATIO:
+        return f"{float(ratio):.2f} (not constrained: mostly the prior)"
+    if holds is False:
+        return (f"{float(ratio):.2f} (learned, but on the coverage harness's twins this form's intervals of it held "
+                "the truth less often than stated where it counts as learned: read it as the prior narrowed)")
+    return f"{float(ratio):.2f} (learned)"
 
 
 def _scored(s: Mapping) -> str:

@@ -92,6 +92,21 @@ def test_each_scored_form_is_its_benchmarks_and_the_default_twins():
     assert posterior_form(spec, exp)["scored_by"] == shipped[0]["benchmark"]
 
 
+def test_each_scored_form_says_where_its_learned_intervals_held():
+    """SCORED's learned_holds is its benchmark's split by the product's flag (benchmarks/scores.py): a
+    parameter's learned intervals hold unless their 90 % coverage is rejected at LEARNED_ALPHA."""
+    from calibration.scored import LEARNED_ALPHA, SCORED, learned_holds
+
+    for entry in SCORED:
+        bench = json.loads((REPO / entry["benchmark"]).read_text())
+        key = "summary_emulator_mcmc" if bench["reported_posterior"] == "emulator_mcmc" else "summary"
+        params = bench["well_specified"][key]["params"]
+        assert entry["learned_holds"] == {p: params[p]["product_flag"]["informative"]["coverage_90"]["p_vs_level"]
+                                          >= LEARNED_ALPHA for p in params}, entry["benchmark"]
+        assert learned_holds({**entry["form"], "scored_by": None}) == entry["learned_holds"]
+    assert learned_holds({"posterior": "ensemble"}) == {} and learned_holds(None) == {}
+
+
 def test_a_summary_says_whether_its_form_was_scored():
     """Another ensemble size, another prior box, another preset or another form is not the scored loop:
     its summary says so (scored_by None) and names where the same form was scored, as every measured
