@@ -4,8 +4,9 @@ whole prior box, generated from the coverage benchmark's JSON (one source for th
     python tools/coverage_table.py benchmarks/results/coverage_well_specified.json [more.json]          # print
     python tools/coverage_table.py benchmarks/results/coverage_well_specified.json [more.json] --readme # rewrite
 
-(``--readme`` also rewrites docs/inference.md's table of the same twins split by whether the window
-holds their post-peak, :func:`censored_table`.)
+(``--readme`` also rewrites docs/inference.md's tables of the same twins split by whether the window
+holds their post-peak, :func:`censored_table`, and by the product's ``uninformative`` flag,
+:func:`flag_table`.)
 
 Each JSON is a ``benchmarks/bench_coverage.py`` output; each of its sets with twins (well-specified,
 misspecified) is one row, with the weighted interval score over the prior's, the ``uninformative`` share
@@ -254,19 +255,22 @@ def flag_table(entries: list) -> str:
 
 def flag_block(*paths: str) -> str:
     """docs/inference.md's block: :func:`flag_table` of the README table's JSONs ``paths``."""
-    entries = [(p, json.loads((ROOT / p).read_text())) for p in paths]
-    return f"{FLAG_START}\n{flag_table(entries)}\n{FLAG_END}"
+    return f"{FLAG_START}\n{flag_table(_entries(paths))}\n{FLAG_END}"
+
+
+def _entries(paths) -> list:
+    """``[(path, benchmark dict), ...]`` of the JSONs ``paths`` (relative to the repository root)."""
+    return [(p, json.loads((ROOT / p).read_text())) for p in paths]
 
 
 def block(*paths: str) -> str:
     """The README block from the benchmark JSONs ``paths`` (relative to the repository root)."""
-    return f"{START}\n{table([(p, json.loads((ROOT / p).read_text())) for p in paths])}\n{END}"
+    return f"{START}\n{table(_entries(paths))}\n{END}"
 
 
 def censored_block(*paths: str) -> str:
     """docs/inference.md's block: :func:`censored_table` of the README table's JSONs ``paths``."""
-    entries = [(p, json.loads((ROOT / p).read_text())) for p in paths]
-    return f"{CENSORED_START}\n{censored_table(entries)}\n{CENSORED_END}"
+    return f"{CENSORED_START}\n{censored_table(_entries(paths))}\n{CENSORED_END}"
 
 
 def readme_block_sources(text: str) -> list:
