@@ -74,9 +74,7 @@ def prior_row(lower: float, upper: float) -> dict:
 def proper_scores(rows: list, t: np.ndarray, lower: float, upper: float) -> dict:
     """A set's proper scores of one parameter: ``rows`` its twins' parameter rows, ``t`` the truths."""
     w = float(upper - lower)
-    prior = prior_row(lower, upper)
-    wis = np.array([weighted_interval_score(r, y) for r, y in zip(rows, t)])
-    wis_prior = np.array([weighted_interval_score(prior, y) for y in t])
+    wis, wis_prior = _wis_against_prior(rows, t, lower, upper)
     width = np.array([(float(r["q95"]) - float(r["q05"])) / w for r in rows])
     medians = {MEDIAN_FROM_MIDPOINT if r.get("q50") is None else "q50" for r in rows}
     return {"wis_over_prior": float(wis.mean() / wis_prior.mean()) if len(t) else None,
@@ -123,9 +121,8 @@ def _part(rows: list, t: np.ndarray, lower: float, upper: float) -> dict:
         k = int(sum(float(r[lo]) <= y <= float(r[hi]) for r, y in zip(rows, t)))
         out[f"coverage_{level}"] = {"covered": k, "fraction": k / n,
                                     "p_vs_level": float(stats.binomtest(k, n, ref).pvalue)}
-    prior = prior_row(lower, upper)
-    wis = sum(weighted_interval_score(r, y) for r, y in zip(rows, t))
-    out["wis_over_prior"] = float(wis / sum(weighted_interval_score(prior, y) for y in t))
+    wis, wis_prior = _wis_against_prior(rows, t, lower, upper)
+    out["wis_over_prior"] = float(wis.mean() / wis_prior.mean())
     return out
 
 
@@ -140,6 +137,13 @@ def product_flag_split(rows: list, t, lower: float, upper: float) -> dict:
             "estimated_from_quantiles": int(sum(e for _, e in scored)),
             "informative": _part([r for r, f in zip(rows, flag) if not f], t[~flag], lower, upper),
             "uninformative": _part([r for r, f in zip(rows, flag) if f], t[flag], lower, upper)}
+
+
+def _wis_against_prior(rows: list, t, lower: float, upper: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each twin's WIS and the box's uniform prior's at the same truth."""
+    prior = prior_row(lower, upper)
+    return (np.array([weighted_interval_score(r, y) for r, y in zip(rows, t)]),
+            np.array([weighted_interval_score(prior, y) for y in t]))
 
 
 def _flagged(rows: list, width: np.ndarray) -> np.ndarray:

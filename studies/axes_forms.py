@@ -34,16 +34,12 @@ from benchmarks.bench_coverage import truths, twin_experiment  # noqa: E402
 from benchmarks.scores import product_flag_split  # noqa: E402
 from calibration.experiment import ExperimentSpec  # noqa: E402
 from enkf.scores import QUANTILES, prior_expected_wis, weighted_interval_score  # noqa: E402
-from studies.pit_recalibration import (GRID, cdf_at, grid_of, grid_weights, kept_twin,  # noqa: E402
+from studies.pit_recalibration import (GRID, cdf_at, cdfs_of, grid_of, grid_weights, kept_twin,  # noqa: E402
                                        quantile_at)
 from studies.sigma_t_bias import write  # noqa: E402
 
 FORMS = ("power", "axes_marginal", "axes_stretch")
 NAMES = ("sigma_t", "E_t")
-
-
-def _cdf(w: np.ndarray, a: int) -> np.ndarray:
-    return np.concatenate([[0.0], np.cumsum(w.sum(axis=1 - a))])
 
 
 def axis_lambdas(pseudo, P: np.ndarray) -> list[float]:
@@ -71,8 +67,8 @@ def study_twin(keep: Path, kind: str, i: int, seed: int, truth: np.ndarray) -> d
     out = {"seed": 1000 * seed + i, "kind": kind, "lambda": lam, "lambda_axes": dict(zip(NAMES, lam_axes)),
            "truth": dict(zip(NAMES, map(float, truth))), "forms": {f: {} for f in FORMS}}
     for a, name in enumerate(NAMES):
-        c_power = _cdf(power, a)
-        c_axis = _cdf(grid_weights(chi2, lam_axes[a]), a)
+        c_power = cdfs_of(power)[a]
+        c_axis = cdfs_of(grid_weights(chi2, lam_axes[a]))[a]
         q_power = {k: quantile_at(c_power, edges[a], lv) for k, lv in QUANTILES.items()}
         f = np.sqrt(lam_axes[a] / lam)
         stretched = {k: float(np.clip(q_power["q50"] + f * (v - q_power["q50"]), lo[a], hi[a]))
@@ -101,8 +97,8 @@ def summarise(rows: list[dict], lo, hi) -> dict:
                 "coverage_50": float(np.mean([x["q25"] <= y <= x["q75"] for x, y in zip(r, t)])),
                 "pit_ks_p": float(stats.kstest(pit, "uniform").pvalue) if len(pit) == len(r) else None,
                 "wis_over_prior": float(np.mean([x["wis_over_width"] for x in r]) / prior_expected_wis(0.0, 1.0)),
-                "informative": {k: split["informative"].get("coverage_90", {}).get(k) for k in ("covered",)}
-                | {"n": split["informative"]["n"]}}
+                "informative": {"covered": split["informative"].get("coverage_90", {}).get("covered"),
+                                "n": split["informative"]["n"]}}
     return out
 
 

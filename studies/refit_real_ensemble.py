@@ -29,7 +29,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from calibration.diagnose import measured_curve  # noqa: E402
+from calibration.diagnose import measured_curve, record_params  # noqa: E402
 from calibration.model_error import run_mesh_seed  # noqa: E402
 from calibration.observations import read_observations  # noqa: E402
 from calibration.protocol import protocol_model  # noqa: E402
@@ -95,8 +95,8 @@ def main(argv=None) -> dict:
             for j in range(args.members):
                 point = dict(zip(names, X[:, j]))
                 for rec in calib:
-                    own = {fx.split_record(n)[0]: v for n, v in point.items() if fx.split_record(n)[1] in (None, rec)}
-                    base, phys, _ = fx.split_params(own)  # measurement effects act on the curve, not the run
+                    # measurement effects act on the curve, not the run
+                    base, phys, _ = fx.split_params(record_params(point, rec))
                     tasks.append((exp["geometry"], exp["preset"], sheets[rec], {**nulls, **base, **phys},
                                   run_mesh_seed(exp, "check", 0, 0, order.index(rec)),
                                   float(exp["simulation"]["t_end"])))

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import subprocess
 import sys
 from pathlib import Path
 
@@ -127,14 +128,8 @@ def main(argv=None) -> dict:
 
 
 def _commit(root: Path) -> str | None:
-    head = root / ".git" / "HEAD"
-    if not head.exists():
-        return None
-    ref = head.read_text().strip()
-    if ref.startswith("ref: "):
-        target = root / ".git" / ref[5:]
-        return target.read_text().strip() if target.exists() else None
-    return ref
+    out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, check=False)
+    return out.stdout.strip() or None
 
 
 if __name__ == "__main__":
