@@ -218,6 +218,19 @@ def _synthetic_likelihood(J) -> dict:
     return {"m": d["meshes"], "st": held["sigma_t"], "et": held["E_t"], "n": len(d["twins"])}
 
 
+def _bank(J) -> dict:
+    """studies/bank_ceiling.py's likelihood-free yardstick: its held-out bank runs and the smaller banks."""
+    d = J("studies/results/bank_ceiling.json")
+    loo = d["bank_leave_one_out"][str(d["k"])]
+    quoted = (1000, 3000)  # the smaller banks the doc quotes, each at its best k
+    best = {p: [min(r[p]["wis_over_prior"] for r in d["bank_sizes"] if r["runs"] == n) for n in quoted]
+            for p in ("sigma_t", "E_t")}
+    return {"N": d["bank_runs"], "n": d["reference_runs"], "r1": quoted[0], "r3": quoted[1], "c1": loo["sigma_t"]["coverage_90"], "c2": loo["E_t"]["coverage_90"],
+            "s": loo["sigma_t"]["wis_over_prior"], "e": loo["E_t"]["wis_over_prior"],
+            "l": loo["E_t"]["called_learned"]["coverage_90"]["fraction"],
+            "s1": best["sigma_t"][0], "s3": best["sigma_t"][1], "e1": best["E_t"][0], "e3": best["E_t"][1]}
+
+
 def _planted_score(J) -> dict:
     """The planted-effect benchmark's null and physical-effect counts (benchmarks/results/bench_planted.json)."""
     from benchmarks.bench_planted import bar_counts
@@ -415,6 +428,11 @@ QUOTES: list[Quote] = [
           lambda J: _loro_idle(J)),
     Quote("docs/workflow.md", "and {m:.0f} min with the code this page describes (run `current_idle`, the same answers "
           "again), of whose job time the refinement runs are {r:.0f} %", lambda J: _loro_idle(J, "current_idle")),
+    Quote("docs/inference.md", "draws {N} twins as the\n  harness does", _bank),
+    Quote("docs/inference.md", "Held out run by run over its {n}\n  reference runs it covers {c1:.3f} / {c2:.3f} at 90 % "
+          "and scores {s:.3f} (`sigma_t`) and {e:.3f} (`E_t`) of the\n  prior's, and where it would call `E_t` learned "
+          "its intervals hold {l:.3f}; banks of {r1} to {r3} runs\n  score {s1:.3f}-{s3:.3f} and {e1:.3f}-{e3:.3f} "
+          "on common twins", _bank),
     Quote("README.md", "covers 90 % with uniform ranks", by=HARNESS),
     Quote("README.md", "(`sigma_t` 94 %, `E_t` 85 %, the bar's lower edge)", by=HARNESS),
     Quote("README.md", "on the planted-effect benchmark the nulls added nothing in {n_ok} of {n} series, but a physical effect "
