@@ -433,6 +433,8 @@ QUOTES: list[Quote] = [
           "and scores {s:.3f} (`sigma_t`) and {e:.3f} (`E_t`) of the\n  prior's, and where it would call `E_t` learned "
           "its intervals hold {l:.3f}; banks of {r1} to {r3} runs\n  score {s1:.3f}-{s3:.3f} and {e1:.3f}-{e3:.3f} "
           "on common twins", _bank),
+    Quote("README.md", "a calibrated posterior without a likelihood, from {N} runs of the\n  same twin: "
+          "{s:.2f} and {e:.2f}", _bank),
     Quote("README.md", "covers 90 % with uniform ranks", by=HARNESS),
     Quote("README.md", "(`sigma_t` 94 %, `E_t` 85 %, the bar's lower edge)", by=HARNESS),
     Quote("README.md", "on the planted-effect benchmark the nulls added nothing in {n_ok} of {n} series, but a physical effect "
