@@ -88,7 +88,7 @@ from scipy.stats import qmc
 from calibration.experiment import (ExperimentSpec, analysis_record, build_process, mesh_seed, params_frame,
                                     reported_ensemble, rng_for, run_mesh_seed)
 from enkf import prediction_interval_dict
-from enkf.selfcal import TEMPERINGS
+from enkf.selfcal import RECALIBRATIONS, TEMPERINGS
 from calibration.posterior import refine_design, sample_posterior
 from shpb.atomic import atomic_write_bytes, atomic_write_text, emit_json
 from calibration.observations import curve_on_grid, observation_grid, twin_observations, with_approximation_error
@@ -137,14 +137,16 @@ def run_twin(pool, exp: dict, truth: np.ndarray, seed: int, data_preset: str, ap
     :func:`approximation_pairs`, applied to the twin's data (None: the data as observed). ``keep``: a
     file to pickle the twin's runs to (``(spec, params, responses, analyses, obs)``); where it exists the
     runs are read from it instead (another reported posterior scored on the same runs: only the settings
-    the loop does not read, ``self_calibrate``, ``emulator_error`` and the refinement's, may differ from the
-    runs' own; the refinement batch is pickled beside them, ``<keep>.refine.pkl``)."""
+    the loop does not read, ``self_calibrate``, ``emulator_error``, ``tempering``, ``recalibrate`` and the
+    refinement's, may differ from the runs' own; the refinement batch is pickled beside them,
+    ``<keep>.refine.pkl``)."""
     if keep is not None and keep.is_file():
         kept, params, responses, analyses, obs = pickle.loads(keep.read_bytes())
         # only what the loop does not read may differ from the runs' own settings
         spec = ExperimentSpec.from_config(EXPERIMENT, {**exp, "seed": seed})
         if not _same_spec(replace(kept, self_calibrate=spec.self_calibrate, emulator_error=spec.emulator_error,
-                                  tempering=spec.tempering, refine_runs=spec.refine_runs,
+                                  tempering=spec.tempering, recalibrate=spec.recalibrate,
+                                  refine_runs=spec.refine_runs,
                                   refine_temper=spec.refine_temper), spec):
             raise SystemExit(f"{keep}: its runs were made with another loop than this twin's")
     else:
@@ -289,7 +291,10 @@ def _mcmc_record(spec, truth, seed, params, responses, analyses, obs, refine=Non
     d = post.diagnostics
     out["sampler"] = {k: d.get(k) for k in ("converged_chain", "effective_samples", "acceptance_fraction",
                                             "emulated_mean_chi2_per_obs", "steps")}
-    out["self_calibration_lambda"] = ((d.get("emulator_error") or {}).get("self_calibration") or {}).get("lambda")
+    sc = (d.get("emulator_error") or {}).get("self_calibration") or {}
+    out["self_calibration_lambda"] = sc.get("lambda")
+    if "recalibration" in sc:
+        out["recalibration"] = sc["recalibration"]
     return out
 
 
@@ -504,6 +509,8 @@ def main(argv=None) -> dict:
                     help="override emulated.emulator_error (the reported posterior's emulator error, enkf.hetero)")
     ap.add_argument("--tempering", choices=list(TEMPERINGS), default=None,
                     help="override emulated.tempering (how the self-calibration widens the reported posterior)")
+    ap.add_argument("--recalibrate", choices=list(RECALIBRATIONS), default=None,
+                    help="override emulated.recalibrate (the reported posterior's location set by the pseudo-runs)")
     ap.add_argument("--refine-runs", type=int, default=None,
                     help="override emulated.refine_runs (0: the reported posterior on the loop's runs alone)")
     ap.add_argument("--keep-runs", default=None,
@@ -536,6 +543,8 @@ def main(argv=None) -> dict:
         exp["emulated"] = {**exp.get("emulated", {}), "refine_runs": args.refine_runs}
     if args.tempering is not None:
         exp["emulated"] = {**exp.get("emulated", {}), "tempering": args.tempering}
+    if args.recalibrate is not None:
+        exp["emulated"] = {**exp.get("emulated", {}), "recalibrate": args.recalibrate}
     spec = ExperimentSpec.from_config(EXPERIMENT, exp)
     # a development run's overrides name its own cache folder, so that it never mixes with the default's
     tag = "_".join(f"{k}-{v}" for k, v in (("mesh", args.mesh), ("replicates", args.replicates),
@@ -548,7 +557,9 @@ def main(argv=None) -> dict:
                                             # the refined form's twins in a folder of their own
                                             ("refine", spec.refine_runs or None),
                                             # the curvature form's twins in a folder of their own
-                                            ("tempering", "curvature" if spec.tempering == "curvature" else None))
+                                            ("tempering", "curvature" if spec.tempering == "curvature" else None),
+                                            # the recalibrated form's twins in a folder of their own
+                                            ("recalibrate", None if spec.recalibrate == "none" else spec.recalibrate))
                       if v is not None)
     # the pairs' curves do not depend on coarse_variability: one file per seed in approx-<n>/, the counted
     # form's twins beside them (its folder from before the subtracted form), the subtracted form's in their own
@@ -612,7 +623,7 @@ def main(argv=None) -> dict:
            "emulator_smoothing": (exp.get("emulated") or {}).get("smoothing", "loo"),
            "self_calibrate": bool((exp.get("emulated") or {}).get("self_calibrate", False)),
            "emulator_error": (exp.get("emulated") or {}).get("emulator_error", "ar1"),
-           "tempering": spec.tempering,
+           "tempering": spec.tempering, "recalibrate": spec.recalibrate,
            "refine_runs": spec.refine_runs, "refine_temper": spec.refine_temper if spec.refine_runs else None,
            "reported_posterior": exp.get("posterior", "ensemble"), "cores": os.cpu_count(),
            "approximation_pairs": args.approximation_pairs,

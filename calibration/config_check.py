@@ -81,7 +81,8 @@ def _schema_errors(config, schema) -> list[str]:
 
 
 #: settings that only the reported emulator posterior reads (posterior: emulator_mcmc)
-_EMULATOR_POSTERIOR_ONLY = ("self_calibrate", "emulator_error", "tempering", "refine_runs", "refine_temper")
+_EMULATOR_POSTERIOR_ONLY = ("self_calibrate", "emulator_error", "tempering", "recalibrate", "refine_runs",
+                            "refine_temper")
 
 
 def _posterior_option_errors(config: Mapping, schema: Mapping) -> list[str]:
@@ -91,7 +92,13 @@ def _posterior_option_errors(config: Mapping, schema: Mapping) -> list[str]:
     default = schema["properties"]["experiments"]["additionalProperties"]["properties"]["posterior"]["default"]
     errors = []
     for name, exp in (config.get("experiments") or {}).items():
+        em = exp.get("emulated") or {}
         if exp.get("posterior", default) != "ensemble":
+            if em.get("recalibrate", "none") != "none" and (em.get("self_calibrate") is False
+                                                             or em.get("tempering", "power") != "power"):
+                errors.append(f"experiments.{name}.emulated.recalibrate: {em['recalibrate']!r} reads the "
+                              "self-calibration's pseudo-runs under the power tempering; it needs self_calibrate: "
+                              "true and tempering: power")
             continue
         for key in _EMULATOR_POSTERIOR_ONLY:
             if key in (exp.get("emulated") or {}):

@@ -101,6 +101,7 @@ class ExperimentSpec:
     self_calibrate: bool = True
     emulator_error: str = "ar1"
     tempering: str = "power"
+    recalibrate: str = "none"
     refine_runs: int = 25
     refine_temper: float = 4.0
 
@@ -143,6 +144,7 @@ class ExperimentSpec:
                    self_calibrate=bool(emulated.get("self_calibrate", cls.self_calibrate)),
                    emulator_error=str(emulated.get("emulator_error", cls.emulator_error)),
                    tempering=str(emulated.get("tempering", cls.tempering)),
+                   recalibrate=str(emulated.get("recalibrate", cls.recalibrate)),
                    refine_runs=int(emulated.get("refine_runs", cls.refine_runs)),
                    refine_temper=float(emulated.get("refine_temper", cls.refine_temper)))
 

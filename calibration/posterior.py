@@ -62,7 +62,7 @@ def sample_posterior(spec: ExperimentSpec, params: Sequence[pd.DataFrame], respo
                               smoothing=spec.smoothing, loo_scale=terms.likelihood().std,
                               self_calibrate=spec.self_calibrate,
                               heteroscedastic=spec.emulator_error == "heteroscedastic", temper=temper,
-                              tempering=spec.tempering)
+                              tempering=spec.tempering, recalibrate=spec.recalibrate)
 
 
 def refine_batch(spec: ExperimentSpec, params: pd.DataFrame, status: pd.DataFrame, Y: np.ndarray) -> tuple:

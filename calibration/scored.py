@@ -44,7 +44,12 @@ def _form_of(spec) -> dict:
             "emulator_error": spec.emulator_error, "refine_runs": int(spec.refine_runs)}
     # every benchmark in SCORED ran the power tempering, before the key existed: the form names its
     # tempering only where it is another, so that such a form matches none of them
-    return form if spec.tempering == "power" else {**form, "tempering": spec.tempering}
+    if spec.tempering != "power":
+        form["tempering"] = spec.tempering
+    # likewise the recalibration, which no benchmark in SCORED used
+    if spec.recalibrate != "none":
+        form["recalibrate"] = spec.recalibrate
+    return form
 
 
 def _loop_of(spec, exp: Mapping) -> dict:

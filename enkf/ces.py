@@ -58,9 +58,11 @@ from .emulator import design_arrays, smoothed_emulator
 from .hetero import emulated_deviance
 from .sampling import latin_hypercube
 from .scores import QUANTILES, expected_score_over_prior
-from .selfcal import TEMPERINGS, box_minimum, self_calibration
+from .selfcal import (RECALIBRATIONS, TEMPERINGS, box_minimum, location_shift, pseudo_pits, recalibrated,
+                      self_calibration)
 
-__all__ = ["EmulatorPosterior", "emulator_posterior", "interval_summary", "QUANTILES", "TEMPERINGS"]
+__all__ = ["EmulatorPosterior", "emulator_posterior", "interval_summary", "QUANTILES", "RECALIBRATIONS",
+           "TEMPERINGS"]
 
 
 
@@ -127,13 +129,34 @@ def _tempered(loglik, lam: float, tempering: str, lo, hi, starts):
     return (lambda P: base(theta_hat + (P - theta_hat) * shrink)), theta_hat
 
 
+#: points of the quasi-random grid on which each pseudo-run's posterior is read (``recalibrate``): 2^14,
+#: about the 121 x 121 grid of studies/pit_recalibration.py for two parameters
+RECALIBRATION_POINTS = 2**14
+
+
+def _location_recalibrated(samples, pseudo, lam: float, lo, hi, rng, names, emu_info: dict) -> np.ndarray:
+    """The sample moved by the pseudo-runs' mean PIT probit (``recalibrate: location``); the evidence into
+    ``emu_info``'s self-calibration record."""
+    from scipy.stats import qmc
+
+    points = qmc.scale(qmc.Sobol(lo.size, scramble=True, seed=rng).random(RECALIBRATION_POINTS), lo, hi)
+    pits, ess = pseudo_pits(pseudo, lam, points)
+    mu = location_shift(pits)
+    emu_info["self_calibration"]["recalibration"] = {
+        "form": "location", "mu": dict(zip(names, mu.tolist())),
+        "pit_mean": dict(zip(names, pits.mean(axis=0).tolist())), "points": RECALIBRATION_POINTS,
+        "effective_points_median": float(np.median(ess)), "effective_points_min": float(np.min(ess))}
+    return recalibrated(samples, mu)
+
+
 def emulator_posterior(design_params, design_responses, latest, obs, obs_error: ObservationError, *,
                        lower, upper, times, groups=None, rng: RngLike, start=None,
                        names: Sequence[str] | None = None, walkers: int = 32, min_steps: int = 2000,
                        max_steps: int = 40000, min_tau_multiple: float = 50.0, burn_tau: float = 5.0,
                        emulator_error: bool = True, smoothing="loo", loo_scale=None,
                        self_calibrate: bool = False, heteroscedastic: bool = False,
-                       temper: float = 1.0, tempering: str = "power") -> EmulatorPosterior:
+                       temper: float = 1.0, tempering: str = "power",
+                       recalibrate: str = "none") -> EmulatorPosterior:
     """Sample ``p(theta | d)`` on the emulator of every run (module docstring).
 
     design_params, design_responses : (k, n) / (k, m) every successful run so far (finite curves).
@@ -154,11 +177,20 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
         than the reported one (where :func:`enkf.refine.refinement_design` puts the refinement runs).
     tempering : how ``lambda * temper`` widens the likelihood: ``"power"`` or ``"curvature"`` (module
         docstring).
+    recalibrate : ``"location"``: the sample moved so that each parameter's quantile at level ``q`` is the
+        tempered posterior's at ``Phi(mu + Phi^-1(q))``, ``mu`` the mean probit of the self-calibration's
+        pseudo-runs' PITs under their own posteriors (:func:`enkf.selfcal.pseudo_pits`): the same runs
+        that set the width set the location (needs ``self_calibrate`` and the power form).
     """
     if not temper >= 1.0:
         raise ValueError(f"temper must be at least 1, got {temper}")
     if tempering not in TEMPERINGS:
         raise ValueError(f"tempering must be one of {TEMPERINGS}, got {tempering!r}")
+    if recalibrate not in RECALIBRATIONS:
+        raise ValueError(f"recalibrate must be one of {RECALIBRATIONS}, got {recalibrate!r}")
+    if recalibrate != "none" and not (self_calibrate and emulator_error and tempering == "power"):
+        raise ValueError("recalibrate reads the self-calibration's pseudo-runs under the power form: it needs "
+                         "self_calibrate, emulator_error and tempering 'power'")
     X, Y, latest, d = design_arrays(design_params, design_responses, latest, obs)
     lo, hi = np.asarray(lower, float), np.asarray(upper, float)
     n = lo.size
@@ -174,14 +206,15 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
     emu_info = {"n_residuals": 0}
     if heteroscedastic and not emulator_error:
         raise ValueError("heteroscedastic scales the emulator's error: it needs emulator_error")
-    lam, width, emu_err = 1.0, hi - lo, None
+    lam, width, emu_err, pseudo = 1.0, hi - lo, None, []
     if emulator_error:
         emu_err, emu_info = emulator_error_model(em.loo_residuals()[latest], times, groups)
         if self_calibrate:
             emu_info["self_calibration"] = self_calibration(
                 X, Y, latest, obs_error, lower=lo, upper=hi, smoothing=smoothing_info["smoothing"],
                 error_model=lambda r: emulator_error_model(r, times, groups)[0], rng=rng,
-                heteroscedastic=heteroscedastic, tempering=tempering)
+                heteroscedastic=heteroscedastic, tempering=tempering,
+                keep_runs=pseudo if recalibrate != "none" else None)
             lam = emu_info["self_calibration"]["lambda"]
     lam *= float(temper)
     loglik, theta_hat = _tempered(
@@ -223,6 +256,8 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
         raise RuntimeError(f"the chain of {steps} steps is shorter than its burn-in ({burn}); tau = {tau}")
     U = sampler.get_chain(discard=burn, thin=thin, flat=True)
     samples = lo + U * width
+    if recalibrate == "location":
+        samples = _location_recalibrated(samples, pseudo, lam, lo, hi, rng, names, emu_info)
     w = obs_error.whiten(em(samples.mean(axis=0))[0] - d)
     diagnostics = {
         "method": "emcee on the emulator (calibrate-emulate-sample)",

@@ -38,10 +38,17 @@ from .emulator import CurveEmulator
 from .hetero import emulated_deviance
 from .sampling import latin_hypercube
 
-__all__ = ["TEMPERINGS", "box_minimum", "pseudo_runs", "self_calibration"]
+__all__ = ["RECALIBRATIONS", "TEMPERINGS", "box_minimum", "location_shift", "pseudo_pits", "pseudo_runs",
+           "recalibrated", "self_calibration"]
 
 #: How the factor widens the reported posterior's likelihood (:mod:`enkf.ces`).
 TEMPERINGS = ("power", "curvature")
+#: How the pseudo-runs move the reported posterior's quantiles besides its width (:func:`pseudo_pits`):
+#: ``none``, or ``location``: each parameter's quantile at level ``q`` taken at level ``Phi(mu + Phi^-1(q))``.
+RECALIBRATIONS = ("none", "location")
+#: PITs kept this far from 0 and 1 before their probit: a run at the box's edge can sit below or above
+#: every draw, which would put an infinite value into the mean
+PIT_CLIP = 0.005
 #: The largest factor the curvature form's search returns: a median delta still above the reference
 #: there means the runs sit nowhere near their own likelihood's maximum.
 LAMBDA_MAX = 1e12
@@ -95,7 +102,7 @@ def _deviance(em, C, R, C_em, X_keep, lo, hi, heteroscedastic: bool):
 def self_calibration(X, Y, latest, obs_error: ObservationError, *, lower, upper, smoothing: float,
                      error_model: Callable[[np.ndarray], ObservationError], rng: RngLike,
                      search_points: int = 1000, heteroscedastic: bool = False, pseudo=None,
-                     tempering: str = "power") -> dict:
+                     tempering: str = "power", keep_runs: list | None = None) -> dict:
     """``lambda`` and its evidence (module docstring).
 
     X, Y : (k, n) / (k, m) every run of the emulator's design; ``latest`` (k,) bool: the runs used as
@@ -113,6 +120,8 @@ def self_calibration(X, Y, latest, obs_error: ObservationError, *, lower, upper,
     tempering : the form ``lambda`` widens the likelihood in (:mod:`enkf.ces`): ``power`` divides
         ``delta`` by it; ``curvature`` brings each run's parameters ``sqrt(lambda)`` times closer to its
         likelihood's maximum, and ``lambda`` is the least for which the median ``delta`` is the reference.
+    keep_runs : a list that receives ``(theta_i, deviance_i)`` of each pseudo-run, ``deviance_i(P)`` its
+        ``-2 log`` likelihood on its own emulator (:func:`pseudo_pits` reads them).
     """
     X, Y = np.asarray(X, float), np.asarray(Y, float)
     latest = np.asarray(latest, bool)
@@ -137,6 +146,8 @@ def self_calibration(X, Y, latest, obs_error: ObservationError, *, lower, upper,
         def chi2(P, dev=dev, y=y):
             return dev(P, y)
 
+        if keep_runs is not None:
+            keep_runs.append((X[i].copy(), chi2))
         least, at = box_minimum(chi2, lo, hi, starts)
         deltas.append(max(0.0, float(chi2(X[i])[0]) - least))
         stretched.append(lambda lam, chi2=chi2, x=X[i], at=at, least=least:
@@ -172,3 +183,42 @@ def _curvature_lambda(stretched, reference: float) -> float:
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if excess(math.exp(mid)) > 0.0 else (lo, mid)
     return math.exp(hi)
+
+
+def pseudo_pits(pseudo, lam: float, points) -> tuple[np.ndarray, np.ndarray]:
+    """``(pits, ess)``: ``pits`` (runs, n) the probability integral transform of each pseudo-run's own
+    parameters under its own power-tempered posterior ``exp(-deviance_i / (2 lam))`` with the box prior,
+    read on ``points`` (N, n) spread evenly over the box (a quasi-random grid: each point's weight is
+    its density), and ``ess`` (runs,) the effective number of points behind each. When the reported
+    posterior is calibrated these PITs are uniform; their mean probit is how far its location is off
+    (Kuleshov et al. 2018's quantile recalibration). Read off the reported posterior's own sample instead
+    (importance weights), a pseudo-run whose posterior sits in that sample's tail rests on a handful of
+    draws."""
+    points = np.asarray(points, float)
+    pits, ess = [], []
+    for x, deviance in pseudo:
+        dev = deviance(points)
+        w = np.exp(-0.5 * (dev - dev.min()) / lam)
+        w /= w.sum()
+        pits.append([float(np.sum(w[points[:, j] < x[j]]) + 0.5 * np.sum(w[points[:, j] == x[j]]))
+                     for j in range(points.shape[1])])
+        ess.append(1.0 / float(np.sum(w * w)))
+    return np.array(pits), np.array(ess)
+
+
+def location_shift(pits: np.ndarray) -> np.ndarray:
+    """``mu`` (n,): the mean probit of the pseudo-runs' PITs (``pits`` (runs, n)) per parameter."""
+    return stats.norm.ppf(np.clip(np.asarray(pits, float), PIT_CLIP, 1.0 - PIT_CLIP)).mean(axis=0)
+
+
+def recalibrated(samples, mu) -> np.ndarray:
+    """The draws moved, parameter by parameter and in their order (so the joint's dependence stays), so
+    that the quantile at level ``q`` of parameter ``j`` is the original's at ``Phi(mu_j + Phi^-1(q))``."""
+    samples = np.asarray(samples, float)
+    out = np.empty_like(samples)
+    u = (np.arange(samples.shape[0]) + 0.5) / samples.shape[0]
+    for j in range(samples.shape[1]):
+        order = np.argsort(samples[:, j], kind="stable")
+        # Hazen's plotting positions: at mu = 0 each draw maps onto itself
+        out[order, j] = np.quantile(samples[:, j], stats.norm.cdf(mu[j] + stats.norm.ppf(u)), method="hazen")
+    return out

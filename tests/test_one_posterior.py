@@ -55,6 +55,10 @@ def test_the_schema_and_the_spec_state_the_same_default_form():
     from enkf.selfcal import TEMPERINGS
 
     assert em["tempering"]["enum"] == list(TEMPERINGS) and em["tempering"]["default"] == ExperimentSpec.tempering
+    from enkf.selfcal import RECALIBRATIONS
+
+    assert em["recalibrate"]["enum"] == list(RECALIBRATIONS)
+    assert em["recalibrate"]["default"] == ExperimentSpec.recalibrate == "none"
 
 
 @pytest.mark.parametrize("exp", ["twin_ref", "marble_loop", "planted_gap"])
@@ -127,6 +131,9 @@ def test_a_summary_says_whether_its_form_was_scored():
     # the curvature tempering was scored on development twins only: no benchmark's form
     assert posterior_form(replace(spec, tempering="curvature"), exp) == {
         **HARNESS_FORM, "tempering": "curvature", "scored_by": None, "form_scored_on": None}
+    # the location recalibration is under test (benchmarks/coverage_plan_location.json): no benchmark's form yet
+    assert posterior_form(replace(spec, recalibrate="location"), exp) == {
+        **HARNESS_FORM, "recalibrate": "location", "scored_by": None, "form_scored_on": None}
     assert posterior_form(replace(spec, emulator_error="heteroscedastic"), exp)["scored_by"] == \
         "benchmarks/results/coverage_well_specified.json"
     assert posterior_form(replace(spec, posterior="ensemble"), exp) == {

@@ -215,6 +215,12 @@ def test_shipped_configs_are_valid():
     (lambda c: c["experiments"]["twin"].update(posterior="emulator_mcmc", emulated={"refine_runs": 3}),
      "experiments.twin.emulated.refine_runs: 3 runs cannot measure the emulator's error over 2 parameters; use 0 (none) or at least 4"),
     (lambda c: c["experiments"]["twin"].update(emulated={"refine_temper": 0.5}), "experiments.twin.emulated.refine_temper"),
+    (lambda c: c["experiments"]["twin"].update(posterior="emulator_mcmc", emulated={"recalibrate": "location",
+                                                                                    "self_calibrate": False}),
+     "experiments.twin.emulated.recalibrate: 'location' reads the self-calibration's pseudo-runs under the power "
+     "tempering; it needs self_calibrate: true and tempering: power"),
+    (lambda c: c["experiments"]["twin"].update(posterior="emulator_mcmc", emulated={"recalibrate": "scale"}),
+     "experiments.twin.emulated.recalibrate: 'scale' is not one of"),
     (lambda c: c["experiments"]["twin"].update(method="esmda", esmda={"alphas": [2.0, 3.0]}),
      "experiments.twin.esmda.alphas: sum of 1/alpha must be 1 (got 0.833333)"),
 ])
