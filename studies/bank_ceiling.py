@@ -211,7 +211,9 @@ def fit_summaries(data: np.ndarray, x: np.ndarray) -> tuple[Summaries, dict]:
                                       "validation_mse": {f"{a}_{b}": v for (a, b), v in err.items()}}
 
 
-def bank_loo(s_ref, u_ref, theta_ref, sd, k: int, lo, hi, names, adjust=True) -> dict:
+def bank_loo(s_ref, u_ref, theta_ref, sd, k: int, lo, hi, names, adjust=True, parts=None) -> dict:
+    """Each reference run held out in turn and scored; ``parts``: ``{label: mask}``, the same scored apart
+    on each part of the runs (under ``"parts"``)."""
     rows = {p: [] for p in names}
     idx = np.arange(len(s_ref))
     for j in idx:
@@ -219,7 +221,23 @@ def bank_loo(s_ref, u_ref, theta_ref, sd, k: int, lo, hi, names, adjust=True) ->
         u, w = abc_posterior(s_ref[keep], u_ref[keep], s_ref[j], k, sd, adjust)
         for a, p in enumerate(names):
             rows[p].append(posterior_row(u, w, a, lo[a], hi[a], u_ref[j, a]))
-    return {p: score_rows(rows[p], theta_ref[:, a], lo[a], hi[a]) for a, p in enumerate(names)}
+    out = {p: score_rows(rows[p], theta_ref[:, a], lo[a], hi[a]) for a, p in enumerate(names)}
+    if parts:
+        out["parts"] = {label: {p: score_rows([r for r, m in zip(rows[p], mask) if m], theta_ref[mask, a],
+                                              lo[a], hi[a]) for a, p in enumerate(names)}
+                        for label, mask in parts.items()}
+    return out
+
+
+#: a run's window holds no post-peak when its data's maximum lies this close to the window's end (the
+#: harness's threshold, tools/coverage_table.py CENSOR_S; samples every 1 us)
+CENSOR_SAMPLES = 2
+
+
+def window_parts(data: np.ndarray) -> dict:
+    """``{label: mask}``: the runs whose observed maximum lies in the window's last 2 us, and the others."""
+    late = np.argmax(data, axis=1) >= data.shape[1] - 1 - CENSOR_SAMPLES
+    return {"no_post_peak": late, "post_peak": ~late}
 
 
 def choose_k(loo: dict, names) -> int:
@@ -302,6 +320,7 @@ def score(bank: Path, kept: dict[int, Path], out: Path | None) -> dict:
     loo = {k: bank_loo(s_ref, u_ref, theta_ref, summ.sd, k, lo, hi, names) for k in KS}
     k = choose_k(loo, names)
     loo_plain = bank_loo(s_ref, u_ref, theta_ref, summ.sd, k, lo, hi, names, adjust=False)
+    loo[k] = bank_loo(s_ref, u_ref, theta_ref, summ.sd, k, lo, hi, names, parts=window_parts(data[ref]))
     dev = {}
     for sd_seed, folder in kept.items():
         t, y = kept_twins(folder, sd_seed, lo, hi)

@@ -48,6 +48,11 @@ def test_the_censored_twins_table_is_generated_from_the_readme_table_s_json():
     assert (f"`E_t` is scarcely learned (WIS {wis[True]} of the prior's, against {wis[False]} where the window holds "
             "the post-peak) and its intervals still cover") in " ".join(text.split())
     assert float(wis[True]) > float(wis[False]) and int(well[True][5].split(" / ")[1].rstrip(" %")) >= 85
+    # the bank's yardstick beside the same rows (both parameters' WIS over the prior's)
+    both = {k: c[6].strip() for k, c in well.items()}
+    flat = " ".join(text.split())
+    assert f"and the shipped form {both[True]} (the table above)" in flat
+    assert f" against {both[False]}. " in flat
 
 
 def test_the_flag_split_table_is_generated_and_its_prose_is_its_rows():
