@@ -435,7 +435,7 @@ QUOTES: list[Quote] = [
     Quote("docs/inference.md", "draws {N} twins as the\n  harness does", _bank),
     Quote("docs/inference.md", "there the\n  yardstick scores {cs:.3f} / {ce:.3f}", _bank),
     Quote("docs/inference.md", "and the shipped form 0.33 / 0.96 (the table above)", by=CENSORED_PROSE),
-    Quote("docs/inference.md", "holds the post-peak {ps:.3f} / {pe:.3f} against", _bank),
+    Quote("docs/inference.md", "holds the post-peak {ps:.3f} / {pe:.3f}", _bank),
     Quote("docs/inference.md", "against 0.25 / 0.62.", by=CENSORED_PROSE),
     Quote("docs/inference.md", "Held out run by run over its {n}\n  reference runs it covers {c1:.3f} / {c2:.3f} at 90 % "
           "and scores {s:.3f} (`sigma_t`) and {e:.3f} (`E_t`) of the\n  prior's, and where it would call `E_t` learned "
