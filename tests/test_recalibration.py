@@ -101,3 +101,18 @@ def test_the_recalibrated_sample_is_the_plain_one_moved_and_the_default_is_uncha
     with pytest.raises(ValueError, match="power form"):
         emulator_posterior(X, Y, latest, d, R, rng=np.random.default_rng(1), recalibrate="location",
                            **{**kw, "self_calibrate": False})
+
+
+def test_the_config_switch_reaches_the_spec():
+    from pathlib import Path
+
+    from calibration.experiment import ExperimentSpec
+    from calibration.workflow_io import load_yaml, validate_config
+
+    root = Path(__file__).resolve().parents[1]
+    cfg = load_yaml(root / "config" / "config.yaml")
+    exp = validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)["experiments"]["twin_ref"]
+    assert ExperimentSpec.from_config("twin_ref", exp).recalibrate == "none"
+    cfg["experiments"]["twin_ref"]["emulated"] = {"recalibrate": "location"}
+    exp = validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)["experiments"]["twin_ref"]
+    assert ExperimentSpec.from_config("twin_ref", exp).recalibrate == "location"
