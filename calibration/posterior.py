@@ -36,10 +36,11 @@ POSTERIORS = ("ensemble", "emulator_mcmc")
 
 def sample_posterior(spec: ExperimentSpec, params: Sequence[pd.DataFrame], responses: Sequence[np.ndarray],
                      last_analysis: Mapping, obs: Observations, refine: tuple | None = None, *,
-                     temper: float = 1.0) -> EmulatorPosterior:
+                     temper: float = 1.0, recalibrate: str | None = None) -> EmulatorPosterior:
     """The emulator MCMC posterior from iterations ``0..K`` (``params``/``responses``) of the final loop;
     ``refine``: ``(params (r, n) or frame, responses (r, m))`` of the refinement batch (failed runs NaN),
-    then the latest runs; ``temper``: :func:`enkf.ces.emulator_posterior`'s."""
+    then the latest runs; ``temper``: :func:`enkf.ces.emulator_posterior`'s; ``recalibrate``: its, by
+    default the experiment's ``emulated.recalibrate``."""
     alive = np.asarray(last_analysis["alive"], bool)
     if refine is not None:
         P_ref, Y_ref = refine
@@ -62,7 +63,8 @@ def sample_posterior(spec: ExperimentSpec, params: Sequence[pd.DataFrame], respo
                               smoothing=spec.smoothing, loo_scale=terms.likelihood().std,
                               self_calibrate=spec.self_calibrate,
                               heteroscedastic=spec.emulator_error == "heteroscedastic", temper=temper,
-                              tempering=spec.tempering, recalibrate=spec.recalibrate)
+                              tempering=spec.tempering,
+                              recalibrate=spec.recalibrate if recalibrate is None else recalibrate)
 
 
 def refine_batch(spec: ExperimentSpec, params: pd.DataFrame, status: pd.DataFrame, Y: np.ndarray) -> tuple:
@@ -84,7 +86,10 @@ def refine_design(spec: ExperimentSpec, params: Sequence[pd.DataFrame], response
     the k-means centroids of the loop's emulator posterior tempered by ``spec.refine_temper``."""
     if spec.refine_runs < 1:
         raise ValueError(f"{spec.name}: emulated.refine_runs is 0; there is no refinement batch to design")
-    tempered = sample_posterior(spec, params, responses, last_analysis, obs, temper=spec.refine_temper)
+    # where the runs go, not a reported interval: not recalibrated, so that the batch is the same whatever
+    # emulated.recalibrate says (and a form scored on kept runs is what the workflow would report)
+    tempered = sample_posterior(spec, params, responses, last_analysis, obs, temper=spec.refine_temper,
+                                recalibrate="none")
     P = refinement_design(tempered.samples, spec.lower, spec.upper, spec.refine_runs, rng_for(spec.seed, "refine"))
     df = pd.DataFrame(P, columns=list(spec.names))
     df.insert(0, "member", np.arange(len(df)))

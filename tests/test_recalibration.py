@@ -116,3 +116,31 @@ def test_the_config_switch_reaches_the_spec():
     cfg["experiments"]["twin_ref"]["emulated"] = {"recalibrate": "location"}
     exp = validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)["experiments"]["twin_ref"]
     assert ExperimentSpec.from_config("twin_ref", exp).recalibrate == "location"
+
+
+def test_the_refinement_batch_is_designed_without_the_recalibration(monkeypatch):
+    # the batch is where the runs go, not a reported interval: the same whatever emulated.recalibrate says,
+    # so that a form scored on kept runs (bench_coverage --keep-runs) is what the workflow would report
+    from dataclasses import replace
+    from pathlib import Path
+
+    import calibration.posterior as cp
+    from calibration.experiment import ExperimentSpec
+    from calibration.workflow_io import load_yaml, validate_config
+
+    root = Path(__file__).resolve().parents[1]
+    exp = validate_config(load_yaml(root / "config" / "config.yaml"), root / "config" / "schema.yaml",
+                          base_dir=root)["experiments"]["twin_ref"]
+    spec = replace(ExperimentSpec.from_config("twin_ref", exp), recalibrate="location")
+    seen = {}
+
+    class Drawn:
+        samples = np.random.default_rng(0).uniform(spec.lower, spec.upper, (400, 2))
+
+    def sample_posterior(spec, params, responses, last_analysis, obs, refine=None, *, temper=1.0, recalibrate=None):
+        seen.update(temper=temper, recalibrate=recalibrate)
+        return Drawn
+
+    monkeypatch.setattr(cp, "sample_posterior", sample_posterior)
+    design = cp.refine_design(spec, [], [], {}, None)
+    assert seen == {"temper": spec.refine_temper, "recalibrate": "none"} and len(design) == spec.refine_runs
