@@ -1,5 +1,5 @@
 """Every experiment of the shipped configs as the workflow sees it (tests/test_process.py,
-tests/test_one_posterior.py)."""
+tests/test_one_posterior.py), and the default twin with settings of a test's own."""
 from __future__ import annotations
 
 import copy
@@ -28,3 +28,13 @@ def shipped_experiments() -> dict[str, tuple[str, dict]]:
         for name, exp in cfg["experiments"].items():
             out[f"{extra or 'config.yaml'}:{name}"] = (name, exp)
     return out
+
+
+def twin_ref(**settings) -> dict:
+    """config.yaml's ``twin_ref`` with ``settings`` (its top-level keys, e.g. ``emulated`` or ``posterior``)
+    replacing its own, validated as the workflow validates it (a bad value raises the workflow's error)."""
+    from calibration.workflow_io import load_yaml
+
+    cfg = load_yaml(REPO / "config" / "config.yaml")
+    cfg["experiments"]["twin_ref"].update(settings)
+    return validate_config(cfg, SCHEMA, base_dir=REPO)["experiments"]["twin_ref"]

@@ -101,26 +101,17 @@ def test_restores_coverage_where_the_runs_scatter_most():
 
 
 def test_a_twin_takes_it_on_request_and_bad_settings_are_named():
-    from pathlib import Path
-
     from calibration.experiment import ExperimentSpec
-    from calibration.workflow_io import load_yaml, validate_config
+    from tests._shipped import twin_ref
 
-    root = Path(__file__).resolve().parents[1]
-    cfg = load_yaml(root / "config" / "config.yaml")
-    exp = validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)["experiments"]["twin_ref"]
-    assert ExperimentSpec.from_config("twin_ref", exp).emulator_error == "ar1"
-    cfg["experiments"]["twin_ref"]["emulated"] = {"emulator_error": "heteroscedastic"}
-    exp = validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)["experiments"]["twin_ref"]
+    assert ExperimentSpec.from_config("twin_ref", twin_ref()).emulator_error == "ar1"
+    exp = twin_ref(emulated={"emulator_error": "heteroscedastic"})
     assert ExperimentSpec.from_config("twin_ref", exp).emulator_error == "heteroscedastic"
-    cfg["experiments"]["twin_ref"]["emulated"]["emulator_error"] = "smooth"
     with pytest.raises(Exception, match="emulator_error"):
-        validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)
-    cfg["experiments"]["twin_ref"]["emulated"] = {"emulator_error": "heteroscedastic"}
-    cfg["experiments"]["twin_ref"]["posterior"] = "ensemble"
+        twin_ref(emulated={"emulator_error": "smooth"})
     with pytest.raises(Exception, match="emulated.emulator_error: 'heteroscedastic' is a setting of the reported emulator "
                                         "posterior, which posterior: ensemble does not use"):
-        validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)
+        twin_ref(emulated={"emulator_error": "heteroscedastic"}, posterior="ensemble")
 
 
 def test_the_emulator_mcmc_samples_the_heteroscedastic_posterior():

@@ -104,34 +104,21 @@ def test_the_recalibrated_sample_is_the_plain_one_moved_and_the_default_is_uncha
 
 
 def test_the_config_switch_reaches_the_spec():
-    from pathlib import Path
-
     from calibration.experiment import ExperimentSpec
-    from calibration.workflow_io import load_yaml, validate_config
+    from tests._shipped import twin_ref
 
-    root = Path(__file__).resolve().parents[1]
-    cfg = load_yaml(root / "config" / "config.yaml")
-    exp = validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)["experiments"]["twin_ref"]
-    assert ExperimentSpec.from_config("twin_ref", exp).recalibrate == "none"
-    cfg["experiments"]["twin_ref"]["emulated"] = {"recalibrate": "location"}
-    exp = validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)["experiments"]["twin_ref"]
-    assert ExperimentSpec.from_config("twin_ref", exp).recalibrate == "location"
+    assert ExperimentSpec.from_config("twin_ref", twin_ref()).recalibrate == "none"
+    assert ExperimentSpec.from_config("twin_ref", twin_ref(emulated={"recalibrate": "location"})).recalibrate == "location"
 
 
 def test_the_refinement_batch_is_designed_without_the_recalibration(monkeypatch):
     # the batch is where the runs go, not a reported interval: the same whatever emulated.recalibrate says,
     # so that a form scored on kept runs (bench_coverage --keep-runs) is what the workflow would report
-    from dataclasses import replace
-    from pathlib import Path
-
     import calibration.posterior as cp
     from calibration.experiment import ExperimentSpec
-    from calibration.workflow_io import load_yaml, validate_config
+    from tests._shipped import twin_ref
 
-    root = Path(__file__).resolve().parents[1]
-    exp = validate_config(load_yaml(root / "config" / "config.yaml"), root / "config" / "schema.yaml",
-                          base_dir=root)["experiments"]["twin_ref"]
-    spec = replace(ExperimentSpec.from_config("twin_ref", exp), recalibrate="location")
+    spec = ExperimentSpec.from_config("twin_ref", twin_ref(emulated={"recalibrate": "location"}))
     seen = {}
 
     class Drawn:

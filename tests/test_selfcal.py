@@ -122,26 +122,17 @@ def test_the_analyses_are_not_scaled():
 
 
 def test_the_config_switch_is_on_by_default_and_refused_beside_the_ensemble_posterior():
-    from pathlib import Path
-
     from calibration.experiment import ExperimentSpec
-    from calibration.workflow_io import load_yaml, validate_config
+    from tests._shipped import twin_ref
 
-    root = Path(__file__).resolve().parents[1]
-    cfg = load_yaml(root / "config" / "config.yaml")
-    exp = validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)["experiments"]["twin_ref"]
+    exp = twin_ref()
     assert ExperimentSpec.from_config("twin_ref", exp).self_calibrate is True
     assert exp["posterior"] == "emulator_mcmc"
-    cfg["experiments"]["twin_ref"]["emulated"] = {"self_calibrate": False}
-    exp = validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)["experiments"]["twin_ref"]
-    assert ExperimentSpec.from_config("twin_ref", exp).self_calibrate is False
-    cfg["experiments"]["twin_ref"]["emulated"] = {"self_calibrate": "yes"}
+    assert ExperimentSpec.from_config("twin_ref", twin_ref(emulated={"self_calibrate": False})).self_calibrate is False
     with pytest.raises(Exception, match="self_calibrate"):
-        validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)
-    cfg["experiments"]["twin_ref"]["emulated"] = {"self_calibrate": True}
-    cfg["experiments"]["twin_ref"]["posterior"] = "ensemble"
+        twin_ref(emulated={"self_calibrate": "yes"})
     with pytest.raises(Exception, match="emulated.self_calibrate: True is a setting of the reported emulator posterior"):
-        validate_config(cfg, root / "config" / "schema.yaml", base_dir=root)
+        twin_ref(emulated={"self_calibrate": True}, posterior="ensemble")
 
 
 def test_other_runs_as_pseudo_data_are_the_runs_it_takes():
