@@ -149,6 +149,18 @@ def _location_recalibrated(samples, pseudo, lam: float, lo, hi, rng, names, emu_
     return recalibrated(samples, mu)
 
 
+def _check_forms(temper: float, tempering: str, recalibrate: str, self_calibrate: bool, emulator_error: bool):
+    if not temper >= 1.0:
+        raise ValueError(f"temper must be at least 1, got {temper}")
+    if tempering not in TEMPERINGS:
+        raise ValueError(f"tempering must be one of {TEMPERINGS}, got {tempering!r}")
+    if recalibrate not in RECALIBRATIONS:
+        raise ValueError(f"recalibrate must be one of {RECALIBRATIONS}, got {recalibrate!r}")
+    if recalibrate != "none" and not (self_calibrate and emulator_error and tempering == "power"):
+        raise ValueError("recalibrate reads the self-calibration's pseudo-runs under the power form: it needs "
+                         "self_calibrate, emulator_error and tempering 'power'")
+
+
 def emulator_posterior(design_params, design_responses, latest, obs, obs_error: ObservationError, *,
                        lower, upper, times, groups=None, rng: RngLike, start=None,
                        names: Sequence[str] | None = None, walkers: int = 32, min_steps: int = 2000,
@@ -182,15 +194,7 @@ def emulator_posterior(design_params, design_responses, latest, obs, obs_error: 
         pseudo-runs' PITs under their own posteriors (:func:`enkf.selfcal.pseudo_pits`): the same runs
         that set the width set the location (needs ``self_calibrate`` and the power form).
     """
-    if not temper >= 1.0:
-        raise ValueError(f"temper must be at least 1, got {temper}")
-    if tempering not in TEMPERINGS:
-        raise ValueError(f"tempering must be one of {TEMPERINGS}, got {tempering!r}")
-    if recalibrate not in RECALIBRATIONS:
-        raise ValueError(f"recalibrate must be one of {RECALIBRATIONS}, got {recalibrate!r}")
-    if recalibrate != "none" and not (self_calibrate and emulator_error and tempering == "power"):
-        raise ValueError("recalibrate reads the self-calibration's pseudo-runs under the power form: it needs "
-                         "self_calibrate, emulator_error and tempering 'power'")
+    _check_forms(temper, tempering, recalibrate, self_calibrate, emulator_error)
     X, Y, latest, d = design_arrays(design_params, design_responses, latest, obs)
     lo, hi = np.asarray(lower, float), np.asarray(upper, float)
     n = lo.size
