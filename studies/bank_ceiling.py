@@ -35,6 +35,7 @@ sys.path.insert(0, str(ROOT))
 from benchmarks.bench_coverage import _simulate, truths, twin_experiment, twin_task  # noqa: E402
 from calibration.experiment import ExperimentSpec, mesh_seed, rng_for  # noqa: E402
 from calibration.observations import observation_grid, twin_observations  # noqa: E402
+from studies.pit_recalibration import LOW_SIGMA_T  # noqa: E402  (where the shipped median sits high)
 
 #: the bank's design seed; member i is twin seed ``BANK_SEED * 1000 + i`` (benchmark twins use seeds < 100)
 BANK_SEED = 990
@@ -228,10 +229,6 @@ def bank_loo(s_ref, u_ref, theta_ref, sd, k: int, lo, hi, names, adjust=True, pa
                                               lo[a], hi[a]) for a, p in enumerate(names)}
                         for label, mask in parts.items()}
     return out
-
-
-#: where the one-posterior benchmark's sigma_t median sits high (README): truths below this
-LOW_SIGMA_T = 40e6
 
 
 def low_strength_shift(rows: list, t: np.ndarray) -> dict:
