@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from benchmarks.scores import COVERAGE_90_BAR, COVERAGE_90_MISSPECIFIED_MIN, SBC_ALPHA, WIS_BAR  # noqa: E402
+from benchmarks.scores import COVERAGE_90_BAR, COVERAGE_90_MISSPECIFIED_MIN, SBC_ALPHA, WIS_BAR, verdict  # noqa: E402
 from shpb.atomic import emit_json  # noqa: E402
 
 SETS = ("well_specified", "misspecified", "misspecified_rate")
@@ -34,17 +34,15 @@ REPORTED = "summary_emulator_mcmc"
 
 
 def _scores(block: dict) -> dict:
-    """Per parameter: 90 % coverage (failed samplers as misses), the smaller rank-test p, WIS over the prior's."""
-    out = {}
-    for p, res in block[REPORTED]["params"].items():
-        c = res["coverage_90"]
-        out[p] = {"coverage_90": c.get("fraction_counting_failures_as_misses", c["fraction"]),
-                  "coverage_50": res["coverage_50"].get("fraction_counting_failures_as_misses",
-                                                        res["coverage_50"]["fraction"]),
-                  "rank_p": min(res["sbc"]["chi2_p"], res["sbc"]["ks_p"]),
-                  "wis_over_prior": res.get("wis_over_prior_counting_failures_as_prior", res["wis_over_prior"]),
-                  "mean_over_truth_median": res["mean_over_truth_median"]}
-    return out
+    """Per parameter, as :func:`benchmarks.scores.verdict` reads them: 90 % coverage (failed samplers as
+    misses), the smaller rank-test p, WIS over the prior's; with the 50 % coverage and the median's bias."""
+    summ = block[REPORTED]
+    bars = verdict(summ)["bars"]
+    return {p: {"coverage_90": bars[f"coverage_90 {p}"]["value"], "rank_p": bars[f"sbc {p}"]["value"],
+                "wis_over_prior": bars[f"wis_over_prior {p}"]["value"],
+                "coverage_50": res["coverage_50"]["fraction"],
+                "mean_over_truth_median": res["mean_over_truth_median"]}
+            for p, res in summ["params"].items()}
 
 
 def _check_pair(shipped: dict, candidate: dict) -> None:
