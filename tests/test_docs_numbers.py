@@ -29,6 +29,7 @@ ENGINE = "benchmarks/results/bench_engine.json"
 ENGINE_JOINTS = "benchmarks/results/bench_engine_joints.json"
 VAR = "benchmarks/results/bench_sim_variability.json"
 BLAS = "benchmarks/results/bench_blas_kernel.json"
+BITS = "studies/results/engine_bits.json"
 IDLE = "benchmarks/results/bench_default_run_idle.json"
 
 
@@ -871,6 +872,12 @@ QUOTES: list[Quote] = [
                                     "ds": d["posterior"]["sigma_t"]["mean_difference_over_sd"],
                                     "de": d["posterior"]["E_t"]["mean_difference_over_sd"]})(
               J(BLAS), {r["iteration"]: r for r in J(BLAS)["iterations"]})),
+    Quote("docs/inference.md", "Across CPUs, {n} twins of the coverage harness run on two machines", lambda J: {
+        "n": J(BITS)["summary"]["twins"]}),
+    Quote("docs/inference.md", "the reported median moved by a\n  median {ms:.2f} of its 90 % interval's width for `sigma_t` and "
+          "{me:.2f} for `E_t`, by more than {ps:.2f} and\n  {pe:.2f} in one twin in ten", lambda J: (lambda s, e: {
+              "ms": s["median"], "me": e["median"], "ps": s["p90"], "pe": e["p90"]})(
+              *(J(BITS)["summary"][p]["median_shift_over_width_abs"] for p in ("sigma_t", "E_t")))),
     Quote("docs/inference.md", "point of a grid from {m} mesh realizations with the other parameter at its truth and no emulator,\n"
           "  held the truth in {st} and {et} of {n} twins' 90 % intervals", lambda J: _synthetic_likelihood(J)),
     Quote("docs/inference.md", "posterior expects to score more than 0.55 of the prior box's", by=FLAG_BAR),
