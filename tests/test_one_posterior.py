@@ -77,20 +77,23 @@ def test_the_default_runs_diagnosis_base_model_is_its_posterior(exp):
 
 
 def test_each_scored_form_is_its_benchmarks_and_the_default_twins():
-    """calibration.scored.SCORED names the form and loop its benchmark JSON scored: the JSON records the
+    """calibration.scored.SCORED names the form and loop its benchmark JSONs scored: each JSON records the
     same form and loop settings, and the loop is config/config.yaml's twin_ref (the harness's twin), whose
     summary names the benchmark of the form it reports."""
     from calibration.scored import SCORED, posterior_form
 
     spec, exp = _spec("config.yaml:twin_ref")
     for entry in SCORED:
-        bench = json.loads((REPO / entry["benchmark"]).read_text())
-        assert bench["experiment"] == "twin_ref"
-        assert {"posterior": bench["reported_posterior"], "self_calibrate": bench["self_calibrate"],
-                "emulator_error": bench["emulator_error"], "refine_runs": bench["refine_runs"]} == entry["form"]
-        loop = entry["loop"]
-        assert (bench["method"], bench["ensemble_size"], bench["window_s"]) == (
-            loop["method"], loop["ensemble_size"], loop["window_s"])
+        for path in (entry["benchmark"], *entry["confirmed_by"]):
+            bench = json.loads((REPO / path).read_text())
+            assert bench["experiment"] == "twin_ref"
+            assert {"posterior": bench["reported_posterior"], "self_calibrate": bench["self_calibrate"],
+                    "emulator_error": bench["emulator_error"], "refine_runs": bench["refine_runs"]} == entry["form"]
+            # the keys the form names only where they differ from these (calibration.scored._form_of)
+            assert (bench.get("tempering", "power"), bench.get("recalibrate", "none")) == ("power", "none"), path
+            loop = entry["loop"]
+            assert (bench["method"], bench["ensemble_size"], bench["window_s"]) == (
+                loop["method"], loop["ensemble_size"], loop["window_s"]), path
     shipped = [s for s in SCORED if s["form"] == HARNESS_FORM]
     assert len(shipped) == 1
     assert posterior_form(spec, exp)["scored_by"] == shipped[0]["benchmark"]
@@ -101,12 +104,20 @@ def test_each_scored_form_says_where_its_learned_intervals_held():
     parameter's learned intervals hold unless their 90 % coverage is rejected at LEARNED_ALPHA."""
     from calibration.scored import LEARNED_ALPHA, SCORED, learned_holds
 
+    from scipy import stats
+
     for entry in SCORED:
-        bench = json.loads((REPO / entry["benchmark"]).read_text())
-        key = "summary_emulator_mcmc" if bench["reported_posterior"] == "emulator_mcmc" else "summary"
-        params = bench["well_specified"][key]["params"]
-        assert entry["learned_holds"] == {p: params[p]["product_flag"]["informative"]["coverage_90"]["p_vs_level"]
-                                          >= LEARNED_ALPHA for p in params}, entry["benchmark"]
+        covered, n = {}, {}
+        for path in (entry["benchmark"], *entry["confirmed_by"]):
+            bench = json.loads((REPO / path).read_text())
+            key = "summary_emulator_mcmc" if bench["reported_posterior"] == "emulator_mcmc" else "summary"
+            for p, q in bench["well_specified"][key]["params"].items():
+                part = q["product_flag"]["informative"]
+                covered[p] = covered.get(p, 0) + part["coverage_90"]["covered"]
+                n[p] = n.get(p, 0) + part["n"]
+        # the twins of every JSON pooled: one binomial test of the learned intervals' 90 % coverage
+        assert entry["learned_holds"] == {p: stats.binomtest(covered[p], n[p], 0.9).pvalue >= LEARNED_ALPHA
+                                          for p in covered}, entry["benchmark"]
         assert learned_holds({**entry["form"], "scored_by": None}) == entry["learned_holds"]
     assert learned_holds({"posterior": "ensemble"}) == {} and learned_holds(None) == {}
 

@@ -234,8 +234,8 @@ def _flag_cell(part: dict) -> str:
 def flag_table(entries: list) -> str:
     """Per set and parameter, the reported posterior's twins split by the product's ``uninformative``
     flag (benchmarks.scores.product_flag_split): a calibrated posterior covers at its level in both parts."""
-    rows = ["| twins | parameter | the product says | n | 90 % interval covers (binomial p against 90 %) "
-            "| 50 % interval covers | WIS / prior's |", "|---|---|---|---|---|---|---|"]
+    rows = ["| twins | source | parameter | the product says | n | 90 % interval covers (binomial p against 90 %) "
+            "| 50 % interval covers | WIS / prior's |", "|---|---|---|---|---|---|---|---|"]
     for src, bench in entries:
         for name in SETS:
             if not (bench.get(name) or {}).get("twins"):
@@ -245,7 +245,7 @@ def flag_table(entries: list) -> str:
                 for key in ("informative", "uninformative"):
                     part = split[key]
                     c50 = part.get("coverage_50")
-                    rows.append(f"| {_label(bench, name)} | `{x}` | {key} | {part['n']} | {_flag_cell(part)} "
+                    rows.append(f"| {_label(bench, name)} | `{Path(src).name}` | `{x}` | {key} | {part['n']} | {_flag_cell(part)} "
                                 f"| {'-' if c50 is None else _pct(c50['fraction'])} "
                                 f"| {_part_wis(part)} |")
     head = ("The same posteriors split by whether the product calls each parameter `uninformative` in a run's "
