@@ -26,6 +26,9 @@ ROOT = Path(__file__).resolve().parents[1]
 # benchmarks, in this order (the one-posterior benchmark, then the location benchmark's shipped form)
 README_FILES = ("coverage_one_posterior.json", "coverage_location.json")
 README_FILE = README_FILES[0]
+# ... and the same posterior with the approximation error on standard-mesh twins: three seeds pooled
+# (benchmarks/pool_coverage.py; benchmarks/coverage_plan_approximation.json)
+README_POOLED = "coverage_approximation.json"
 README_SETS = [(f, s) for f in README_FILES for s in ("well_specified", "misspecified", "misspecified_rate")]
 SETS = [("coverage_well_specified.json", "well_specified"), ("coverage_well_specified_repeat.json", "well_specified"),
         ("coverage_misspecified.json", "misspecified"), *README_SETS]
@@ -116,7 +119,7 @@ def test_the_committed_verdicts_are_the_readme_s(spec, committed):
     claims the verdicts make, the first benchmark's then the second's."""
     text = (ROOT / "README.md").read_text()
     flat = " ".join(text.split())
-    assert coverage_table.readme_block_sources(text) == [f"benchmarks/results/{f}" for f in README_FILES]
+    assert coverage_table.readme_block_sources(text) == [f"benchmarks/results/{f}" for f in (*README_FILES, README_POOLED)]
     for f, name in SETS:
         twins = committed[f][name]["twins"]
         fresh = verdict(bc.score_mcmc(twins, spec.lower, spec.upper, spec.names))
@@ -357,3 +360,22 @@ def test_the_flag_split_fails_a_method_sure_only_where_it_is_wrong():
     assert bad["informative"]["coverage_90"]["p_vs_level"] < 0.01  # ... the split is not
     prior = product_flag_split([prior_row(0.0, 1.0)] * 400, truths, 0.0, 1.0)
     assert prior["informative"]["n"] == 0 and prior["uninformative_share"] == 1.0
+
+
+def test_the_pooled_approximation_benchmark_is_its_twins_and_meets_its_plan(spec):
+    """The README's row of the approximation error: the pooled JSON's scores are what its three seeds' twins
+    give now, each seed a planned set of ten with its own pairs, and the plan's bar (90 % coverage >= 0.80 per
+    parameter, benchmarks/coverage_plan_approximation.json) is what the row and the README's advice rest on."""
+    pooled = json.loads((ROOT / "benchmarks" / "results" / README_POOLED).read_text())
+    plan = json.loads((ROOT / "benchmarks" / "coverage_plan_approximation.json").read_text())
+    sources = {src: json.loads((ROOT / src).read_text()) for src in pooled["sources"]}
+    assert sorted(t["seed"] // 1000 for b in sources.values() for t in b["misspecified"]["twins"]) == sorted(
+        s for s in plan["sets"]["misspecified"]["seeds"] for _ in range(plan["sets"]["misspecified"]["twins_per_seed"]))
+    assert all(b["approximation_pairs"] == 24 and b["coarse_variability"] == "subtracted" for b in sources.values())
+    twins = [t for b in sources.values() for t in b["misspecified"]["twins"]]
+    fresh = bc.score_mcmc(twins, spec.lower, spec.upper, spec.names)
+    assert _digits(json.loads(json.dumps(fresh, default=lambda o: o.item()))) == _digits(pooled["summary_emulator_mcmc"])
+    shown = set_verdict_of("misspecified", fresh)
+    row = next(line for line in (ROOT / "README.md").read_text().splitlines() if f"| `{README_POOLED}` |" in line)
+    assert row.rstrip(" |").rsplit("|", 1)[1].strip() == coverage_table._failed(shown) == "none"
+    assert all(fresh["params"][p]["coverage_90"]["fraction_counting_failures_as_misses"] >= 0.80 for p in spec.names)

@@ -260,7 +260,20 @@ def flag_block(*paths: str) -> str:
 
 def _entries(paths) -> list:
     """``[(path, benchmark dict), ...]`` of the JSONs ``paths`` (relative to the repository root)."""
-    return [(p, json.loads((ROOT / p).read_text())) for p in paths]
+    return [(p, as_benchmark(json.loads((ROOT / p).read_text()))) for p in paths]
+
+
+def as_benchmark(bench: dict) -> dict:
+    """A ``benchmarks/pool_coverage.py`` JSON as a ``bench_coverage.py`` one with its one set: the pooled
+    scores and verdict, the twins read from its sources (paths from the repository root); any other
+    JSON as it is."""
+    if bench.get("benchmark") != "pool_coverage":
+        return bench
+    name = bench["set"]
+    twins = [t for src in bench["sources"] for t in json.loads((ROOT / src).read_text())[name]["twins"]]
+    rest = {k: v for k, v in bench.items() if k not in ("summary", "summary_emulator_mcmc", "verdict", "set", "sources")}
+    return {**rest, name: {"summary": bench["summary"], "summary_emulator_mcmc": bench["summary_emulator_mcmc"],
+                           "verdict": bench["verdict"], "twins": twins}}
 
 
 def block(*paths: str) -> str:
