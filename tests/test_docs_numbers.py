@@ -501,7 +501,7 @@ QUOTES: list[Quote] = [
           by=HARNESS),
     Quote("README.md", "span a median 0.71 and 0.74 of the box", by=HARNESS),
     Quote("README.md", "data from the finer mesh are held 83 % / 83 % and 77 % / 73 %, data with an undeclared rate "
-          "dependence 90 % / 75 % and 75 % / 85 %: the 80 % bar is met on neither benchmark", by=HARNESS),
+          "dependence 90 % / 75 % and 75 % / 85 %: the 80 % bar is met on neither of the two", by=HARNESS),
     Quote("README.md", "hold less (78 % / 71 % and 73 % / 72 % well-specified)", by=HARNESS),
     Quote("README.md", "learned from 24 paired runs per record (a third benchmark), finer-mesh data are held {asc:.0f} % / "
           "{aec:.0f} % at a WIS of {asw:.2f} / {aew:.2f}", _approximation),

@@ -154,7 +154,7 @@ def test_the_committed_verdicts_are_the_readme_s(spec, committed):
     mis = {s: [pct(f"coverage_90 {p}", s) for p in spec.names] for s in ("misspecified", "misspecified_rate")}
     words = ["{} / {} and {} / {}".format(m[0][0], m[1][0], m[0][1], m[1][1]) for m in mis.values()]
     assert (f"data from the finer mesh are held {words[0]}, data with an undeclared rate dependence {words[1]}: "
-            "the 80 % bar is met on neither benchmark") in flat
+            "the 80 % bar is met on neither of the two") in flat
     assert all(any(k.startswith("coverage_90") for s in mis for k in shown[f, s]["failed"]) for f in README_FILES)
     # the prior box covers 90 % on these truths; the posterior's median sits above sigma_t's truth
     prior = [bc.score(prior_records(committed[f][n]["twins"], spec.lower, spec.upper, spec.names), spec.lower,
