@@ -102,9 +102,9 @@ def test_each_scored_form_is_its_benchmarks_and_the_default_twins():
 def test_each_scored_form_says_where_its_learned_intervals_held():
     """SCORED's learned_holds is its benchmark's split by the product's flag (benchmarks/scores.py): a
     parameter's learned intervals hold unless their 90 % coverage is rejected at LEARNED_ALPHA."""
-    from calibration.scored import LEARNED_ALPHA, SCORED, learned_holds
-
     from scipy import stats
+
+    from calibration.scored import LEARNED_ALPHA, SCORED, learned_holds
 
     for entry in SCORED:
         covered, n = {}, {}
