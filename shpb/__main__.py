@@ -115,6 +115,9 @@ def main(argv=None) -> int:
     ic.add_argument("--heldout", metavar="NAME", help="with --diagnosis: the sheet (file stem) to hold out")
     ic.add_argument("--allow-invalid", action="store_true",
                     help="calibrate on records graded invalid by the lab checks (observations.allow_invalid)")
+    ic.add_argument("--approximation-error", action="store_true",
+                    help="carry the coarse mesh's own error (24 runs paired at standard per record; "
+                         "docs/own-data.md, section 8)")
     args = ap.parse_args(argv)
     if args.command == "init-config":
         return _init_config(args)
@@ -197,7 +200,7 @@ def _init_config(args) -> int:
     from .lab.init_config import InitConfigError, init_config
     try:
         text, doc = init_config(args.sheets, name=args.name, diagnosis=args.diagnosis, heldout=args.heldout,
-                                allow_invalid=args.allow_invalid)
+                                allow_invalid=args.allow_invalid, approximation_error=args.approximation_error)
     except (ValueError, FileNotFoundError, InitConfigError) as exc:
         print(f"python -m shpb init-config: error: {exc}", file=sys.stderr)
         return contract.EXIT_BAD_INPUT

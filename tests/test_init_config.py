@@ -100,6 +100,30 @@ def test_the_marble_cylinder_gets_a_box_its_post_peak_fits_in_and_a_window_past_
     assert exp["method"] == "esmda" and exp["observations"]["model_error"] == {"simulator_replicates": 3}
 
 
+def test_the_approximation_error_is_written_on_request_with_its_reason(tmp_path):
+    """--approximation-error writes the coarse mesh's own error block the coverage benchmark found needed on
+    finer data (benchmarks/coverage_plan_approximation.json), with its reason, and the config validates;
+    without it no such block is written (the other tests' configs)."""
+    text, doc = init_config([DISC], approximation_error=True)
+    exp = _exp(doc)
+    assert exp["observations"]["model_error"] == {"approximation_error": {"preset": "standard", "pairs": 24}}
+    lines = text.splitlines()
+    i = next(k for k, ln in enumerate(lines) if ln.strip().startswith("model_error:"))
+    j = i
+    while lines[j - 1].strip().startswith("#"):  # a long reason is wrapped above its key
+        j -= 1
+    reason = " ".join(ln.strip().lstrip("# ") for ln in lines[j:i + 1])
+    assert "--approximation-error" in reason and "section 8" in reason
+    (tmp_path / "disc.yaml").write_text(text)
+    validate_config(yaml.safe_load((tmp_path / "disc.yaml").read_text()), REPO / "config" / "schema.yaml",
+                    base_dir=REPO)
+    assert "approximation_error" not in _exp(init_config([DISC])[1])["observations"].get("model_error", {})
+    # the command line passes it through
+    out = tmp_path / "cli.yaml"
+    assert main(["init-config", str(DISC), "--out", str(out), "--approximation-error"]) == 0
+    assert _exp(yaml.safe_load(out.read_text()))["observations"]["model_error"]["approximation_error"]["pairs"] == 24
+
+
 def test_every_choice_carries_its_reason(written):
     for text in (written[1][0], written[2][0]):
         lines = text.splitlines()

@@ -229,7 +229,8 @@ def read_sheets(paths: list[str | Path]) -> tuple[list, list[RecordTimes]]:
 
 
 def init_config(paths: list[str | Path], *, name: str | None = None, diagnosis: bool = False,
-                heldout: str | None = None, seed: int = 31, allow_invalid: bool = False) -> tuple[str, dict]:
+                heldout: str | None = None, seed: int = 31, allow_invalid: bool = False,
+                approximation_error: bool = False) -> tuple[str, dict]:
     """``(YAML text with comments, the same document as a dict)``: one calibration experiment from ``paths``.
 
     The rock is compared by the sheets' ``rock.lithology``; sheets that give only E, nu, rho are taken
@@ -268,4 +269,4 @@ def init_config(paths: list[str | Path], *, name: str | None = None, diagnosis: 
     boxes, why_box = rock_box(lithology, geometry, max(t.peak_stress for t in times if t.name != held))
     return experiment_yaml(name=name, geometry=geometry, lithology=lithology, times=times, window=window,
                            why_window=why_window, dt=choose_dt(window), boxes=boxes, why_box=why_box,
-                           heldout=held, seed=seed, invalid=[t.name for t in invalid])
+                           heldout=held, seed=seed, invalid=[t.name for t in invalid], approximation=approximation_error)

@@ -85,8 +85,9 @@ def _diagnosis_lines(heldout_path: str, seed: int) -> list[str]:
 
 
 def experiment_yaml(*, name, geometry, lithology, times, window, why_window, dt, boxes, why_box, heldout,
-                    seed, invalid=()) -> tuple[str, dict]:
-    """``(text, parsed experiment)``; ``times`` in test order, ``heldout`` a record name or None."""
+                    seed, invalid=(), approximation: bool = False) -> tuple[str, dict]:
+    """``(text, parsed experiment)``; ``times`` in test order, ``heldout`` a record name or None;
+    ``approximation``: the coarse mesh's own error learned from runs paired at ``standard``."""
     calib = [t for t in times if t.name != heldout]
     held = [t for t in times if t.name == heldout]
     sample_dt = min(5.0e-7, dt)
@@ -127,9 +128,17 @@ def experiment_yaml(*, name, geometry, lithology, times, window, why_window, dt,
     if invalid:
         body.append(line(6, "allow_invalid", True, f"--allow-invalid: {', '.join(invalid)} graded invalid by "
                          f"python -m shpb reduce, calibrated on anyway"))
+    model_error, why = {}, []
     if heldout:
-        body.append(line(6, "model_error", {"simulator_replicates": 3}, "the mesh's own scatter, as "
-                         "config/diagnosis.yaml"))
+        model_error["simulator_replicates"] = 3
+        why.append("the mesh's own scatter, as config/diagnosis.yaml")
+    if approximation:
+        model_error["approximation_error"] = {"preset": "standard", "pairs": 24}
+        why.append("--approximation-error: the coarse mesh's own error from 24 runs paired at standard, which "
+                   "the coverage benchmark found needed on finer data (docs/own-data.md, section 8)")
+    if model_error:
+        body.append(line(6, "model_error", model_error, "; ".join(why)))
+    if heldout:
         body += _diagnosis_lines(record_path(held[0].path), seed)
     text = "\n".join(head + [""] + body) + "\n"
     return text, yaml.safe_load(text)
