@@ -139,6 +139,19 @@ def product_flag_split(rows: list, t, lower: float, upper: float) -> dict:
             "uninformative": _part([r for r, f in zip(rows, flag) if f], t[flag], lower, upper)}
 
 
+def pooled_learned_coverage(benches: list, name: str) -> dict:
+    """The well-specified twins on which the product calls ``name`` learned, over several benchmark JSONs of
+    one form (the reported posterior's :func:`product_flag_split`): ``{"covered", "n", "p"}``, the 90 %
+    intervals' hits pooled and their binomial p against 90 % (what calibration.scored's ``learned_holds``
+    rests on)."""
+    parts = []
+    for bench in benches:
+        key = "summary_emulator_mcmc" if bench.get("reported_posterior") == "emulator_mcmc" else "summary"
+        parts.append(bench["well_specified"][key]["params"][name]["product_flag"]["informative"])
+    k, n = sum(int(q["coverage_90"]["covered"]) for q in parts), sum(int(q["n"]) for q in parts)
+    return {"covered": k, "n": n, "p": float(stats.binomtest(k, n, 0.9).pvalue)}
+
+
 def _wis_against_prior(rows: list, t, lower: float, upper: float) -> tuple[np.ndarray, np.ndarray]:
     """Each twin's WIS and the box's uniform prior's at the same truth."""
     prior = prior_row(lower, upper)

@@ -7,8 +7,9 @@ Fracture is chaotic, so a difference in the last bit of one run grows into anoth
 runs of the two machines are then two draws of the simulator's own scatter, not the same draw twice.
 The spread of the two reported intervals is the part of the interval set by which draws the loop got:
 an error of the quoted interval that no single run shows. Inputs: the location benchmark's part-1
-records (``benchmarks/results/coverage_location_records/machine-a/``) and the same twins' records re-run
-under its amendment 1 (``.../refine-25/``); only twins present in both are compared. No twin is scored
+records (``benchmarks/results/coverage_location_records/machine-a/``) and the same twins re-run under its
+amendment 1 (the well-specified twins of ``benchmarks/results/coverage_location.json``, the scored JSON that
+holds their records); only twins present in both are compared. No twin is scored
 against its truth here beyond whether the two intervals agree on holding it.
 
     python studies/engine_bits.py --out studies/results/engine_bits.json
@@ -24,6 +25,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 RECORDS = ROOT / "benchmarks" / "results" / "coverage_location_records"
+SCORED = ROOT / "benchmarks" / "results" / "coverage_location.json"
 NAMES = ("sigma_t", "E_t")
 
 
@@ -66,14 +68,15 @@ def summarise(rows: list) -> dict:
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--a", default=str(RECORDS / "machine-a"))
-    ap.add_argument("--b", default=str(RECORDS / "refine-25"))
+    ap.add_argument("--b", default=str(SCORED), help="a bench_coverage JSON whose well-specified twins are machine B's")
     ap.add_argument("--out")
     args = ap.parse_args(argv)
+    b = {t["seed"]: t for t in json.loads(Path(args.b).read_text())["well_specified"]["twins"]}
     rows = []
     for fa in sorted(Path(args.a).glob("well_specified_*.json")):
-        fb = Path(args.b) / fa.name
-        if fb.is_file():
-            rows.append(pair_rows(json.loads(fa.read_text()), json.loads(fb.read_text())))
+        a = json.loads(fa.read_text())
+        if a["seed"] in b:
+            rows.append(pair_rows(a, b[a["seed"]]))
     if not rows:
         raise SystemExit(f"no twin is in both {args.a} and {args.b}")
     result = {"study": "engine_bits", "what": __doc__.split("\n\n")[0].replace("\n", " "),

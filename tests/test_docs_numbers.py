@@ -75,13 +75,12 @@ def _location_decision(J) -> dict:
 def _pooled_learned(J, name: str) -> dict:
     """The shipped form's well-specified twins on which the product calls ``name`` learned, in the README's two
     benchmarks: the second's 90 % coverage and both pooled (calibration.scored.SCORED's learned_holds)."""
-    from scipy import stats
+    from benchmarks.scores import pooled_learned_coverage
 
-    parts = [J(f"benchmarks/results/{f}")["well_specified"]["summary_emulator_mcmc"]["params"][name]["product_flag"]
-             ["informative"] for f in ("coverage_one_posterior.json", "coverage_location.json")]
-    k, n = sum(p["coverage_90"]["covered"] for p in parts), sum(p["n"] for p in parts)
-    return {"k": k, "n": n, "p": stats.binomtest(k, n, 0.9).pvalue, "k2": parts[1]["coverage_90"]["covered"],
-            "n2": parts[1]["n"], "p2": parts[1]["coverage_90"]["p_vs_level"]}
+    benches = [J(f"benchmarks/results/{f}") for f in ("coverage_one_posterior.json", "coverage_location.json")]
+    both, second = pooled_learned_coverage(benches, name), pooled_learned_coverage(benches[1:], name)
+    return {"k": both["covered"], "n": both["n"], "p": both["p"], "k2": second["covered"], "n2": second["n"],
+            "p2": second["p"]}
 
 
 def _approximation(J) -> dict:
