@@ -1,6 +1,7 @@
 """One set of the coverage benchmark's twins scored over several of its JSONs (twins of different seeds).
 
     python benchmarks/pool_coverage.py misspecified A.json B.json --out benchmarks/results/<name>.json
+    python benchmarks/pool_coverage.py misspecified+misspecified_rate A.json B.json C.json  (every misspecified twin)
 
 Each JSON is a ``benchmarks/bench_coverage.py`` output; the set's twins of all of them are scored
 together by the benchmark's own ``score`` / ``score_mcmc`` (coverage with Clopper-Pearson intervals,
@@ -47,7 +48,16 @@ def setting(bench: dict, key: str):
 
 
 def pool(name: str, benches: dict[str, dict]) -> dict:
-    """``benches``: path -> bench_coverage JSON. The set ``name`` scored over all their twins."""
+    """``benches``: path -> bench_coverage JSON. The set ``name`` scored over all their twins; ``name`` may
+    list several sets joined by ``+`` (``misspecified+misspecified_rate``: every misspecified twin, each
+    JSON contributing the listed sets it holds)."""
+    names = name.split("+")
+    if len(names) > 1:
+        parts = {path: [r for n in names for r in (b.get(n) or {}).get("twins") or []] for path, b in benches.items()}
+        benches = {path: {**b, name: {"twins": parts[path],
+                                      "summary_emulator_mcmc": {n: b[n]["summary_emulator_mcmc"]
+                                                                for n in names if b.get(n)}}}
+                   for path, b in benches.items()}
     first = next(iter(benches.values()))
     for path, b in benches.items():
         differ = [k for k in SETTINGS if setting(b, k) != setting(first, k)]
@@ -66,15 +76,22 @@ def pool(name: str, benches: dict[str, dict]) -> dict:
             "twins": len(b[name]["twins"]), "wall_s_this_call": b.get("wall_s_this_call"),
             "summary_emulator_mcmc": b[name]["summary_emulator_mcmc"]} for p, b in benches.items()},
             **{k: setting(first, k) for k in SETTINGS}, "n_twins": len(twins),
-            **scored, "verdict": set_verdict(scored, setting(first, "reported_posterior") or "ensemble")}
+            **scored, "verdict": set_verdict(scored, setting(first, "reported_posterior") or "ensemble",
+                                             names[0] if len(set(names)) == 1 else "misspecified")}
 
 
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("set", choices=["well_specified", "misspecified"])
+    ap.add_argument("set", help="well_specified, misspecified or misspecified_rate, or several misspecified sets "
+                                "joined by '+' (misspecified+misspecified_rate)")
     ap.add_argument("jsons", nargs="+")
     ap.add_argument("--out", default=None)
     a = ap.parse_args(argv)
+    sets = a.set.split("+")
+    if not sets or any(n not in ("well_specified", "misspecified", "misspecified_rate") for n in sets) or (
+            len(sets) > 1 and "well_specified" in sets):
+        ap.error(f"set {a.set!r}: expected well_specified, misspecified, misspecified_rate or misspecified sets "
+                 "joined by '+'")
     benches = {str(Path(p)): json.loads(Path(p).read_text()) for p in a.jsons}
     return emit_json(pool(a.set, benches), a.out)
 
