@@ -68,6 +68,12 @@ def pool(name: str, benches: dict[str, dict]) -> dict:
     if len(flat) != len(set(flat)):
         twice = sorted({s for s in flat if flat.count(s) > 1})
         raise SystemExit(f"the same twin seed twice ({twice[:5]}...): those twins would count twice")
+    # the rate set's data mesh matters to its twins only: one value over the JSONs that hold rate twins
+    rate_mesh = {b.get("rate_data_preset", "fast") for b in benches.values()
+                 if "misspecified_rate" in names and ((b.get("misspecified_rate") or {}).get("twins")
+                                                      or len(names) == 1)}
+    if len(rate_mesh) > 1:
+        raise SystemExit(f"the rate twins' data come from different meshes ({sorted(rate_mesh)}): not one set")
     spec = ExperimentSpec.from_config(first["experiment"], twin_experiment())
     twins = [r for b in benches.values() for r in b[name]["twins"]]
     scored = {"summary": score(twins, spec.lower, spec.upper, spec.names),
@@ -76,6 +82,7 @@ def pool(name: str, benches: dict[str, dict]) -> dict:
             "twins": len(b[name]["twins"]), "wall_s_this_call": b.get("wall_s_this_call"),
             "summary_emulator_mcmc": b[name]["summary_emulator_mcmc"]} for p, b in benches.items()},
             **{k: setting(first, k) for k in SETTINGS}, "n_twins": len(twins),
+            **({"rate_data_preset": rate_mesh.pop()} if rate_mesh else {}),
             **scored, "verdict": set_verdict(scored, setting(first, "reported_posterior") or "ensemble",
                                              names[0] if len(set(names)) == 1 else "misspecified")}
 
