@@ -33,7 +33,7 @@ CASES = {"disc": "twin_ref", "cylinder": "marble_loop"}
 
 
 def _experiment(name: str) -> dict:
-    cfg = validate_config(load_yaml(ROOT / "config" / "config.yaml"))
+    cfg = validate_config(load_yaml(ROOT / "config" / "config.yaml"), ROOT / "config" / "schema.yaml", base_dir=ROOT)
     exp = dict(cfg["experiments"][name])
     exp["observations"] = {**exp["observations"], "model_error": {
         **(exp["observations"].get("model_error") or {}),

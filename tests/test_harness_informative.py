@@ -29,6 +29,10 @@ README_FILE = README_FILES[0]
 # ... and the same posterior with the approximation error on standard-mesh twins: three seeds pooled
 # (benchmarks/pool_coverage.py; benchmarks/coverage_plan_approximation.json)
 README_POOLED = "coverage_approximation.json"
+# ... and on standard-mesh twins with an undeclared rate dependence (benchmarks/coverage_plan_rate_approximation.json),
+# with every misspecified twin of that form pooled for the plan's primary bar
+README_RATE = "coverage_rate_approximation.json"
+ALL_MISSPECIFIED = "coverage_misspecified_approximation.json"
 README_SETS = [(f, s) for f in README_FILES for s in ("well_specified", "misspecified", "misspecified_rate")]
 SETS = [("coverage_well_specified.json", "well_specified"), ("coverage_well_specified_repeat.json", "well_specified"),
         ("coverage_misspecified.json", "misspecified"), *README_SETS]
@@ -119,7 +123,8 @@ def test_the_committed_verdicts_are_the_readme_s(spec, committed):
     claims the verdicts make, the first benchmark's then the second's."""
     text = (ROOT / "README.md").read_text()
     flat = " ".join(text.split())
-    assert coverage_table.readme_block_sources(text) == [f"benchmarks/results/{f}" for f in (*README_FILES, README_POOLED)]
+    assert coverage_table.readme_block_sources(text) == [f"benchmarks/results/{f}"
+                                                         for f in (*README_FILES, README_POOLED, README_RATE)]
     for f, name in SETS:
         twins = committed[f][name]["twins"]
         # each set's stored verdict applies its own bars (the misspecified sets: coverage >= 0.80)
@@ -380,3 +385,32 @@ def test_the_pooled_approximation_benchmark_is_its_twins_and_meets_its_plan(spec
     row = next(line for line in (ROOT / "README.md").read_text().splitlines() if f"| `{README_POOLED}` |" in line)
     assert row.rstrip(" |").rsplit("|", 1)[1].strip() == coverage_table._failed(shown) == "none"
     assert all(fresh["params"][p]["coverage_90"]["fraction_counting_failures_as_misses"] >= 0.80 for p in spec.names)
+
+
+def test_the_rate_benchmark_is_its_twins_and_its_plan_s_bars_are_reported(spec):
+    """The README's row of the recommended form on standard-mesh data with an undeclared rate dependence: the
+    pooled JSON is its three planned seeds' twins scored now (the data's mesh, the planted k and the pairs the
+    plan's); the primary bar pools every misspecified twin of the form (the approximation benchmark's and
+    these) and is met; the rate set alone misses on sigma_t, and the row says so."""
+    res = ROOT / "benchmarks" / "results"
+    plan = json.loads((ROOT / "benchmarks" / "coverage_plan_rate_approximation.json").read_text())
+    rate, every = (json.loads((res / f).read_text()) for f in (README_RATE, ALL_MISSPECIFIED))
+    sources = {src: json.loads((ROOT / src).read_text()) for src in rate["sources"]}
+    want = plan["sets"]["misspecified_rate"]
+    assert sorted(t["seed"] // 1000 for b in sources.values() for t in b["misspecified_rate"]["twins"]) == sorted(
+        s for s in want["seeds"] for _ in range(want["twins_per_seed"]))
+    assert all(b["approximation_pairs"] == 24 and b["rate_data_preset"] == "standard" and b["planted_rate_k"] == 0.25
+               for b in sources.values())
+    twins = [t for b in sources.values() for t in b["misspecified_rate"]["twins"]]
+    fresh = bc.score_mcmc(twins, spec.lower, spec.upper, spec.names)
+    assert _digits(json.loads(json.dumps(fresh, default=lambda o: o.item()))) == _digits(rate["summary_emulator_mcmc"])
+    # the primary bar: every misspecified twin of the form, the approximation benchmark's and these
+    approx = json.loads((res / README_POOLED).read_text())
+    assert sorted(every["sources"]) == sorted([*approx["sources"], *rate["sources"]]) and every["n_twins"] == 60
+    all_twins = twins + [t for src in approx["sources"] for t in json.loads((ROOT / src).read_text())["misspecified"]["twins"]]
+    primary = set_verdict_of("misspecified", bc.score_mcmc(all_twins, spec.lower, spec.upper, spec.names))
+    assert primary == every["verdict"] and primary["passes"]
+    secondary = set_verdict_of("misspecified_rate", fresh)
+    row = next(line for line in (ROOT / "README.md").read_text().splitlines() if f"| `{README_RATE}` |" in line)
+    assert row.rstrip(" |").rsplit("|", 1)[1].strip() == coverage_table._failed(secondary)
+    assert secondary["failed"] == ["coverage_90 sigma_t"]
