@@ -114,6 +114,16 @@ def _rate_approximation(J) -> dict:
     return out
 
 
+def _approximation_cost(J) -> dict:
+    """The approximation pairs' time per record on 2 cores [min] and a standard run over a fast one, disc and cylinder."""
+    d = J("benchmarks/results/bench_approximation_cost.json")
+    c = d["cases"]
+    if d["cores"] != 2:
+        return {}
+    return {"dm": c["disc"]["pairs_on_cores_s"] / 60, "cm": c["cylinder"]["pairs_on_cores_s"] / 60,
+            "dr": c["disc"]["standard_over_model_preset"], "cr": c["cylinder"]["standard_over_model_preset"]}
+
+
 def _planted_gap(J) -> dict:
     """The shipped planted-gap series through the loop (the default run's planted_gap): the walk's
     confirmed step, the held-out errors, and the planted values against the reported intervals."""
@@ -526,6 +536,8 @@ QUOTES: list[Quote] = [
           "prior's against {bsw:.2f} and {bew:.2f}", _approximation),
     Quote("README.md", "finer-mesh data with an undeclared rate dependence {rs:.0f} % / {re:.0f} % (a fourth); over all "
           "{N} of these twins {ps:.0f} % / {pe:.0f} %, the bar met", _rate_approximation),
+    Quote("docs/own-data.md", "about {dm:.1f} min per disc record and {cm:.1f} min per marble cylinder record on 2 cores\n"
+          "(a `standard` run takes {dr:.1f} and {cr:.1f} times a `fast` one", _approximation_cost),
     Quote("README.md", "an undeclared rate dependence moves `sigma_t` (median {up:.0f} % above the truth)", _rate_approximation),
     Quote("docs/own-data.md", "on {n} standard-mesh twins\nthat also carried a rate dependence nobody declared, it held the "
           "truth in {rs:.0f} % (`sigma_t`) and {re:.0f} %\n(`E_t`) of them, `sigma_t`'s median {up:.0f} % above the truth\n"
