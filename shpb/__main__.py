@@ -115,9 +115,10 @@ def main(argv=None) -> int:
     ic.add_argument("--heldout", metavar="NAME", help="with --diagnosis: the sheet (file stem) to hold out")
     ic.add_argument("--allow-invalid", action="store_true",
                     help="calibrate on records graded invalid by the lab checks (observations.allow_invalid)")
-    ic.add_argument("--approximation-error", action="store_true",
-                    help="carry the coarse mesh's own error (24 runs paired at standard per record; "
-                         "docs/own-data.md, section 8)")
+    ic.add_argument("--approximation-error", action=argparse.BooleanOptionalAction, default=True,
+                    help="carry the coarse mesh's own error (24 runs paired at standard per record; on by default, "
+                         "as a lab's records come from a specimen with no mesh; --no-approximation-error for "
+                         "records simulated at the model's own mesh; docs/own-data.md, section 8)")
     args = ap.parse_args(argv)
     if args.command == "init-config":
         return _init_config(args)

@@ -230,7 +230,7 @@ def read_sheets(paths: list[str | Path]) -> tuple[list, list[RecordTimes]]:
 
 def init_config(paths: list[str | Path], *, name: str | None = None, diagnosis: bool = False,
                 heldout: str | None = None, seed: int = 31, allow_invalid: bool = False,
-                approximation_error: bool = False) -> tuple[str, dict]:
+                approximation_error: bool = True) -> tuple[str, dict]:
     """``(YAML text with comments, the same document as a dict)``: one calibration experiment from ``paths``.
 
     The rock is compared by the sheets' ``rock.lithology``; sheets that give only E, nu, rho are taken

@@ -134,8 +134,9 @@ def experiment_yaml(*, name, geometry, lithology, times, window, why_window, dt,
         why.append("the mesh's own scatter, as config/diagnosis.yaml")
     if approximation:
         model_error["approximation_error"] = {"preset": "standard", "pairs": 24}
-        why.append("--approximation-error: the coarse mesh's own error from 24 runs paired at standard, which "
-                   "the coverage benchmark found needed on finer data (docs/own-data.md, section 8)")
+        why.append("the coarse mesh's own error from 24 runs paired at standard, which the coverage benchmark "
+                   "found needed on data finer than the model (docs/own-data.md, section 8; "
+                   "--no-approximation-error leaves it out)")
     if model_error:
         body.append(line(6, "model_error", model_error, "; ".join(why)))
     if heldout:
