@@ -106,9 +106,16 @@ BAR = {"sigma_t": 0.02, "E_t": 0.10}
 LEVELS = {"50": (0.25, 0.75), "90": (0.05, 0.95)}
 
 
+def shipped_experiment(name: str, edit=None) -> dict:
+    """Experiment ``name`` of config/config.yaml, validated (schema defaults filled in) after ``edit(exp)``."""
+    cfg = load_yaml(ROOT / "config" / "config.yaml")
+    if edit is not None:
+        edit(cfg["experiments"][name])
+    return validate_config(cfg, ROOT / "config" / "schema.yaml", base_dir=ROOT)["experiments"][name]
+
+
 def twin_experiment() -> dict:
-    cfg = validate_config(load_yaml(ROOT / "config" / "config.yaml"), ROOT / "config" / "schema.yaml", base_dir=ROOT)
-    return cfg["experiments"][EXPERIMENT]
+    return shipped_experiment(EXPERIMENT)
 
 
 def truths(n: int, lower, upper, seed: int) -> np.ndarray:

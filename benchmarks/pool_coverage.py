@@ -70,8 +70,7 @@ def pool(name: str, benches: dict[str, dict]) -> dict:
         raise SystemExit(f"the same twin seed twice ({twice[:5]}...): those twins would count twice")
     # the rate set's data mesh matters to its twins only: one value over the JSONs that hold rate twins
     rate_mesh = {b.get("rate_data_preset", "fast") for b in benches.values()
-                 if "misspecified_rate" in names and ((b.get("misspecified_rate") or {}).get("twins")
-                                                      or len(names) == 1)}
+                 if "misspecified_rate" in names and (b.get("misspecified_rate") or {}).get("twins")}
     if len(rate_mesh) > 1:
         raise SystemExit(f"the rate twins' data come from different meshes ({sorted(rate_mesh)}): not one set")
     spec = ExperimentSpec.from_config(first["experiment"], twin_experiment())

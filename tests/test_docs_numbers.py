@@ -92,9 +92,18 @@ def _approximation(J) -> dict:
         return {}
     out = {"n": with_["n_twins"], "n0": without["summary_emulator_mcmc"]["n_twins"]}
     for tag, q in (("a", with_["summary_emulator_mcmc"]), ("b", without["summary_emulator_mcmc"])):
-        for p, k in (("sigma_t", "s"), ("E_t", "e")):
-            out[f"{tag}{k}c"] = 100 * q["params"][p]["coverage_90"]["fraction_counting_failures_as_misses"]
-            out[f"{tag}{k}w"] = q["params"][p]["wis_over_prior"]
+        out.update(_cov90_wis(q, tag, "c", "w"))
+    return out
+
+
+def _cov90_wis(summary: dict, tag: str, cov: str, wis: str | None = None) -> dict:
+    """A reported posterior's 90 % coverage [%] (failed samplers as misses) and WIS over the prior's, per
+    parameter, named ``<tag><s|e><cov>`` and ``<tag><s|e><wis>``."""
+    out = {}
+    for p, k in (("sigma_t", "s"), ("E_t", "e")):
+        out[f"{tag}{k}{cov}"] = 100 * summary["params"][p]["coverage_90"]["fraction_counting_failures_as_misses"]
+        if wis:
+            out[f"{tag}{k}{wis}"] = summary["params"][p]["wis_over_prior"]
     return out
 
 
@@ -109,8 +118,7 @@ def _rate_approximation(J) -> dict:
     out = {"n": rate["n_twins"], "N": every["n_twins"],
            "up": 100 * (rate["summary_emulator_mcmc"]["params"]["sigma_t"]["mean_over_truth_median"] - 1)}
     for tag, q in (("r", rate["summary_emulator_mcmc"]), ("p", every["summary_emulator_mcmc"])):
-        for p, k in (("sigma_t", "s"), ("E_t", "e")):
-            out[f"{tag}{k}"] = 100 * q["params"][p]["coverage_90"]["fraction_counting_failures_as_misses"]
+        out.update(_cov90_wis(q, tag, ""))
     return out
 
 

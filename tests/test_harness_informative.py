@@ -368,22 +368,32 @@ def test_the_flag_split_fails_a_method_sure_only_where_it_is_wrong():
     assert prior["informative"]["n"] == 0 and prior["uninformative_share"] == 1.0
 
 
+def _planned_pool(spec, pooled_file: str, plan_file: str, name: str) -> tuple[dict, list, dict]:
+    """``(sources, twins, fresh scores)`` of a pooled benchmark JSON: its sources' twins of set ``name`` are
+    its plan's seeds x twins per seed, and its stored scores are what those twins give now."""
+    pooled = json.loads((ROOT / "benchmarks" / "results" / pooled_file).read_text())
+    want = json.loads((ROOT / "benchmarks" / plan_file).read_text())["sets"][name]
+    sources = {src: json.loads((ROOT / src).read_text()) for src in pooled["sources"]}
+    twins = [t for b in sources.values() for t in b[name]["twins"]]
+    assert sorted(t["seed"] // 1000 for t in twins) == sorted(s for s in want["seeds"] for _ in range(want["twins_per_seed"]))
+    fresh = bc.score_mcmc(twins, spec.lower, spec.upper, spec.names)
+    assert _digits(json.loads(json.dumps(fresh, default=lambda o: o.item()))) == _digits(pooled["summary_emulator_mcmc"])
+    return sources, twins, fresh
+
+
+def _readme_row_bars(source: str) -> str:
+    """The "bars not met" cell of the README coverage table's row of ``source``."""
+    row = next(line for line in (ROOT / "README.md").read_text().splitlines() if f"| `{source}` |" in line)
+    return row.rstrip(" |").rsplit("|", 1)[1].strip()
+
+
 def test_the_pooled_approximation_benchmark_is_its_twins_and_meets_its_plan(spec):
     """The README's row of the approximation error: the pooled JSON's scores are what its three seeds' twins
     give now, each seed a planned set of ten with its own pairs, and the plan's bar (90 % coverage >= 0.80 per
     parameter, benchmarks/coverage_plan_approximation.json) is what the row and the README's advice rest on."""
-    pooled = json.loads((ROOT / "benchmarks" / "results" / README_POOLED).read_text())
-    plan = json.loads((ROOT / "benchmarks" / "coverage_plan_approximation.json").read_text())
-    sources = {src: json.loads((ROOT / src).read_text()) for src in pooled["sources"]}
-    assert sorted(t["seed"] // 1000 for b in sources.values() for t in b["misspecified"]["twins"]) == sorted(
-        s for s in plan["sets"]["misspecified"]["seeds"] for _ in range(plan["sets"]["misspecified"]["twins_per_seed"]))
+    sources, _, fresh = _planned_pool(spec, README_POOLED, "coverage_plan_approximation.json", "misspecified")
     assert all(b["approximation_pairs"] == 24 and b["coarse_variability"] == "subtracted" for b in sources.values())
-    twins = [t for b in sources.values() for t in b["misspecified"]["twins"]]
-    fresh = bc.score_mcmc(twins, spec.lower, spec.upper, spec.names)
-    assert _digits(json.loads(json.dumps(fresh, default=lambda o: o.item()))) == _digits(pooled["summary_emulator_mcmc"])
-    shown = set_verdict_of("misspecified", fresh)
-    row = next(line for line in (ROOT / "README.md").read_text().splitlines() if f"| `{README_POOLED}` |" in line)
-    assert row.rstrip(" |").rsplit("|", 1)[1].strip() == coverage_table._failed(shown) == "none"
+    assert _readme_row_bars(README_POOLED) == coverage_table._failed(set_verdict_of("misspecified", fresh)) == "none"
     assert all(fresh["params"][p]["coverage_90"]["fraction_counting_failures_as_misses"] >= 0.80 for p in spec.names)
 
 
@@ -392,25 +402,17 @@ def test_the_rate_benchmark_is_its_twins_and_its_plan_s_bars_are_reported(spec):
     pooled JSON is its three planned seeds' twins scored now (the data's mesh, the planted k and the pairs the
     plan's); the primary bar pools every misspecified twin of the form (the approximation benchmark's and
     these) and is met; the rate set alone misses on sigma_t, and the row says so."""
-    res = ROOT / "benchmarks" / "results"
-    plan = json.loads((ROOT / "benchmarks" / "coverage_plan_rate_approximation.json").read_text())
-    rate, every = (json.loads((res / f).read_text()) for f in (README_RATE, ALL_MISSPECIFIED))
-    sources = {src: json.loads((ROOT / src).read_text()) for src in rate["sources"]}
-    want = plan["sets"]["misspecified_rate"]
-    assert sorted(t["seed"] // 1000 for b in sources.values() for t in b["misspecified_rate"]["twins"]) == sorted(
-        s for s in want["seeds"] for _ in range(want["twins_per_seed"]))
+    sources, twins, fresh = _planned_pool(spec, README_RATE, "coverage_plan_rate_approximation.json",
+                                          "misspecified_rate")
     assert all(b["approximation_pairs"] == 24 and b["rate_data_preset"] == "standard" and b["planted_rate_k"] == 0.25
                for b in sources.values())
-    twins = [t for b in sources.values() for t in b["misspecified_rate"]["twins"]]
-    fresh = bc.score_mcmc(twins, spec.lower, spec.upper, spec.names)
-    assert _digits(json.loads(json.dumps(fresh, default=lambda o: o.item()))) == _digits(rate["summary_emulator_mcmc"])
     # the primary bar: every misspecified twin of the form, the approximation benchmark's and these
-    approx = json.loads((res / README_POOLED).read_text())
+    res = ROOT / "benchmarks" / "results"
+    every, approx, rate = (json.loads((res / f).read_text()) for f in (ALL_MISSPECIFIED, README_POOLED, README_RATE))
     assert sorted(every["sources"]) == sorted([*approx["sources"], *rate["sources"]]) and every["n_twins"] == 60
     all_twins = twins + [t for src in approx["sources"] for t in json.loads((ROOT / src).read_text())["misspecified"]["twins"]]
     primary = set_verdict_of("misspecified", bc.score_mcmc(all_twins, spec.lower, spec.upper, spec.names))
     assert primary == every["verdict"] and primary["passes"]
     secondary = set_verdict_of("misspecified_rate", fresh)
-    row = next(line for line in (ROOT / "README.md").read_text().splitlines() if f"| `{README_RATE}` |" in line)
-    assert row.rstrip(" |").rsplit("|", 1)[1].strip() == coverage_table._failed(secondary)
+    assert _readme_row_bars(README_RATE) == coverage_table._failed(secondary)
     assert secondary["failed"] == ["coverage_90 sigma_t"]

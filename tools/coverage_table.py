@@ -62,16 +62,14 @@ def reported(bench: dict, name: str) -> dict:
 def _label(bench: dict, name: str) -> str:
     if name == "well_specified":
         return "well-specified"
+    pairs = bench.get("approximation_pairs")
+    extra = f", approximation error from {pairs} paired runs" if pairs else ""
     if name == "misspecified_rate":
         twins = (bench.get(name) or {}).get("twins") or [{}]
         k = (twins[0].get("planted") or {}).get("rate_strength.k")
         mesh = "data from the `standard` mesh" if bench.get("rate_data_preset") == "standard" else "data"
-        pairs = bench.get("approximation_pairs")
-        extra = f", approximation error from {pairs} paired runs" if pairs else ""
         return (f"misspecified ({mesh} with an undeclared rate dependence{f', rate_strength.k = {k:g}' if k else ''}"
                 f"{extra})")
-    pairs = bench.get("approximation_pairs")
-    extra = f", approximation error from {pairs} paired runs" if pairs else ""
     return f"misspecified (data from the `standard` mesh{extra})"
 
 

@@ -13,6 +13,10 @@ COMMENT_COLUMN = 40
 LINE_WIDTH = 120
 
 
+#: the coarse mesh's own error init-config writes (docs/own-data.md, section 8): the block the coverage
+#: benchmarks validated (benchmarks/coverage_plan_approximation.json)
+APPROXIMATION_ERROR = {"preset": "standard", "pairs": 24}
+
 def number(v: float | int) -> str:
     """A YAML number that YAML 1.1 loaders (PyYAML, Snakemake) read as a number: ``1.0e+7`` not ``1e+07``."""
     if isinstance(v, int) or float(v) == 0.0:
@@ -133,7 +137,7 @@ def experiment_yaml(*, name, geometry, lithology, times, window, why_window, dt,
         model_error["simulator_replicates"] = 3
         why.append("the mesh's own scatter, as config/diagnosis.yaml")
     if approximation:
-        model_error["approximation_error"] = {"preset": "standard", "pairs": 24}
+        model_error["approximation_error"] = dict(APPROXIMATION_ERROR)
         why.append("the coarse mesh's own error from 24 runs paired at standard, which the coverage benchmark "
                    "found needed on data finer than the model (docs/own-data.md, section 8; "
                    "--no-approximation-error leaves it out)")
