@@ -104,6 +104,8 @@ from benchmarks.scores import proper_scores, set_verdict_of, with_failures_as_pr
 EXPERIMENT = "twin_ref"
 BAR = {"sigma_t": 0.02, "E_t": 0.10}
 LEVELS = {"50": (0.25, 0.75), "90": (0.05, 0.95)}
+#: the finer mesh the approximation error's pairs are run at, whatever a set's data (a lab's records get the same)
+APPROXIMATION_PRESET = "standard"
 
 
 def shipped_experiment(name: str, edit=None) -> dict:
@@ -597,9 +599,7 @@ def main(argv=None) -> dict:
                 (cache / approx_tag).mkdir(parents=True, exist_ok=True)
                 pairs = cache / approx_tag / f"pairs_{seed}.json"
                 if pairs.is_file() or not args.score_only:
-                    # the pairs learn the model's error against the standard mesh whatever the set's data
-                    # (a lab's records get the same term)
-                    approx = approximation_pairs(pool, exp, args.approximation_pairs, seed, "standard", pairs,
+                    approx = approximation_pairs(pool, exp, args.approximation_pairs, seed, APPROXIMATION_PRESET, pairs,
                                                  args.coarse_variability)
             if name == "misspecified_rate" and data_preset != "fast":
                 folder = folder / f"rate-data-{data_preset}"  # never mixed with the fast data's twins

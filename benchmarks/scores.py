@@ -139,17 +139,35 @@ def product_flag_split(rows: list, t, lower: float, upper: float) -> dict:
             "uninformative": _part([r for r, f in zip(rows, flag) if f], t[flag], lower, upper)}
 
 
-def pooled_learned_coverage(benches: list, name: str) -> dict:
-    """The well-specified twins on which the product calls ``name`` learned, over several benchmark JSONs of
-    one form (the reported posterior's :func:`product_flag_split`): ``{"covered", "n", "p"}``, the 90 %
+def set_summaries(bench: dict, sets: tuple = ("well_specified",)) -> list:
+    """The reported posterior's scored summary of each of ``sets`` a benchmark JSON holds; a pooled JSON
+    (``benchmarks/pool_coverage.py``, one ``set`` such as ``misspecified+misspecified_rate``) is one summary,
+    taken when its sets are among ``sets``."""
+    key = "summary_emulator_mcmc" if bench.get("reported_posterior") == "emulator_mcmc" else "summary"
+    if "set" in bench:
+        return [bench[key]] if set(bench["set"].split("+")) <= set(sets) else []
+    return [bench[s][key] for s in sets if s in bench]
+
+
+def pooled_learned_coverage(benches: list, name: str, sets: tuple = ("well_specified",)) -> dict:
+    """The twins of ``sets`` on which the product calls ``name`` learned, over several benchmark JSONs of one
+    form (the reported posterior's :func:`product_flag_split`): ``{"covered", "n", "p"}``, the 90 %
     intervals' hits pooled and their binomial p against 90 % (what calibration.scored's ``learned_holds``
     rests on)."""
-    parts = []
-    for bench in benches:
-        key = "summary_emulator_mcmc" if bench.get("reported_posterior") == "emulator_mcmc" else "summary"
-        parts.append(bench["well_specified"][key]["params"][name]["product_flag"]["informative"])
+    parts = [s["params"][name]["product_flag"]["informative"] for b in benches for s in set_summaries(b, sets)]
     k, n = sum(int(q["coverage_90"]["covered"]) for q in parts), sum(int(q["n"]) for q in parts)
     return {"covered": k, "n": n, "p": float(stats.binomtest(k, n, 0.9).pvalue)}
+
+
+def pooled_coverage_90(benches: list, name: str, sets: tuple) -> dict:
+    """Every twin of ``sets`` over several benchmark JSONs of one form: ``{"covered", "n"}`` of ``name``'s
+    90 % intervals, a twin whose sampler failed counted as a miss (what calibration.scored's
+    ``misspecified_90`` quotes)."""
+    parts = [s for b in benches for s in set_summaries(b, sets)]
+    n = sum(int(s["n_twins"]) for s in parts)
+    k = sum(round(float(s["params"][name]["coverage_90"]["fraction_counting_failures_as_misses"]) * int(s["n_twins"]))
+            for s in parts)
+    return {"covered": int(k), "n": n}
 
 
 def _wis_against_prior(rows: list, t, lower: float, upper: float) -> tuple[np.ndarray, np.ndarray]:

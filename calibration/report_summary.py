@@ -16,7 +16,8 @@ from collections.abc import Mapping
 from html import escape
 
 from enkf.scores import INFORMATIVE_RATIO
-from .scored import learned_holds
+from shpb.lab.init_config_yaml import APPROXIMATION_ERROR
+from .scored import approximation_form, learned_holds, misspecified_90
 
 __all__ = ["summary_html"]
 
@@ -129,13 +130,41 @@ def _scored(s: Mapping) -> str:
     form = s.get("posterior_form")
     if not isinstance(form, Mapping):
         return "its form is not recorded"
+    # a twin's data are the model's own; a measured record's never are
+    measured = "" if s.get("truth") else _misspecified(form)
     if form.get("scored_by"):
-        return f"this form and loop are scored by the coverage harness, {escape(str(form['scored_by']))}"
+        return f"this form and loop are scored by the coverage harness, {escape(str(form['scored_by']))}" + measured
     other = form.get("form_scored_on")
     where = (f" (the same form is scored on another loop's twins, {escape(str(other.get('benchmark')))})"
              if isinstance(other, Mapping) else "")
     return ("no coverage benchmark has scored this form on this loop" + where
-            + ": read the intervals with the verdict and the predictive coverage")
+            + ": read the intervals with the verdict and the predictive coverage" + measured)
+
+
+def _misspecified(form: Mapping) -> str:
+    """How this form's 90 % intervals fared on the harness's misspecified twins (``posterior_form``'s
+    ``misspecified_90``): what a measured record's intervals can expect, and the form that did better where
+    this one held under 90 %."""
+    # a summary written before the key carries its form, and the form finds its scores
+    mis = form.get("misspecified_90") or misspecified_90(form)
+    if not isinstance(mis, Mapping):
+        return ""
+    text = ("; on the harness's misspecified twins (data the model cannot reproduce: made on a finer mesh, or "
+            "with a rate dependence the calibration does not declare) this form's 90 % intervals held the truth in "
+            + _held(mis))
+    short = any(isinstance(q, Mapping) and "covered" in q and q["covered"] < 0.9 * q["n"] for q in mis.values())
+    if short and not form.get("approximation_error"):
+        with_term = misspecified_90({**form, "approximation_error": approximation_form(APPROXIMATION_ERROR)})
+        text += (": expect measured records' intervals to be too narrow; with the approximation error "
+                 "(observations.model_error.approximation_error, what init-config writes) such twins' intervals held "
+                 + (_held(with_term) if with_term else "more often"))
+    return text
+
+
+def _held(mis: Mapping) -> str:
+    held = [f"{escape(p)} {int(q['covered'])} of {int(q['n'])}" for p, q in mis.items()
+            if isinstance(q, Mapping) and "covered" in q]
+    return ", ".join(held) + f" ({escape(', '.join(map(str, mis.get('benchmarks', []))))})"
 
 
 def _misfit(s: Mapping) -> list[str]:
