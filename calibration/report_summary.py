@@ -106,8 +106,10 @@ def _parameters(s: Mapping) -> list[str]:
                       and float(q["q05"]) <= float(t) <= float(q["q95"]))
             row.append("-" if t is None else f"{_num(t, f)} ({'inside' if inside else 'outside'})")
         rows.append(row)
-    return [f"<p style=\"margin:0.4em 0 0 0\">Parameters (posterior: {which}; {_scored(s)}):</p>",
-            _table(header, rows)]
+    # a twin's data are the model's own; a measured record's never are
+    mis = "" if truth else _misspecified(s.get("posterior_form"))
+    return ([f"<p style=\"margin:0.4em 0 0 0\">Parameters (posterior: {which}; {_scored(s)}):</p>",
+             _table(header, rows)] + ([f"<p style=\"margin:0.4em 0 0 0\">{mis}</p>"] if mis else []))
 
 
 def _learned(ratio, holds: bool | None = None) -> str:
@@ -130,35 +132,35 @@ def _scored(s: Mapping) -> str:
     form = s.get("posterior_form")
     if not isinstance(form, Mapping):
         return "its form is not recorded"
-    # a twin's data are the model's own; a measured record's never are
-    measured = "" if s.get("truth") else _misspecified(form)
     if form.get("scored_by"):
-        return f"this form and loop are scored by the coverage harness, {escape(str(form['scored_by']))}" + measured
+        return f"this form and loop are scored by the coverage harness, {escape(str(form['scored_by']))}"
     other = form.get("form_scored_on")
     where = (f" (the same form is scored on another loop's twins, {escape(str(other.get('benchmark')))})"
              if isinstance(other, Mapping) else "")
     return ("no coverage benchmark has scored this form on this loop" + where
-            + ": read the intervals with the verdict and the predictive coverage" + measured)
+            + ": read the intervals with the verdict and the predictive coverage")
 
 
-def _misspecified(form: Mapping) -> str:
+def _misspecified(form) -> str:
     """How this form's 90 % intervals fared on the harness's misspecified twins (``posterior_form``'s
     ``misspecified_90``): what a measured record's intervals can expect, and the form that did better where
-    this one held under 90 %."""
+    this one held under 90 %; "" for a form never scored on such twins."""
+    if not isinstance(form, Mapping):
+        return ""
     # a summary written before the key carries its form, and the form finds its scores
     mis = form.get("misspecified_90") or misspecified_90(form)
     if not isinstance(mis, Mapping):
         return ""
-    text = ("; on the harness's misspecified twins (data the model cannot reproduce: made on a finer mesh, or "
-            "with a rate dependence the calibration does not declare) this form's 90 % intervals held the truth in "
-            + _held(mis))
+    text = ("On the coverage harness's misspecified twins (data the model cannot reproduce: made on a finer mesh, "
+            "or with a rate dependence the calibration does not declare) this form's 90 % intervals held the truth "
+            "in " + _held(mis))
     short = any(isinstance(q, Mapping) and "covered" in q and q["covered"] < 0.9 * q["n"] for q in mis.values())
     if short and not form.get("approximation_error"):
         with_term = misspecified_90({**form, "approximation_error": approximation_form(APPROXIMATION_ERROR)})
-        text += (": expect measured records' intervals to be too narrow; with the approximation error "
+        text += (": expect measured records' intervals to be too narrow. With the approximation error "
                  "(observations.model_error.approximation_error, what init-config writes) such twins' intervals held "
                  + (_held(with_term) if with_term else "more often"))
-    return text
+    return text + "."
 
 
 def _held(mis: Mapping) -> str:

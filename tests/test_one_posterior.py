@@ -202,21 +202,26 @@ def test_summary_html_says_whether_the_intervals_were_scored():
     assert "not recorded" in _scored({})
     # a measured record's summary says how its form fared on misspecified twins, and names the form that did
     # better where its intervals held under 90 %; a twin's does not
+    from calibration.report_summary import _misspecified, _parameters
+
     mis = {"benchmarks": ["benchmarks/results/m.json"], "sigma_t": {"covered": 81, "n": 100},
            "E_t": {"covered": 79, "n": 100}}
-    text = _scored({"posterior_form": {"scored_by": None, "misspecified_90": mis}})
+    text = _misspecified({"scored_by": None, "misspecified_90": mis})
     assert "held the truth in sigma_t 81 of 100, E_t 79 of 100 (benchmarks/results/m.json)" in text
     assert "too narrow" in text and "approximation_error" in text
-    assert "misspecified" not in _scored({"posterior_form": {"scored_by": None, "misspecified_90": mis},
-                                          "truth": {"sigma_t": 1.0}})
+    post = {"sigma_t": {"mean": 3e7, "q05": 2e7, "q95": 4e7}}
+    form = {"scored_by": None, "misspecified_90": mis}
+    assert "misspecified" in "".join(_parameters({"posterior": post, "posterior_form": form}))
+    assert "misspecified" not in "".join(_parameters({"posterior": post, "posterior_form": form,
+                                                      "truth": {"sigma_t": 3e7}}))
     good = {**mis, "sigma_t": {"covered": 95, "n": 100}, "E_t": {"covered": 92, "n": 100}}
-    assert "too narrow" not in _scored({"posterior_form": {"scored_by": None, "misspecified_90": good}})
-    with_term = _scored({"posterior_form": {"scored_by": None, "approximation_error": {"pairs": 24},
-                                            "misspecified_90": mis}})
+    assert "too narrow" not in _misspecified({"scored_by": None, "misspecified_90": good})
+    with_term = _misspecified({"scored_by": None, "approximation_error": {"pairs": 24}, "misspecified_90": mis})
     assert "79 of 100" in with_term and "too narrow" not in with_term
+    assert _misspecified({"posterior": "ensemble", "scored_by": None}) == "" and _misspecified(None) == ""
     # a summary written before the key: its form finds the scores (the committed default run's marble)
     marble = json.loads((RUN / "marble_loop" / "summary.json").read_text())
-    text = _scored(marble)
+    text = _misspecified(marble["posterior_form"])
     assert "held the truth in sigma_t 81 of 100, E_t 79 of 100" in text
     assert "such twins' intervals held sigma_t 51 of 60, E_t 56 of 60" in text
     assert "the same form is scored on another loop's twins, benchmarks/results/y.json" in _scored(
