@@ -554,6 +554,9 @@ QUOTES: list[Quote] = [
           "prior's against {bsw:.2f} and {bew:.2f}", _approximation),
     Quote("README.md", "finer-mesh data with an undeclared rate dependence {rs:.0f} % / {re:.0f} % (a fourth); over all "
           "{N} of these twins {ps:.0f} % / {pe:.0f} %, the bar met", _rate_approximation),
+    Quote("docs/own-data.md", "the held-out record's RMSE after the loop was {a:.1f} MPa against {b:.1f} MPa without\nit",
+          lambda J: (lambda h: {"a": h("with_term") / 1e6, "b": h("without_term") / 1e6})(
+              lambda k: J("studies/results/marble_approximation.json")[k]["diagnosis"]["heldout"]["CaMa_SHPB_006"]["rmse_after"])),
     Quote("docs/own-data.md", "about {dm:.1f} min per disc record and {cm:.1f} min per marble cylinder record on 2 cores\n"
           "(a `standard` run takes {dr:.1f} and {cr:.1f} times a `fast` one", _approximation_cost),
     Quote("README.md", "an undeclared rate dependence moves `sigma_t` (median {up:.0f} % above the truth)", _rate_approximation),
