@@ -93,6 +93,7 @@ from enkf import prediction_interval_dict
 from enkf.selfcal import RECALIBRATIONS, TEMPERINGS
 from calibration.posterior import refine_design, sample_posterior
 from shpb.atomic import atomic_write_bytes, atomic_write_text, emit_json
+from shpb.lab.init_config_yaml import APPROXIMATION_ERROR  # the pairs' preset: the block a lab's records get
 from calibration.observations import curve_on_grid, observation_grid, twin_observations, with_approximation_error
 from calibration.workflow_io import load_yaml, validate_config
 
@@ -104,8 +105,6 @@ from benchmarks.scores import proper_scores, set_verdict_of, with_failures_as_pr
 EXPERIMENT = "twin_ref"
 BAR = {"sigma_t": 0.02, "E_t": 0.10}
 LEVELS = {"50": (0.25, 0.75), "90": (0.05, 0.95)}
-#: the finer mesh the approximation error's pairs are run at, whatever a set's data (a lab's records get the same)
-APPROXIMATION_PRESET = "standard"
 
 
 def shipped_experiment(name: str, edit=None) -> dict:
@@ -599,8 +598,8 @@ def main(argv=None) -> dict:
                 (cache / approx_tag).mkdir(parents=True, exist_ok=True)
                 pairs = cache / approx_tag / f"pairs_{seed}.json"
                 if pairs.is_file() or not args.score_only:
-                    approx = approximation_pairs(pool, exp, args.approximation_pairs, seed, APPROXIMATION_PRESET, pairs,
-                                                 args.coarse_variability)
+                    approx = approximation_pairs(pool, exp, args.approximation_pairs, seed,
+                                                 APPROXIMATION_ERROR["preset"], pairs, args.coarse_variability)
             if name == "misspecified_rate" and data_preset != "fast":
                 folder = folder / f"rate-data-{data_preset}"  # never mixed with the fast data's twins
             folder.mkdir(parents=True, exist_ok=True)

@@ -90,10 +90,10 @@ def test_each_scored_form_is_its_benchmarks_and_the_default_twins():
             form = {"posterior": bench["reported_posterior"], "self_calibrate": bench["self_calibrate"],
                     "emulator_error": bench["emulator_error"], "refine_runs": bench["refine_runs"]}
             if bench.get("approximation_pairs"):
-                # the harness makes the pairs at `standard` (bench_coverage.APPROXIMATION_PRESET)
-                from benchmarks.bench_coverage import APPROXIMATION_PRESET
+                # the harness makes the pairs at the preset a lab's records get (init-config's block)
+                from shpb.lab.init_config_yaml import APPROXIMATION_ERROR
 
-                form["approximation_error"] = {"preset": APPROXIMATION_PRESET, "pairs": bench["approximation_pairs"],
+                form["approximation_error"] = {"preset": APPROXIMATION_ERROR["preset"], "pairs": bench["approximation_pairs"],
                                                "coarse_variability": bench["coarse_variability"]}
             assert form == entry["form"], path
             # the keys the form names only where they differ from these (calibration.scored._form_of)

@@ -17,6 +17,7 @@ LINE_WIDTH = 120
 #: benchmarks validated (benchmarks/coverage_plan_approximation.json)
 APPROXIMATION_ERROR = {"preset": "standard", "pairs": 24}
 
+
 def number(v: float | int) -> str:
     """A YAML number that YAML 1.1 loaders (PyYAML, Snakemake) read as a number: ``1.0e+7`` not ``1e+07``."""
     if isinstance(v, int) or float(v) == 0.0:
