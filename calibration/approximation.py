@@ -31,7 +31,8 @@ from .model_error import mesh_seed
 from .observations import Observations, response_matrix, with_approximation_error
 
 __all__ = ["approximation_settings", "approximation_design", "approximation_run_ids", "approximation_run",
-           "approximation_mesh_seed", "apply_approximation_error", "approximation_from_runs"]
+           "approximation_mesh_seed", "apply_approximation_error", "apply_stored_approximation_error",
+           "approximation_from_runs"]
 
 _RUN_RE = re.compile(r"^(fine)_(\d+)$|^(coarse)_(\d+)_(\d+)$")
 
@@ -89,6 +90,21 @@ def apply_approximation_error(obs: Observations, exp: Mapping,
     run's empty curve leaves its pair out)."""
     Y = response_matrix([curves[r] for r in approximation_run_ids(exp)], obs)
     return with_approximation_error(obs, *approximation_from_runs(exp, Y, obs.time, obs.groups))
+
+
+def apply_stored_approximation_error(obs: Observations, exp: Mapping, folder) -> Observations:
+    """``obs`` corrected by the runs stored under ``folder`` (``results/<exp>/approximation``), its own
+    records' runs: the calibration records' observations and the held-out records' alike; ``obs`` as
+    it is when the experiment has no approximation error."""
+    from pathlib import Path
+
+    from .observations import read_curve
+
+    runs = approximation_run_ids(exp)
+    if not runs:
+        return obs
+    curves = {r: {rec: read_curve(Path(folder) / r / rec / "curve.csv") for rec in obs.records} for r in runs}
+    return apply_approximation_error(obs, exp, curves)
 
 
 def approximation_from_runs(exp: Mapping, Y: np.ndarray, times, groups=None) -> tuple:

@@ -61,8 +61,10 @@ def blind(heldout: Observations | None) -> Observations | None:
     if heldout is None:
         return None
     frame = heldout.frame.copy()
-    frame["stress_Pa"] = np.nan
-    return Observations(frame, heldout.error_kind, dict(heldout.corr_time), dict(heldout.meta))
+    # the curve as observed too, where an approximation error corrected it; its added covariance
+    # (the pairs' scatter, from the record's incident wave) is kept: not its response
+    frame[[c for c in ("stress_Pa", "stress_uncorrected_Pa") if c in frame]] = np.nan
+    return Observations(frame, heldout.error_kind, dict(heldout.corr_time), dict(heldout.meta), heldout.added_cov)
 
 
 def emulated_model(X, names: Sequence[str], lower, upper, curves: Mapping[str, Sequence], model_times,

@@ -10,11 +10,12 @@
 
 
 rule diagnosis_heldout_observations:
-    """The held-out records reduced like the calibration records: their curves are read by the final
-    evaluation only; before it, their incident wave (the simulations) and noise level (their band).
+    """The held-out records reduced (rule reduced_record) and corrected by their own approximation pairs
+    like the calibration records: their curves are read by the final evaluation only; before it, their
+    incident wave (the simulations) and noise level (their band).
     """
     input:
-        lambda wc: list(heldout_records(wc.exp).values()),
+        unpack(heldout_observation_inputs),
     output:
         csv="results/{exp}/diagnosis/heldout/obs.csv",
         meta="results/{exp}/diagnosis/heldout/obs.json",
@@ -23,8 +24,13 @@ rule diagnosis_heldout_observations:
     conda:
         CONDA_ENV
     params:
-        obs=lambda wc: EXPERIMENTS[wc.exp]["observations"],
-        records=lambda wc: heldout_records(wc.exp),
+        exp=lambda wc: {
+            k: EXPERIMENTS[wc.exp][k]
+            for k in ("kind", "seed", "preset", "observations")
+        },
+        records=lambda wc: {
+            r: stored_record(wc.exp, r) for r in heldout_records(wc.exp)
+        },
     script:
         "../scripts/diagnosis_heldout.py"
 

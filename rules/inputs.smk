@@ -51,6 +51,14 @@ def raw_record(exp, record):
     return {**records(exp), **held}[record]
 
 
+def approximation_records(exp):
+    """The records the approximation pairs run on, the calibration records then the held-out ones: a
+    held-out record's data are corrected by the mesh offset of its own incident wave, as the calibration
+    records' are (its input, not its response: docs/closing-the-loop.md)."""
+    held = heldout_records(exp) if diagnosis_cfg(exp) else {}
+    return list({**records(exp), **held})
+
+
 # rules/simulate.smk
 #: The rules that declare one simulation each (no job of their own: rules/simulate.smk); a batch's stage.
 SIMULATION_STAGES = (
@@ -95,7 +103,9 @@ def stage_runs(exp, stage, key):
         return [{"record": r} for r in recs]
     if stage == "approximation_run":
         ids = approximation_run_ids(EXPERIMENTS[exp])
-        return [{"run": a, "record": r} for a in ids for r in recs]
+        return [
+            {"run": a, "record": r} for a in ids for r in approximation_records(exp)
+        ]
     if stage == "sensitivity_member":
         s = sensitivity_spec(exp)
         return [{"sample": m, "record": s.record} for m in member_ids(s.n_simulations)]
@@ -363,6 +373,14 @@ def diagnosed_experiments():
 
 def heldout_records(exp):
     return {record_name(p): str(p) for p in diagnosis_cfg(exp)["heldout_records"]}
+
+
+def heldout_observation_inputs(wc):
+    """The held-out records' reduced files and the approximation pairs (none without the term)."""
+    return {
+        "records": [stored_record(wc.exp, r) for r in heldout_records(wc.exp)],
+        "approximation": stage_batch_files(wc.exp, "approximation_run"),
+    }
 
 
 def design_records(exp):

@@ -17,8 +17,8 @@ rule truth:
 
 
 # One run of the approximation error's pairs (calibration.approximation): a design point of the prior at
-# the finer preset (fine_<i>) or at the experiment's own (coarse_<i>_<r>), on its own mesh realization.
-# A failed run leaves its pair out.
+# the finer preset (fine_<i>) or at the experiment's own (coarse_<i>_<r>), on its own mesh realization,
+# for a calibration or a held-out record (approximation_records). A failed run leaves its pair out.
 rule approximation_run:
     input:
         batch=lambda wc: batch_file("approximation_run", wc),
@@ -31,7 +31,7 @@ rule approximation_run:
         sim=lambda wc: sim_settings(wc.exp, simulation_preset("approximation_run", wc)),
         parameters=lambda wc: {"values": approximation_point(wc.exp, wc.run)},
         mesh_seed=lambda wc: approximation_mesh_seed(
-            EXPERIMENTS[wc.exp], wc.run, list(records(wc.exp)).index(wc.record)
+            EXPERIMENTS[wc.exp], wc.run, approximation_records(wc.exp).index(wc.record)
         ),
         run=lambda wc: dict(
             zip(
@@ -76,6 +76,5 @@ rule observations:
             for k in ("kind", "seed", "preset", "observations")
         },
         records=lambda wc: {r: stored_record(wc.exp, r) for r in records(wc.exp)},
-        approximation_runs=lambda wc: approximation_run_ids(EXPERIMENTS[wc.exp]),
     script:
         "../scripts/observations.py"

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from calibration.approximation import apply_approximation_error
+from calibration.approximation import apply_stored_approximation_error
 from calibration.experiment import rng_for
-from calibration.observations import observation_grid, read_curve, stored_observations, twin_observations
+from calibration.observations import observation_grid, stored_observations, twin_observations
 
 e = snakemake.params.exp
 o = e["observations"]
@@ -23,9 +23,5 @@ else:
     # each record as rule reduced_record stored it (read, not reduced again)
     obs = stored_observations(snakemake.params.records, t_start=o["t_start"], t_end=o["t_end"], dt=o["dt"],
                               error_kind=o["error"]["kind"], sigma_scale=o["error"]["sigma_scale"])
-runs = list(snakemake.params.approximation_runs)
-if runs:
-    root = Path(snakemake.output.csv).parents[1] / "approximation"
-    curves = {r: {rec: read_curve(root / r / rec / "curve.csv") for rec in obs.records} for r in runs}
-    obs = apply_approximation_error(obs, e, curves)
+obs = apply_stored_approximation_error(obs, e, Path(snakemake.output.csv).parents[1] / "approximation")
 obs.write(snakemake.output.csv, snakemake.output.meta)

@@ -19,7 +19,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 _SECONDS_PER_FILE = {
     "test_workflow.py": 410, "test_own_data.py": 165, "test_sensitivity.py": 95,
     "test_calibration_verdict.py": 80, "test_ces.py": 60, "test_protocol_selection.py": 55,
-    "test_approximation_error.py": 50, "test_shpb_models.py": 47, "test_report_summary.py": 42,
+    "test_approximation_error.py": 60, "test_shpb_models.py": 47, "test_report_summary.py": 42,
     "test_fdem_fracture.py": 42, "test_disc_fracture.py": 34, "test_slurm_grouping.py": 30,
     "test_planted_closure_fdem.py": 30, "test_first_contact.py": 26, "test_heal.py": 22,
     "test_covariates.py": 21,

@@ -246,3 +246,50 @@ def test_a_bad_approximation_error_block_is_named_before_any_job_runs(block, mes
         validate_config(cfg, SCHEMA)
     assert "experiments.twin.observations.model_error.approximation_error" in str(err.value)
     assert message in str(err.value)
+
+
+def test_a_held_out_record_is_corrected_by_pairs_run_on_its_own_incident_wave(tmp_path):
+    """The default run's marble series with 3 pairs, on the stand-in simulator (finer presets peak 7 %
+    lower): the pairs run on the held-out record's incident wave too, so its obs.csv is corrected by the
+    same -7 % of the design's mean rise before the peak and carries the pairs' scatter in its error model,
+    as the calibration records' obs.csv is (their pairs on the mesh realizations they had before)."""
+    import yaml
+
+    from calibration.approximation import approximation_design, approximation_run_ids
+    from calibration.observations import read_observations
+    from calibration.workflow_io import validate_config
+    from test_workflow import REPO, SCHEMA, snakemake, write_stand_in
+
+    base = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+    exp = base["experiments"]["marble_loop"]
+    exp["observations"]["records"] = [str(REPO / p) for p in exp["observations"]["records"]]
+    exp["diagnosis"]["heldout_records"] = [str(REPO / p) for p in exp["diagnosis"]["heldout_records"]]
+    exp["observations"]["model_error"]["approximation_error"] = {"preset": "standard", "pairs": 3}
+    cfg = {"run": ["marble_loop"], "experiments": {"marble_loop": exp}, "simulator": write_stand_in(tmp_path)}
+    (tmp_path / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    res = tmp_path / "results" / "marble_loop"
+    run = snakemake(tmp_path, "--cores", "2", "results/marble_loop/diagnosis/heldout/obs.csv",
+                    "results/marble_loop/observations/obs.csv")
+    assert run.returncode == 0, run.stderr[-4000:]
+    full = validate_config(cfg, SCHEMA, base_dir=tmp_path)["experiments"]["marble_loop"]
+    ids = approximation_run_ids(full)
+    presets = {r: json.loads((res / "approximation" / r / "CaMa_SHPB_006" / "run.json").read_text())["preset"]
+               for r in ids}
+    assert len(ids) == 9 and {presets[r] for r in ids if r.startswith("fine")} == {"standard"}
+    assert {presets[r] for r in ids if r.startswith("coarse")} == {"fast"}
+    logs = {rec: (res / "approximation/fine_000" / rec / "simulate.log").read_text().split("\n")[0]
+            for rec in ("CaMa_SHPB_004", "CaMa_SHPB_014", "CaMa_SHPB_006")}
+    assert "--record results/marble_loop/observations/CaMa_SHPB_006/record.json" in logs["CaMa_SHPB_006"]
+    assert len({line.split("--mesh-seed ")[1].split()[0] for line in logs.values()}) == 3
+    rise_scale = approximation_design("marble_loop", full)[:, 0].mean()
+    held = read_observations(res / "diagnosis/heldout/obs.csv", res / "diagnosis/heldout/obs.json")
+    calib = read_observations(res / "observations/obs.csv", res / "observations/obs.json")
+    assert held.records == ["CaMa_SHPB_006"] and calib.records == ["CaMa_SHPB_004", "CaMa_SHPB_014"]
+    for obs in (held, calib):
+        t = obs.time
+        offset = obs.values - obs.frame["stress_uncorrected_Pa"].to_numpy()
+        before = t < 19.5e-6
+        rise = 0.8 * np.sin(0.5 * np.pi * t[before] / 20e-6) ** 2 * rise_scale
+        assert before.sum() == 10 * len(obs.records) and np.allclose(offset[before], 0.07 * rise, rtol=1e-9, atol=1e-3)
+        assert np.all(obs.error_model().std[t > 25e-6] > obs.sigma[t > 25e-6])
+    assert held.meta["approximation_error"]["n_pairs_used"] == 3

@@ -179,3 +179,20 @@ def test_the_selection_sees_a_held_out_record_blind():
     assert np.all(np.isnan(b.values)) and np.array_equal(b.time, held.time)
     assert np.array_equal(b.error_model().dense(), held.error_model().dense())
     assert not np.any(np.isnan(held.values))  # the original is untouched
+
+
+def test_a_corrected_held_out_record_is_blind_to_its_curve_as_observed_and_keeps_its_mesh_scatter():
+    """With an approximation error, the held-out record's obs.csv holds the curve as observed as well
+    (stress_uncorrected_Pa): blinded too; the pairs' scatter (from its incident wave) stays in its noise."""
+    from calibration.closing import blind
+    from calibration.observations import with_approximation_error
+    from enkf.covariance import DenseError
+
+    t = np.arange(0.0, 40e-6, 2e-6)
+    M = DenseError(np.diag(np.full(t.size, 9e10)), _symmetric=True)
+    held = with_approximation_error(_obs(np.linspace(0, 5e7, t.size), np.full(t.size, 2e5), ["H"], t),
+                                    np.full(t.size, 1e6), M, {"sd_Pa": [3e5] * t.size})
+    b = blind(held)
+    assert np.all(np.isnan(b.values)) and np.all(np.isnan(b.frame["stress_uncorrected_Pa"]))
+    assert np.allclose(b.error_model().std, np.sqrt(4e10 + 9e10), rtol=1e-12)
+    assert np.array_equal(b.error_model().dense(), held.error_model().dense())
