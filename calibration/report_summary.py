@@ -198,7 +198,19 @@ def _records(s: Mapping) -> list[str]:
             "the forecast run at the posterior mean:</p>", _table(["record", "before", "after"], rows)]
 
 
-def _diagnosis(check: Mapping) -> list[str]:
+def _corrected(summary: Mapping) -> str:
+    """What the diagnosis's records are compared with where the data model carries the approximation
+    error: the data less the coarse mesh's mean error, the held-out records' from pairs of their own."""
+    approx = summary.get("approximation_error")
+    if not isinstance(approx, Mapping):
+        return ""
+    return (f" Each record's data here, the held-out records' too, are the observed stress less the "
+            f"{escape(str(approx.get('coarse_preset', '?')))} mesh's mean error against "
+            f"{escape(str(approx.get('fine_preset', '?')))} (the approximation pairs run on that record's own "
+            "incident wave): the errors are the model's, not its mesh's.")
+
+
+def _diagnosis(check: Mapping, summary: Mapping | None = None) -> list[str]:
     added = ", ".join(str(a) for a in check.get("added") or []) or "none"
     conf = _get(check, "fdem_confirmation", "text")
     out = [f"<p style=\"margin:0.4em 0 0 0\"><b>Diagnosis</b>: verdict {escape(str(check.get('verdict') or '?'))}, "
@@ -229,7 +241,8 @@ def _diagnosis(check: Mapping) -> list[str]:
                 "after (near 1: the model's miss, not the parameters, limits the prediction; '?': a check made "
                 "before it was scored). The RMSE weighs every sample alike, so after the failure peak, where "
                 "the simulator's own mesh scatter is largest, it can rise while the band's score falls: the "
-                "score reads each sample against its own uncertainty, as the walk does:</p>",
+                "score reads each sample against its own uncertainty, as the walk does." + _corrected(summary or {})
+                + "</p>",
                 _table(["record", "used for", "RMSE before [MPa]", "RMSE after [MPa]", "peak error before [%]",
                         "peak error after [%]", "band covers", "band score / box before",
                         "band score / box after"], rows)]
@@ -318,7 +331,7 @@ def summary_html(name: str, summary: Mapping, check: Mapping | None = None, refi
         parts = ['<meta charset="utf-8">', '<div class="experiment-summary" style="font-family:sans-serif">']
         parts += _headline(name, summary) + _parameters(summary) + _misfit(summary) + _records(summary)
         if isinstance(check, Mapping):
-            parts += _diagnosis(check) + _refit(refit)
+            parts += _diagnosis(check, summary) + _refit(refit)
         parts.append(f"<p style=\"margin:0.2em 0;font-size:0.85em\">From results/{escape(name)}/summary.json"
                      + (f" and results/{escape(name)}/diagnosis/check.json" if isinstance(check, Mapping) else "")
                      + (f" and results/{escape(name)}/diagnosis/refit.json" if isinstance(refit, Mapping) else "")

@@ -51,6 +51,15 @@ def test_the_diagnosis_shows_each_record_s_band_coverage_and_its_score_over_the_
                              f"{band['after']['interval_score_over_box']:.2f}"]
 
 
+def test_the_diagnosis_says_its_records_are_compared_less_the_mesh_error_only_where_they_were_corrected():
+    summary = json.loads((RUN / "marble_loop" / "summary.json").read_text())
+    check = json.loads((RUN / "marble_loop" / "diagnosis_check.json").read_text())
+    assert "mesh's mean error" not in summary_html("marble_loop", summary, check)
+    approx = {"fine_preset": "standard", "coarse_preset": "fast", "n_pairs_used": 24}
+    html = html_unescape(summary_html("marble_loop", {**summary, "approximation_error": approx}, check))
+    assert "the held-out records' too, are the observed stress less the fast mesh's mean error against standard" in html
+
+
 def test_a_twin_shows_its_truth_against_the_interval_and_no_diagnosis():
     html = summary_html("twin_ref", json.loads((RUN / "twin_ref" / "summary.json").read_text()))
     rows = _cells(html)
