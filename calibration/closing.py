@@ -55,14 +55,12 @@ __all__ = ["FOLD_SEPARATOR", "blind", "candidate_effects", "emulated_model", "pr
 
 
 def blind(heldout: Observations | None) -> Observations | None:
-    """The held-out records as the selection may see them: their times and noise level, their curves
-    replaced by NaN (so that any use of them before :func:`assemble` poisons the result instead of
-    leaking it)."""
+    """The held-out records as the selection may see them: their times and noise level (with the
+    approximation pairs' scatter, from their incident wave), their curves replaced by NaN, the curve as
+    observed too (so that any use of them before :func:`assemble` poisons the result instead of leaking it)."""
     if heldout is None:
         return None
     frame = heldout.frame.copy()
-    # the curve as observed too, where an approximation error corrected it; its added covariance
-    # (the pairs' scatter, from the record's incident wave) is kept: not its response
     frame[[c for c in ("stress_Pa", "stress_uncorrected_Pa") if c in frame]] = np.nan
     return Observations(frame, heldout.error_kind, dict(heldout.corr_time), dict(heldout.meta), heldout.added_cov)
 
@@ -522,11 +520,12 @@ def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: Emulated
     for r in obs.records:
         s = obs.record_slice(r)
         curves[r] = {"data": "calibration (cross-validated)", "time": obs.time[s], "obs": obs.values[s],
-                     "before": real["cv"].get(0, {}).get(r), "after": real["cv"].get(k, {}).get(r)}
+                     "observed": obs.as_observed(r), "before": real["cv"].get(0, {}).get(r),
+                     "after": real["cv"].get(k, {}).get(r)}
     for h in held:
         s = heldout.record_slice(h)
         curves[h] = {"data": "heldout", "time": heldout.time[s], "obs": heldout.values[s],
-                     "before": real["heldout"][0][h], "after": real["heldout"][k][h]}
+                     "observed": heldout.as_observed(h), "before": real["heldout"][0][h], "after": real["heldout"][k][h]}
     return report, check, curves, band_frame
 
 

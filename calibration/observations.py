@@ -157,6 +157,12 @@ class Observations:
     def grid(self, record: str) -> np.ndarray:
         return self.time[self.record_slice(record)]
 
+    def as_observed(self, record: str) -> np.ndarray | None:
+        """The record's stress as observed where an approximation error corrected it, else None (the
+        check's plot shows both: how far the coarse mesh's error moved the data)."""
+        col = "stress_uncorrected_Pa"
+        return self.frame[col].to_numpy(float)[self.record_slice(record)] if col in self.frame else None
+
     def of_record(self, record: str) -> "Observations":
         """The observations of one record, with its own error model (e.g. to calibrate on it alone)."""
         sl = self.record_slice(record)

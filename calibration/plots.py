@@ -280,7 +280,11 @@ def check_figure(curves, errors, added, confirmation=None, bands=None, band_reco
                 ax.fill_between(b["time_s"] * 1e6, b["lower_Pa"] / 1e6, b["upper_Pa"] / 1e6, color="tab:green",
                                 alpha=0.18, lw=0, label="90 % predictive band" + (f" (covers {got:.2f})"
                                                                                  if got is not None else ""))
-        ax.plot(c["time"] * 1e6, c["obs"] / 1e6, ".", ms=2, color="0.5", label="data")
+        corrected = c.get("observed") is not None
+        if corrected:
+            ax.plot(c["time"] * 1e6, c["observed"] / 1e6, ".", ms=1.5, color="0.8", label="data as observed")
+        ax.plot(c["time"] * 1e6, c["obs"] / 1e6, ".", ms=2, color="0.5",
+                label="data less the coarse mesh's mean error" if corrected else "data")
         for which, name, color in (("before", "base model", "tab:blue"), ("after", after_label, "tab:orange")):
             if which == "after" and not added:
                 continue  # the base model kept: its runs are already drawn

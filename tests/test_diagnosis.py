@@ -276,5 +276,14 @@ def test_measured_curve_applies_the_measurement_chain_on_the_model_grid_and_the_
     v = poly.get_paths()[0].vertices  # MPa, us: the band's upper and lower edges
     assert v[:, 1].max() == pytest.approx((y + 5e6).max() / 1e6) and v[:, 1].min() == pytest.approx((y - 5e6).min() / 1e6)
     assert "90 % predictive band (covers 0.87)" in [x.get_text() for x in ax.get_legend().get_texts()]
+    assert "data" in [x.get_text() for x in ax.get_legend().get_texts()]
+    # data corrected by an approximation error: both drawn, each named, the corrected one where obs says
+    curves["r1"]["observed"] = obs + 3e6
+    fig2 = check_figure(curves, errors, ["face_gap"])
+    (ax2,) = fig2.axes
+    lines = {ln.get_label(): ln.get_ydata() for ln in ax2.get_lines()}
+    np.testing.assert_allclose(lines["data as observed"], (obs + 3e6) / 1e6)
+    np.testing.assert_allclose(lines["data less the coarse mesh's mean error"], obs / 1e6)
     import matplotlib.pyplot as plt
     plt.close(fig)
+    plt.close(fig2)

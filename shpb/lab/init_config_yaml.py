@@ -139,7 +139,8 @@ def experiment_yaml(*, name, geometry, lithology, times, window, why_window, dt,
         why.append("the mesh's own scatter, as config/diagnosis.yaml")
     if approximation:
         model_error["approximation_error"] = dict(APPROXIMATION_ERROR)
-        why.append("the coarse mesh's own error from 24 runs paired at standard, which the coverage benchmark "
+        why.append(f"the coarse mesh's own error from {APPROXIMATION_ERROR['pairs']} runs paired at "
+                   f"{APPROXIMATION_ERROR['preset']} per record (held-out records alike), which the coverage benchmark "
                    "found needed on data finer than the model (docs/own-data.md, section 8; "
                    "--no-approximation-error leaves it out)")
     if model_error:
