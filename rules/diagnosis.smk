@@ -31,6 +31,7 @@ rule diagnosis_heldout_observations:
         records=lambda wc: {
             r: stored_record(wc.exp, r) for r in heldout_records(wc.exp)
         },
+        approximation=lambda wc: approximation_folder(wc.exp),
     script:
         "../scripts/diagnosis_heldout.py"
 

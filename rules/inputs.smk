@@ -39,7 +39,11 @@ def approximation_preset(exp, run):
 def observation_inputs(wc):
     e = EXPERIMENTS[wc.exp]
     # the approximation runs (none when observations.model_error.approximation_error is off)
-    out = {"approximation": stage_batch_files(wc.exp, "approximation_run")}
+    out = {
+        "approximation": stage_batch_files(
+            approximation_owner(wc.exp), "approximation_run"
+        )
+    }
     if e["kind"] == "twin":
         return {**out, "truth": f"results/{wc.exp}/truth/synthetic/curve.csv"}
     return {**out, "records": [stored_record(wc.exp, r) for r in records(wc.exp)]}
@@ -54,9 +58,24 @@ def raw_record(exp, record):
 def approximation_records(exp):
     """The records the approximation pairs run on, the calibration records then the held-out ones: a
     held-out record's data are corrected by the mesh offset of its own incident wave, as the calibration
-    records' are (its input, not its response: docs/closing-the-loop.md)."""
+    records' are (its input, not its response: docs/closing-the-loop.md). A leave-one-record-out fold
+    runs none: its series runs each record's pairs once, and every fold reads them
+    (approximation_owner)."""
+    if EXPERIMENTS[exp].get("loro_of"):
+        return []
     held = heldout_records(exp) if diagnosis_cfg(exp) else {}
     return list({**records(exp), **held})
+
+
+def approximation_owner(exp):
+    """The experiment whose approximation runs `exp` reads: a fold's series (the pairs depend on the box,
+    the seed, the presets and each record's incident wave, which the folds share), else `exp`.
+    """
+    return EXPERIMENTS[exp].get("loro_of") or exp
+
+
+def approximation_folder(exp):
+    return f"results/{approximation_owner(exp)}/approximation"
 
 
 # rules/simulate.smk
@@ -379,7 +398,9 @@ def heldout_observation_inputs(wc):
     """The held-out records' reduced files and the approximation pairs (none without the term)."""
     return {
         "records": [stored_record(wc.exp, r) for r in heldout_records(wc.exp)],
-        "approximation": stage_batch_files(wc.exp, "approximation_run"),
+        "approximation": stage_batch_files(
+            approximation_owner(wc.exp), "approximation_run"
+        ),
     }
 
 

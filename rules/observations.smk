@@ -76,5 +76,6 @@ rule observations:
             for k in ("kind", "seed", "preset", "observations")
         },
         records=lambda wc: {r: stored_record(wc.exp, r) for r in records(wc.exp)},
+        approximation=lambda wc: approximation_folder(wc.exp),
     script:
         "../scripts/observations.py"

@@ -5,8 +5,6 @@ from calibration.job_log import log_to
 
 log_to(snakemake.log[0])  # the job's output goes to its log (rules/*.smk)
 
-from pathlib import Path
-
 from calibration.approximation import apply_stored_approximation_error
 from calibration.observations import stored_observations
 
@@ -14,5 +12,5 @@ e = snakemake.params.exp
 o = e["observations"]
 obs = stored_observations(snakemake.params.records, t_start=o["t_start"], t_end=o["t_end"], dt=o["dt"],
                           error_kind=o["error"]["kind"], sigma_scale=o["error"]["sigma_scale"])
-obs = apply_stored_approximation_error(obs, e, Path(snakemake.output.csv).parents[2] / "approximation")
+obs = apply_stored_approximation_error(obs, e, snakemake.params.approximation)
 obs.write(snakemake.output.csv, snakemake.output.meta)

@@ -293,3 +293,36 @@ def test_a_held_out_record_is_corrected_by_pairs_run_on_its_own_incident_wave(tm
         assert before.sum() == 10 * len(obs.records) and np.allclose(offset[before], 0.07 * rise, rtol=1e-9, atol=1e-3)
         assert np.all(obs.error_model().std[t > 25e-6] > obs.sigma[t > 25e-6])
     assert held.meta["approximation_error"]["n_pairs_used"] == 3
+
+
+def test_a_series_runs_each_record_s_pairs_once_and_every_fold_reads_them(tmp_path):
+    """config/diagnosis.yaml's leave-one-record-out marble series with 3 pairs, on the stand-in: the pairs
+    run once per record under the series (not per fold), and a record's correction is the same whether
+    its fold calibrates on it or holds it out."""
+    import yaml
+
+    from calibration.observations import read_observations
+    from test_workflow import REPO, snakemake, write_stand_in
+
+    exp = yaml.safe_load((REPO / "config" / "diagnosis.yaml").read_text())["experiments"]["marble_loro"]
+    exp["observations"]["records"] = [str(REPO / p) for p in exp["observations"]["records"]]
+    exp["observations"].setdefault("model_error", {})["approximation_error"] = {"preset": "standard", "pairs": 3}
+    cfg = {"run": ["marble_loro"], "experiments": {"marble_loro": exp}, "simulator": write_stand_in(tmp_path)}
+    (tmp_path / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    folds = ("marble_loro__CaMa_SHPB_006", "marble_loro__CaMa_SHPB_016")
+    targets = [f"results/{f}/{part}/obs.csv" for f in folds for part in ("observations", "diagnosis/heldout")]
+    run = snakemake(tmp_path, "--cores", "2", *targets)
+    assert run.returncode == 0, run.stderr[-4000:]
+    res = tmp_path / "results"
+    made = sorted(p.parent.relative_to(res).parts[0] for p in res.glob("*/approximation/*/*/run.json"))
+    assert set(made) == {"marble_loro"} and len(made) == 4 * 9  # four records, 3 pairs x (1 fine + 2 coarse)
+
+    def offsets(fold, part):
+        obs = read_observations(res / fold / part / "obs.csv", res / fold / part / "obs.json")
+        d = obs.values - obs.frame["stress_uncorrected_Pa"].to_numpy()
+        return {r: d[obs.record_slice(r)] for r in obs.records}
+
+    held_006, calib_016 = offsets(folds[0], "diagnosis/heldout"), offsets(folds[1], "observations")
+    assert list(held_006) == ["CaMa_SHPB_006"] and "CaMa_SHPB_006" in calib_016
+    np.testing.assert_array_equal(held_006["CaMa_SHPB_006"], calib_016["CaMa_SHPB_006"])
+    assert np.max(np.abs(held_006["CaMa_SHPB_006"])) > 1e5  # the stand-in's finer mesh: a real offset
