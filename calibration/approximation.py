@@ -14,7 +14,8 @@ Every later step (ES-MDA, the discrepancy over it, the emulator and its MCMC, th
 predictive coverage) sees the corrected observations and the wider error model.
 
 Run folders: ``results/<exp>/approximation/<run>/<record>/`` with ``<run>`` ``fine_<i>`` or
-``coarse_<i>_<r>``.
+``coarse_<i>_<r>``, for the calibration and the held-out records (a leave-one-record-out series runs
+them once under its own folder, and its folds read them there).
 """
 
 from __future__ import annotations
@@ -93,9 +94,9 @@ def apply_approximation_error(obs: Observations, exp: Mapping,
 
 
 def apply_stored_approximation_error(obs: Observations, exp: Mapping, folder) -> Observations:
-    """``obs`` corrected by the runs stored under ``folder`` (``results/<exp>/approximation``), its own
-    records' runs: the calibration records' observations and the held-out records' alike; ``obs`` as
-    it is when the experiment has no approximation error."""
+    """``obs`` corrected by its records' runs stored under ``folder`` (``results/<exp>/approximation``; a
+    leave-one-record-out fold's: its series'): the calibration records' observations and the held-out
+    records' alike; ``obs`` as it is when the experiment has no approximation error."""
     from pathlib import Path
 
     from .observations import read_curve
