@@ -577,7 +577,7 @@ QUOTES: list[Quote] = [
     Quote("README.md", "finer-mesh data with an undeclared rate dependence {rs:.0f} % / {re:.0f} % (a fourth); over all "
           "{N} of these twins {ps:.0f} % / {pe:.0f} %, the bar met", _rate_approximation),
     Quote("docs/own-data.md", "the held-out record's mesh offset was {o:.1f} MPa rms, up to {om:.1f} MPa; its RMSE after "
-          "the loop\n{a:.1f} MPa against {b:.1f} MPa without the term, where uncorrected it read {u:.1f} MPa\n"
+          "the loop\n{a:.1f} MPa against {b:.1f} MPa without the term; scored against its data as observed it read {u:.1f} MPa\n"
           "([studies](../studies/README.md), `marble_approximation.py`; the pairs added {dm:.1f} min to the run)",
           _heldout_approximation),
     Quote("docs/own-data.md", "the held-out records' RMSE after the loop averaged {a:.1f} MPa\nagainst {b:.1f} MPa without "
