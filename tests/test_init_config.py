@@ -160,9 +160,9 @@ def test_the_written_configs_pass_the_validation_and_a_dry_run(written):
     # the first ensembles' batch jobs (at most 8 fast runs each, an even count): the disc's 25 members in 4
     # and its 6 replicates in 2, the marble's 8 members x 2 records in 2 and 6 replicates x 2 records in 2;
     # their declaring rules are no jobs (rules/inputs.smk, stage_batch_files); the marble's approximation pairs
-    # (its two calibration records, 24 standard and 48 fast runs each, in batches of at most 8); the marble's
-    # diagnosis check
-    assert int(jobs["simulate"]) == (4 + 2) + (2 + 2) + 2 * (3 + 6) and "member" not in jobs
+    # (its two calibration records and its held-out one, 24 standard and 48 fast runs each: 216 runs in
+    # 2 ceil(216 / 16) = 28 batches of at most 8); the marble's diagnosis check
+    assert int(jobs["simulate"]) == (4 + 2) + (2 + 2) + 28 and "member" not in jobs
     assert int(jobs["aggregate"]) == 2
     assert int(jobs["diagnosis_check"]) == 1 and int(jobs["lhs"]) == 2
     assert not (tmp / "results").exists()
