@@ -45,7 +45,7 @@ from .diagnose import EmulatedSHPB, anchored_emulators, emulators_from_design
 # light, for the Snakefile's parse: re-exported here, where the rest of closing the loop lives
 from .diagnosis_config import FOLD_SEPARATOR, candidate_effects, loro_folds  # noqa: F401
 from .model_error import stored_error
-from .observations import Observations
+from .observations import UNCORRECTED_COLUMN, Observations
 from .protocol import check_runs, confirm, real_curves, real_group, select
 
 __all__ = ["FOLD_SEPARATOR", "blind", "candidate_effects", "emulated_model", "protocol_errors", "select_effects",
@@ -61,7 +61,7 @@ def blind(heldout: Observations | None) -> Observations | None:
     if heldout is None:
         return None
     frame = heldout.frame.copy()
-    frame[[c for c in ("stress_Pa", "stress_uncorrected_Pa") if c in frame]] = np.nan
+    frame[[c for c in ("stress_Pa", UNCORRECTED_COLUMN) if c in frame]] = np.nan
     return Observations(frame, heldout.error_kind, dict(heldout.corr_time), dict(heldout.meta), heldout.added_cov)
 
 
@@ -525,7 +525,8 @@ def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: Emulated
     for h in held:
         s = heldout.record_slice(h)
         curves[h] = {"data": "heldout", "time": heldout.time[s], "obs": heldout.values[s],
-                     "observed": heldout.as_observed(h), "before": real["heldout"][0][h], "after": real["heldout"][k][h]}
+                     "observed": heldout.as_observed(h), "before": real["heldout"][0][h],
+                     "after": real["heldout"][k][h]}
     return report, check, curves, band_frame
 
 

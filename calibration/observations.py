@@ -52,7 +52,8 @@ if TYPE_CHECKING:  # pragma: no cover
 # imports this module at parse time (every command, `-n` too), where neither is needed.
 
 __all__ = [
-    "OBS_COLUMNS", "ObservationFileError", "Observations", "observation_grid", "curve_on_grid", "read_curve",
+    "OBS_COLUMNS", "UNCORRECTED_COLUMN", "ObservationFileError", "Observations", "observation_grid",
+    "curve_on_grid", "read_curve",
     "twin_observations", "reduce_measured_record", "measured_observations", "check_record",
     "read_observations", "response_matrix", "with_approximation_error", "record_validity",
     "record_check_summary", "cached_check_record", "write_reduced_record", "stored_observations",
@@ -60,6 +61,8 @@ __all__ = [
 
 #: Columns of ``obs.csv`` (SI units).
 OBS_COLUMNS = ("record", "time_s", "stress_Pa", "sigma_Pa")
+#: the stress as observed, beside the corrected ``stress_Pa`` where an approximation error corrected it
+UNCORRECTED_COLUMN = "stress_uncorrected_Pa"
 
 
 # --------------------------------------------------------------------------------------------------
@@ -160,7 +163,7 @@ class Observations:
     def as_observed(self, record: str) -> np.ndarray | None:
         """The record's stress as observed where an approximation error corrected it, else None (the
         check's plot shows both: how far the coarse mesh's error moved the data)."""
-        col = "stress_uncorrected_Pa"
+        col = UNCORRECTED_COLUMN
         return self.frame[col].to_numpy(float)[self.record_slice(record)] if col in self.frame else None
 
     def of_record(self, record: str) -> "Observations":
@@ -261,7 +264,7 @@ def with_approximation_error(obs: Observations, offset, M: ObservationError | No
     if obs.added_cov is not None:
         raise ValueError("these observations already carry an approximation error")
     frame = obs.frame.copy()
-    frame["stress_uncorrected_Pa"] = frame["stress_Pa"].to_numpy(float)
+    frame[UNCORRECTED_COLUMN] = frame["stress_Pa"].to_numpy(float)
     frame["stress_Pa"] = frame["stress_Pa"].to_numpy(float) - offset
     return Observations(frame, obs.error_kind, dict(obs.corr_time), {**obs.meta, "approximation_error": dict(info)},
                         None if M is None else M.dense())

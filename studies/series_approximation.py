@@ -45,17 +45,24 @@ def _fold(summary: dict, check: dict, held: str, heldout_meta: dict | None) -> d
     band = (check.get("predictive_band") or {}).get("records", {}).get(held, {})
     out = {"verdict": check.get("verdict"), "added": check.get("added"),
            **{f"rmse_{s}": h[s]["rmse"] for s in ("before", "after")},
-           **{f"predictive_coverage_90_{s}": (band.get(s) or {}).get("predictive_coverage_90") for s in ("before", "after")},
-           **{f"interval_score_over_box_{s}": (band.get(s) or {}).get("interval_score_over_box") for s in ("before", "after")},
+           **{f"predictive_coverage_90_{s}": (band.get(s) or {}).get("predictive_coverage_90")
+              for s in ("before", "after")},
+           **{f"interval_score_over_box_{s}": (band.get(s) or {}).get("interval_score_over_box")
+              for s in ("before", "after")},
            "posterior": {p: {q: summary["posterior"][p][q] for q in QUANTILES} for p in ("sigma_t", "E_t")}}
     approx = (heldout_meta or {}).get("approximation_error")
-    if approx:
-        out["heldout_offset_rms_Pa"], out["heldout_offset_max_abs_Pa"] = approx["offset_rms_Pa"], approx["offset_max_abs_Pa"]
+    if approx:  # the held-out record's own correction (none without the term)
+        out["heldout_offset_rms_Pa"] = approx["offset_rms_Pa"]
+        out["heldout_offset_max_abs_Pa"] = approx["offset_max_abs_Pa"]
     return out
 
 
 def _series(table: dict, fold_files) -> dict:
-    folds = {row["heldout"]: _fold(*fold_files(row["heldout"]), row["heldout"], None) for row in table["rows"]}
+    """Each fold's figures (``fold_files(held)``: its summary, check and held-out obs.json) and the totals."""
+    folds = {}
+    for row in table["rows"]:
+        summary, check, meta = fold_files(row["heldout"])
+        folds[row["heldout"]] = _fold(summary, check, row["heldout"], meta)
     return {"folds": folds, "totals": {k: table["totals"].get(k) for k in TOTALS}}
 
 
@@ -70,21 +77,17 @@ def main(argv=None) -> dict:
     ap.add_argument("--out", required=True)
     a = ap.parse_args(argv)
     res = Path(a.run)
-    table = json.loads((res / SERIES / "loro" / "summary.json").read_text())
 
-    def fold_dir(held):
-        return res / f"{SERIES}__{held}"
+    def run_files(held):
+        fold = res / f"{SERIES}__{held}"
+        return tuple(_read_json(fold / f) for f in ("summary.json", "diagnosis/check.json",
+                                                     "diagnosis/heldout/obs.json"))
 
-    with_term = _series(table, lambda held: (_read_json(fold_dir(held) / "summary.json"),
-                                             _read_json(fold_dir(held) / "diagnosis" / "check.json")))
-    for held, f in with_term["folds"].items():
-        meta = _read_json(fold_dir(held) / "diagnosis" / "heldout" / "obs.json") or {}
-        f.update({k: v for k, v in _fold(_read_json(fold_dir(held) / "summary.json"),
-                                          _read_json(fold_dir(held) / "diagnosis" / "check.json"), held, meta).items()
-                  if k.startswith("heldout_offset")})
-    without = _series(json.loads((COMMITTED / f"{SERIES}.json").read_text()),
-                      lambda held: (_read_json(COMMITTED / f"{held}_summary.json"),
-                                    _read_json(COMMITTED / f"{held}_check.json")))
+    def committed_files(held):
+        return _read_json(COMMITTED / f"{held}_summary.json"), _read_json(COMMITTED / f"{held}_check.json"), None
+
+    with_term = _series(json.loads((res / SERIES / "loro" / "summary.json").read_text()), run_files)
+    without = _series(json.loads((COMMITTED / f"{SERIES}.json").read_text()), committed_files)
     runs = {"series": len(list((res / SERIES / "approximation").glob("*/*/run.json"))),
             "folds": len(list(res.glob(f"{SERIES}__*/approximation/*/*/run.json")))}
     out = {"what": __doc__.split("\n")[0], "cores": 2, "wall_s_with_term": a.wall_s,
