@@ -7,8 +7,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .integrator import ENERGY_NAMES, STATUS_ENERGY, STATUS_NONFINITE, STATUS_OK, STATUS_RUNAWAY, run_loop
-from .model import DEFAULT_SAFETY, Model, stable_time_step
-from .state import (Loads, Outputs, Probes, Settings, joint_state, joints_of, nodes_of, surfaces_of,
+from .model import DEFAULT_SAFETY, WAKE_TRACTION, Model, stable_time_step
+from .state import (Loads, Outputs, Probes, Settings, bodies_of, joint_state, joints_of, nodes_of, surfaces_of,
                     triangles_of)
 
 
@@ -77,6 +77,7 @@ class Result:
     body_names: list = field(default_factory=list)
     joint_onset_t: np.ndarray | None = None
     joint_break_t: np.ndarray | None = None
+    body_wake_t: dict = field(default_factory=dict)  # when each body woke [s] (0: awake from the start, -1: never)
     snapshots: list = field(default_factory=list)
     peak: Snapshot | None = None
 
@@ -140,7 +141,8 @@ def _resolve(sets, probes, kind):
 def run(model: Model, t_end: float, *, dt: float | None = None, safety: float = DEFAULT_SAFETY,
         sample_dt: float | None = None, velocity_bcs=(), traction_bcs=(), stress_probes=(),
         node_probes=(), x_init=None, v_init=None, energy_guard: float = 10.0,
-        snapshot_times=(), track_peak=None, peak_drop: float = 0.0, peak_floor: float = 0.0) -> Result:
+        snapshot_times=(), track_peak=None, peak_drop: float = 0.0, peak_floor: float = 0.0,
+        sleep: bool = True) -> Result:
     """Run an explicit dynamic simulation from t = 0 to t_end [s].
 
     dt: time step (default: stable_time_step(model, safety)); sample_dt: output interval
@@ -156,6 +158,9 @@ def run(model: Model, t_end: float, *, dt: float | None = None, safety: float = 
     maximum exceeds peak_floor [N] (a specimen that splits and then carries load again has its
     failure peak first). Result.joint_onset_t / joint_break_t give,
     per joint, when it first reached its strength and when it broke (-1: never).
+    sleep: a body at rest in its reference state sleeps, its triangles and joints not evaluated, until a
+    nodal force above WAKE_TRACTION reaches it (fdem.integrator._wake); False evaluates every body at
+    every step.
     """
     if not (np.isfinite(t_end) and t_end > 0):
         raise ValueError(f"t_end must be > 0 s, got {t_end}")
@@ -244,8 +249,12 @@ def run(model: Model, t_end: float, *, dt: float | None = None, safety: float = 
     settings = Settings(float(dt), n_steps, sample_every, float(model.alpha_mass), float(energy_guard),
                         float(buffer), use_contact, nb)
     t0 = time.perf_counter()
+    bodies = bodies_of(model, x, v, loads.vel_nodes, loads.tr_nodes, WAKE_TRACTION)
+    if not sleep:
+        bodies.awake[:] = True
+        bodies.t_wake[:] = 0.0
     status, ns, steps, E, rebuilds = run_loop(nodes, triangles_of(model), joints_of(model), js, surf, loads,
-                                              Probes(eg_ptr, eg_el, ng_ptr, ng_nodes), out, settings)
+                                              Probes(eg_ptr, eg_el, ng_ptr, ng_nodes), out, settings, bodies)
     wall = time.perf_counter() - t0
     msg = {STATUS_OK: "completed",
            STATUS_NONFINITE: f"non-finite state at t = {out_t[max(ns - 1, 0)]:.3e} s (numerical instability)",
@@ -261,6 +270,7 @@ def run(model: Model, t_end: float, *, dt: float | None = None, safety: float = 
         dt=float(dt), steps=int(steps), wall_s=wall, updates_per_s=updates / wall if wall > 0 else 0.0,
         contact_rebuilds=int(rebuilds), x=x, v=v, Dmax=js.Dmax, joint_broken=js.broken,
         body_names=list(model.body_names), joint_onset_t=j_onset, joint_break_t=j_break,
+        body_wake_t=dict(zip(model.body_names, bodies.t_wake.tolist())),
         snapshots=[Snapshot(float(min(k, steps) * dt), snap_x[i], snap_D[i])
                    for i, k in enumerate(snap_steps) if k <= steps],
         peak=(Snapshot(float(peak_info[0]), peak_x, peak_D) if peak_info[2] >= 0 else None))

@@ -48,6 +48,13 @@ Probes = namedtuple("Probes", "eg_ptr eg_el ng_ptr ng_nodes")
 # (fdem.integrator.run_loop).
 Outputs = namedtuple("Outputs", "t energy bforce stress nodes broken pen j_onset j_break "
                                 "snap_steps snap_x snap_D track peak_x peak_D peak_info")
+# The bodies, for skipping those at rest (fdem.integrator._wake): seg the maximal runs of one body in
+# triangle order (lo, hi, body; unsigned: fdem.triangles.triangle_forces_into), node_ptr / node_idx each
+# body's exposed nodes (CSR: those a contact or a traction can reach), has_joints whether a body owns
+# joints, f_wake [N] the nodal force that wakes a sleeping body, awake whether a body moves or carries
+# load and t_wake [s] when it woke (0: awake from the start, -1: asleep; both change as the run wakes
+# bodies).
+Bodies = namedtuple("Bodies", "seg node_ptr node_idx has_joints f_wake awake t_wake")
 # dt [s] is the time step; buffer [m] the contact search buffer; alpha_mass [1/s] mass damping.
 Settings = namedtuple("Settings", "dt n_steps sample_every alpha_mass energy_guard buffer use_contact "
                                   "n_bodies")
@@ -93,6 +100,37 @@ def joint_state(n_joints: int, **given) -> JointState:
 def surfaces_of(model, edge_active, penalty, friction) -> Surfaces:
     return Surfaces(model.edges, model.edge_tri, model.edge_dlim, model.edge_thick, model.edge_joint,
                     edge_active, model.body_fracturable, penalty, friction)
+
+
+def bodies_of(model, x, v, velocity_nodes, traction_nodes, wake_traction) -> Bodies:
+    """The bodies of model at positions x and velocities v. A body is awake from the start when a velocity
+    is prescribed on one of its nodes (an impulse, not a force) or one of them is away from its reference
+    position or moving; every other body sleeps until a nodal force above wake_traction [Pa] times its
+    mean triangle's edge and thickness reaches one of its exposed nodes: the nodes of its surface edges
+    (contact) and traction_nodes. Nothing else can push a body whose triangles and joints are at rest."""
+    nb = len(model.body_names)
+    tb = np.asarray(model.tri_body, np.int64)
+    starts = np.flatnonzero(np.r_[True, tb[1:] != tb[:-1]]) if tb.size else np.zeros(0, np.int64)
+    ends = np.r_[starts[1:], tb.size].astype(np.int64)
+    seg = np.ascontiguousarray(np.stack([starts, ends, tb[starts]], axis=1).astype(np.uint64).reshape(-1, 3))
+    node_body = np.asarray(model.node_body, np.int64)
+    exposed = np.union1d(np.asarray(model.edges, np.int64)[np.asarray(model.edge_active0, bool)].ravel(),
+                         np.asarray(traction_nodes, np.int64))
+    node_idx = exposed[np.argsort(node_body[exposed], kind="stable")].astype(np.int64)
+    node_ptr = np.searchsorted(node_body[node_idx], np.arange(nb + 1)).astype(np.int64)
+    has_joints = np.zeros(nb, np.bool_)
+    has_joints[node_body[np.asarray(model.jn, np.int64)[:, 0]]] = True
+    f_wake = np.zeros(nb)
+    for b in range(nb):
+        on = tb == b
+        if on.any():  # a traction on one edge of the body's mean triangle (edge ~ sqrt(2 area))
+            w = float(model.body_thickness[b])
+            f_wake[b] = wake_traction * np.sqrt(2.0 * np.mean(model.vol0[on]) / w) * w
+    awake = np.zeros(nb, np.bool_)
+    awake[node_body[np.asarray(velocity_nodes, np.int64)]] = True
+    moved = np.any(x != model.x0, axis=1) | np.any(v != 0.0, axis=1)
+    awake[node_body[moved]] = True
+    return Bodies(seg, node_ptr, node_idx, has_joints, f_wake, awake, np.where(awake, 0.0, -1.0))
 
 
 def contact_state(n_nodes: int) -> ContactState:

@@ -27,8 +27,8 @@ from pathlib import Path
 PARTS = {
     "node_update": ("            # half kick, with mass damping", "            # contact neighbour list\n"),
     "contact_refresh": ("            # contact neighbour list\n", "            bforce[:, :] = 0.0\n"),
-    "triangles": ("            bforce[:, :] = 0.0\n", "            Psi, dis, nnew, ndam = joint_forces_into("),
-    "joints": ("            Psi, dis, nnew, ndam = joint_forces_into(", "            E[4] += dis\n"),
+    "triangles": ("            bforce[:, :] = 0.0\n", "            Psi, dis, nnew, ndam = 0.0, 0.0, 0, 0\n"),
+    "joints": ("            Psi, dis, nnew, ndam = 0.0, 0.0, 0, 0\n", "            E[4] += dis\n"),
     "damage_bookkeeping": ("            E[4] += dis\n", "            Uc, Pf, pen = contact_forces("),
     "contact_forces": ("            Uc, Pf, pen = contact_forces(", "            if pen > max_pen:\n"),
     "rest_of_step": ("            if pen > max_pen:\n", "        while isnap"),
