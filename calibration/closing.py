@@ -20,8 +20,7 @@ The order is fixed before anything is fitted (docs/closing-the-loop.md):
    are read: their errors before (base model) and after (the confirmed model), averaged over the meshes.
 
 With ``diagnosis: {validation: loro}`` an experiment's records are each held out once
-(:func:`loro_folds`): one experiment per fold, ``<experiment>__<record>``, and the folds' checks are
-tabulated by :func:`loro_table`.
+(:func:`loro_folds`): one experiment per fold, ``<experiment>__<record>``, tabulated by :func:`loro_table`.
 """
 
 from __future__ import annotations
@@ -37,6 +36,7 @@ from enkf.covariance import DenseError, ObservationError
 from enkf.diagnosis import box_draws, group_text, heldout_evaluation, replicate_curve_errors, replicated, walk_weights
 from enkf.diagnosis.band import replicate_variance, residual_discrepancy, run_band
 from enkf.diagnosis.crossval import seed_for
+from enkf.diagnosis.protocol import step_summary
 from enkf.emulator import AnchoredEmulator
 from shpb import effects as fx
 
@@ -540,7 +540,7 @@ def loro_table(folds: Mapping[str, Mapping], record_info: Mapping[str, Mapping] 
     rows = []
     for fold, rep in folds.items():
         for h, ev in (rep.get("heldout") or {}).items():
-            step = rep["selection"]["steps"][int(rep["shipped_step"])]
+            step = step_summary(rep["selection"], rep["shipped_step"])
             shared = {n: v for n, v in (step.get("posterior") or {}).items()}
             row = {"fold": fold, "heldout": h, "calib_records": rep["calib_records"], "effects": rep["added"],
                    # per kept effect, the group the fold's calibration records could not split (None: a fold

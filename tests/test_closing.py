@@ -135,7 +135,7 @@ def test_the_series_table_reports_each_fold_and_the_mean_change_with_its_spread(
         return {"heldout": {h: {"before": {"rmse": before, "peak_error": 1.0, "time_to_peak_error": 0.0},
                                 "after": {"rmse": after, "peak_error": 0.5, "time_to_peak_error": 0.0,
                                           "point": {}, "intervals": {}}}},
-                "selection": {"steps": [{"posterior": {}}, {"posterior": {"k": {"mean": 0.3}}}]},
+                "selection": {"steps": [{"index": 0, "posterior": {}}, {"index": 1, "posterior": {"k": {"mean": 0.3}}}]},
                 "shipped_step": 1 if added else 0, "calib_records": ["x"], "added": added,
                 "verdict": "confirmed" if added else "base_kept",
                 "errors_per_record": {**cal, h: {"data": "heldout", "before": {"rmse": before}, "after": {"rmse": after}}}}
@@ -157,6 +157,22 @@ def test_the_series_table_reports_each_fold_and_the_mean_change_with_its_spread(
     assert risk["p_no_fold_worse"] == pytest.approx(0.5 ** 3)
     lo, hi = risk["ci90"]
     assert lo == pytest.approx(0.0976, abs=1e-3) and hi == pytest.approx(0.9024, abs=1e-3)  # exact binomial, 2 of 4
+
+
+def test_a_fold_that_shipped_an_alternative_reports_the_alternatives_estimates():
+    """The walk may confirm an alternative in place of the emulator's step (its index follows the nested
+    steps'): the series table reads that step's posterior, not a nested step's (an index past the nested
+    steps stopped a five-record series at its last job)."""
+    ev = {"rmse": 9.0, "peak_error": 1.0, "time_to_peak_error": 0.0, "point": {}, "intervals": {}}
+    rep = {"heldout": {"H": {"before": dict(ev), "after": {**ev, "rmse": 6.0}}},
+           "selection": {"steps": [{"index": 0, "posterior": {}}, {"index": 1, "posterior": {"k": {"mean": 0.3}}}],
+                         "alternatives": [{"index": 2, "alternative_to": 1, "posterior": {"g": {"mean": 7.0}}}]},
+           "shipped_step": 2, "calib_records": ["x"], "added": ["seating"], "verdict": "confirmed",
+           "errors_per_record": {}}
+    row = loro_table({"s__H": rep})["rows"][0]
+    assert row["estimates"] == {"g": {"mean": 7.0}} and row["effects"] == ["seating"]
+    with pytest.raises(KeyError, match="no step 5"):
+        loro_table({"s__H": {**rep, "shipped_step": 5}})
 
 
 def test_the_risk_of_a_worse_prediction_is_zero_records_when_the_base_is_kept():

@@ -131,6 +131,15 @@ class Selection:
                          "settings": self.settings, "alternatives": [a.summary() for a in self.alternatives]})
 
 
+def step_summary(selection: Mapping, index: int) -> dict:
+    """Step ``index`` of a selection's ``to_dict()`` (a report's ``selection``): a nested step or an
+    alternative the walk confirmed in its place (whose index follows the nested steps')."""
+    for st in (*selection["steps"], *selection.get("alternatives", [])):
+        if int(st["index"]) == int(index):
+            return st
+    raise KeyError(f"no step {index} in the selection (steps and alternatives)")
+
+
 def _final_step(model, spec: ModelSpec, cv: CVResult, index: int, in_play: int, calib: list, heldout: list,
                 obs: Mapping, errors: RecordErrors, kw: dict, fit: Fit | None = None) -> ModelStep:
     """Calibrate ``spec`` on all calibration records (or take ``fit``, a posterior given on them) and
