@@ -132,10 +132,12 @@ class Selection:
 
 
 def step_summary(selection: Mapping, index: int) -> dict:
-    """Step ``index`` of a selection's ``to_dict()`` (a report's ``selection``): a nested step or an
-    alternative the walk confirmed in its place (whose index follows the nested steps')."""
-    for st in (*selection["steps"], *selection.get("alternatives", [])):
-        if int(st["index"]) == int(index):
+    """Step ``index`` of a selection's ``to_dict()`` (a report's ``selection``): a nested step (its
+    position where it carries no index) or an alternative the walk confirmed in its place (whose index
+    follows the nested steps')."""
+    steps = [(st.get("index", i), st) for i, st in enumerate(selection["steps"])]
+    for i, st in (*steps, *((a["index"], a) for a in selection.get("alternatives", []))):
+        if int(i) == int(index):
             return st
     raise KeyError(f"no step {index} in the selection (steps and alternatives)")
 
