@@ -249,10 +249,7 @@ def run(model: Model, t_end: float, *, dt: float | None = None, safety: float = 
     settings = Settings(float(dt), n_steps, sample_every, float(model.alpha_mass), float(energy_guard),
                         float(buffer), use_contact, nb)
     t0 = time.perf_counter()
-    bodies = bodies_of(model, x, v, loads.vel_nodes, loads.tr_nodes, WAKE_TRACTION)
-    if not sleep:
-        bodies.awake[:] = True
-        bodies.t_wake[:] = 0.0
+    bodies = bodies_of(model, x, v, loads.vel_nodes, loads.tr_nodes, WAKE_TRACTION, sleep)
     status, ns, steps, E, rebuilds = run_loop(nodes, triangles_of(model), joints_of(model), js, surf, loads,
                                               Probes(eg_ptr, eg_el, ng_ptr, ng_nodes), out, settings, bodies)
     wall = time.perf_counter() - t0

@@ -102,12 +102,13 @@ def surfaces_of(model, edge_active, penalty, friction) -> Surfaces:
                     edge_active, model.body_fracturable, penalty, friction)
 
 
-def bodies_of(model, x, v, velocity_nodes, traction_nodes, wake_traction) -> Bodies:
+def bodies_of(model, x, v, velocity_nodes, traction_nodes, wake_traction, sleep: bool = True) -> Bodies:
     """The bodies of model at positions x and velocities v. A body is awake from the start when a velocity
     is prescribed on one of its nodes (an impulse, not a force) or one of them is away from its reference
     position or moving; every other body sleeps until a nodal force above wake_traction [Pa] times its
     mean triangle's edge and thickness reaches one of its exposed nodes: the nodes of its surface edges
-    (contact) and traction_nodes. Nothing else can push a body whose triangles and joints are at rest."""
+    (contact) and traction_nodes. Nothing else can push a body whose triangles and joints are at rest.
+    sleep=False: every body awake from the start."""
     nb = len(model.body_names)
     tb = np.asarray(model.tri_body, np.int64)
     starts = np.flatnonzero(np.r_[True, tb[1:] != tb[:-1]]) if tb.size else np.zeros(0, np.int64)
@@ -130,6 +131,7 @@ def bodies_of(model, x, v, velocity_nodes, traction_nodes, wake_traction) -> Bod
     awake[node_body[np.asarray(velocity_nodes, np.int64)]] = True
     moved = np.any(x != model.x0, axis=1) | np.any(v != 0.0, axis=1)
     awake[node_body[moved]] = True
+    awake |= not sleep
     return Bodies(seg, node_ptr, node_idx, has_joints, f_wake, awake, np.where(awake, 0.0, -1.0))
 
 

@@ -26,16 +26,14 @@ sys.path.insert(0, str(ROOT))
 
 from fdem.solver import run  # noqa: E402
 from shpb.fracture import CHECK_POINTS  # noqa: E402
-from shpb.paths import data_dir  # noqa: E402
+from shpb.paths import freiburg_raw_files  # noqa: E402
 from shpb.simulate import build  # noqa: E402
 
-RECORDS = ["CaMa/CaMa_SHPB_003", "CaMa/CaMa_SHPB_004", "CaMa/CaMa_SHPB_005", "CaMa/CaMa_SHPB_006",
-           "SeeSst/SeeSst_SHPB_023", "SeeSst/SeeSst_SHPB_024"]
+RECORDS = ["CaMa_SHPB_003", "CaMa_SHPB_004", "CaMa_SHPB_005", "CaMa_SHPB_006", "SeeSst_SHPB_023", "SeeSst_SHPB_024"]
 
 
 def _record(stem: str) -> str:
-    folder = data_dir() / "freiburg-rae-rock-shpb" / "Rae2021" / "SHPBdata" / stem.split("/")[0]
-    return str(sorted(folder.glob(stem.split("/")[1] + "_*.txt"))[0])
+    return str(next(p for p in freiburg_raw_files(("CaMa", "SeeSst")) if p.name.startswith(stem + "_")))
 
 
 def _cases():
@@ -43,7 +41,7 @@ def _cases():
         yield f"disc_{name}", "brazilian_disc", dict(zip(("sigma_t", "E_t"), point)), None
     for stem in RECORDS:
         params = {"sigma_t": 20e6, "E_t": 3e3} if "SeeSst" in stem else {"sigma_t": 35e6, "E_t": 2.75e4}
-        yield f"cylinder_{stem.split('/')[1]}", "cylinder", params, _record(stem)
+        yield f"cylinder_{stem}", "cylinder", params, _record(stem)
 
 
 def _member(geometry, params, record) -> dict:
