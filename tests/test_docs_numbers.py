@@ -523,19 +523,21 @@ def _loro_idle(J, name: str = "anchored_idle") -> dict:
     return {"m": idle["wall_s"] / 60, "r": r} if idle["answers"] == busy["answers"] and idle["exit_code"] == 0 else {}
 
 
-def _loro_sleeping(J) -> dict:
-    """The series run with sleeping bodies against `current_idle` (bench_loro.json): wall [min], solver seconds
-    per simulated run over the other's, and the paper disc's time before sleeping bodies on its machine over
-    the engine table's."""
+def _loro_sleeping(J, name: str = "sleeping") -> dict:
+    """A series run with sleeping bodies against `current_idle` (bench_loro.json): wall [min], solver seconds
+    per simulated run over the other's, the paper disc's time before sleeping bodies on its machine over
+    the engine table's, the effects its folds kept and its held-out bands' mean coverage after and before."""
     runs = J("benchmarks/results/bench_loro.json")["runs"]
 
     def per_run(name):
         f = runs[name]["fdem_runs"].values()
         return sum(v["solver_s"] for v in f) / sum(v["runs"] - v["copied"] for v in f)
 
-    kept = runs["sleeping"]["answers"]["totals"]["effects_kept"]
+    totals = runs[name]["answers"]["totals"]
+    kept = totals["effects_kept"]
     paper = J("benchmarks/results/bench_engine_sleep.json")["cases"]["disc_paper_reference"]["baseline"]["solver_wall_s"]
-    return {"m": runs["sleeping"]["wall_s"] / 60, "r": per_run("sleeping") / per_run("current_idle"),
+    return {"m": runs[name]["wall_s"] / 60, "r": per_run(name) / per_run("current_idle"),
+            "ca": totals["mean_predictive_coverage_90_after"], "cb": totals["mean_predictive_coverage_90_before"],
             "p": paper / J("benchmarks/results/bench_engine.json")["cases"]["disc_paper_reference"]["new"]["solver_wall_s"],
             "fg": kept["face_gap"], "lp": kept["lowpass"], "gg": kept["gauge_gain"]}
 
@@ -608,6 +610,10 @@ QUOTES: list[Quote] = [
           "was {r:.2f} times `current_idle`'s, on a machine where the\n  paper disc member took {p:.2f} times the engine "
           "table's time with the engine before sleeping bodies, and\n  its chaotic runs walked other steps (its folds kept "
           "`face_gap` {fg} times, `lowpass` {lp}, `gauge_gain` {gg})", lambda J: _loro_sleeping(J)),
+    Quote("docs/workflow.md", "On a machine like the earlier runs' (AVX-512) the same code took {m:.0f} min (run "
+          "`sleeping_avx512`): per FDEM\n  run {r:.2f} times `current_idle`'s solver time; its folds kept `face_gap` {fg} "
+          "times, `gauge_gain` {gg}, `lowpass` {lp},\n  and the held-out bands covered {ca:.2f} of their curves on average "
+          "after the loop, {cb:.2f} before", lambda J: _loro_sleeping(J, "sleeping_avx512")),
     Quote("docs/workflow.md", "and {m:.0f} min with the code before sleeping bodies (run `current_idle`, the same answers "
           "again), of whose job time the refinement runs are {r:.0f} %", lambda J: _loro_idle(J, "current_idle")),
     Quote("docs/inference.md", "draws {N} twins as the\n  harness does", _bank),
