@@ -17,9 +17,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from enkf.diagnosis.protocol import step_summary  # noqa: E402
 
 
 def _interval(row: dict) -> dict:
@@ -53,8 +57,8 @@ def summarize(folder: Path) -> dict:
                      for s in rep["confirmation"]["steps"]],
            "heldout": held,
            "workflow_posterior": _against_truth({k: v for k, v in summary["posterior"].items()}, truth, planted),
-           "selection_posterior": _against_truth(rep["selection"]["steps"][rep["shipped_step"]]["posterior"], truth,
-                                                 planted)}
+           "selection_posterior": _against_truth(step_summary(rep["selection"], rep["shipped_step"])["posterior"],
+                                                 truth, planted)}
     refit = folder / "diagnosis/refit.json"
     if refit.exists():
         out["refit_posterior"] = _against_truth(json.loads(refit.read_text())["posterior"], truth, planted)

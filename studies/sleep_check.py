@@ -54,7 +54,7 @@ def _member(geometry, params, record) -> dict:
     on = m.body_nodes(s["geometry"].specimen)
     x0[on] += 1e-17 * np.random.default_rng(17).standard_normal((on.size, 2))
     v0 = np.zeros_like(m.x0)
-    bar = m.body_nodes(m.body_names[0])  # the incident bar
+    bar = m.body_nodes(s["geometry"].incident_bar)
     v0[bar] = 1e-17 * np.random.default_rng(18).standard_normal((bar.size, 2))
     runs = {"sleeping": run(m, t_end, **kw), "awake": run(m, t_end, sleep=False, **kw),
             "awake_rounded": run(m, t_end, sleep=False, x_init=x0, **kw),

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from enkf.diagnosis.protocol import step_summary
 from enkf.scores import interval_score
 from tools import coverage_table, docs_numbers
 
@@ -149,7 +150,7 @@ def _planted_gap(J) -> dict:
     run, truth = f"{RUN}/planted_gap", J("data/examples/planted_gap/truth.json")
     rep, chk = J(f"{run}/diagnosis/report.json"), J(f"{run}/diagnosis/check.json")
     step = [s for s in rep["confirmation"]["steps"] if s["confirmed"]]
-    post = rep["selection"]["steps"][rep["shipped_step"]]["posterior"]
+    post = step_summary(rep["selection"], rep["shipped_step"])["posterior"]
     planted = {t["name"]: t["planted"]["face_gap.gap_m"] for t in truth["tests"]}
     held = chk["heldout"]["PlantGap_03"]
     lo_h, hi_h = held["after"]["intervals"]["face_gap.gap_m@PlantGap_03"]
