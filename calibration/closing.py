@@ -33,7 +33,7 @@ import numpy as np
 import pandas as pd
 
 from enkf.covariance import DenseError, ObservationError
-from enkf.diagnosis import box_draws, group_text, heldout_evaluation, replicate_curve_errors, replicated, walk_weights
+from enkf.diagnosis import box_draws, group_text, heldout_evaluation, replicate_curve_errors
 from enkf.diagnosis.band import replicate_variance, residual_discrepancy, run_band
 from enkf.diagnosis.crossval import seed_for
 from enkf.diagnosis.protocol import step_summary
@@ -46,7 +46,8 @@ from .diagnose import EmulatedSHPB, anchored_emulators, emulators_from_design
 from .diagnosis_config import FOLD_SEPARATOR, candidate_effects, loro_folds  # noqa: F401
 from .model_error import stored_error
 from .observations import UNCORRECTED_COLUMN, Observations
-from .protocol import check_runs, confirm, real_curves, real_group, select
+from .protocol import check_runs, real_curves, real_group, select
+from .walk import gated, walk
 
 __all__ = ["FOLD_SEPARATOR", "blind", "candidate_effects", "emulated_model", "protocol_errors", "select_effects",
            "base_posterior_mismatches", "calibration_discrepancy", "check_rows", "covariate_table", "assemble",
@@ -434,30 +435,20 @@ def base_posterior_mismatches(summary: Mapping, report: Mapping) -> list[str]:
 
 def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: EmulatedSHPB, obs: Observations,
              heldout: Observations | None, noise: Mapping, simulator: Mapping,
-             discrepancy: Mapping[str, np.ndarray]) -> tuple[dict, dict, dict, pd.DataFrame]:
+             discrepancy: Mapping[str, np.ndarray],
+             refit: Mapping | None = None) -> tuple[dict, dict, dict, pd.DataFrame]:
     """``(report, check, curves, bands)`` of the loop: the confirmation walk on the real cross-validation
     runs, then (read here for the first time) the held-out records' errors before and after on the real
     held-out runs, and every record's predictive band (:func:`predictive_bands`; ``bands`` the csv beside
     check.json). ``runs[i]``: the FDEM curve (DataFrame, or None if it failed) of ``rows[i]``;
-    ``discrepancy``: :func:`calibration_discrepancy` of the calibration records."""
+    ``discrepancy``: :func:`calibration_discrepancy` of the calibration records; ``refit``: diagnosis/refit.json
+    where the shipped model was re-fitted, whose identification gate can ship an earlier step of the walk
+    (:func:`calibration.walk.gated`)."""
     real = real_curves(rows, runs, model)
     y = {r: obs.values[obs.record_slice(r)] for r in obs.records}
-    # each time weighted by the inverse of its noise and mesh-scatter variance (walk_weights: why)
-    weights = walk_weights(noise, simulator, list(obs.records))
-    # the walk's own rule (enkf.diagnosis.replicated), so the error terms given and the test it picks agree
-    if replicated(real["cv"].get(0, {}), list(obs.records)):
-        # replicated runs on common meshes: the walk measures the variability of the difference of two
-        # steps (enkf.diagnosis.compare_replicated); the data carry only their instrument noise
-        walk_noise, walk_sim = {r: noise[r] for r in obs.records}, {}
-        conf = confirm(selection, real["cv"], y, walk_noise, weights=weights)
-    else:
-        # one run per point: the data carry their own realization (S on the data, common to every step)
-        # and each run its own; the runs of two steps share a mesh, but their departures are taken as
-        # independent (nothing measures their correlation): cautious, a real gain can be refuted
-        walk_noise = {r: DenseError(noise[r].dense() + (simulator[r].dense() if r in simulator else 0.0),
-                                    _symmetric=True) for r in obs.records}
-        walk_sim = {r: simulator[r] for r in obs.records if r in simulator}
-        conf = confirm(selection, real["cv"], y, walk_noise, simulator=walk_sim, weights=weights)
+    walked = walk(selection, real, obs, noise, simulator)
+    conf = gated(walked["conf"], selection, refit)
+    walk_noise, walk_sim, weights = walked["noise"], walked["simulator"], walked["weights"]
     k = int(conf["confirmed"])
     held = {}
     if heldout is not None and heldout.records:
@@ -477,7 +468,8 @@ def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: Emulated
     shipped = selection.step(k)
     if k == 0:
         verdict = "base_kept"
-        why = ("no addition survived: " + (conf["steps"][-1]["text"] if conf["steps"] else selection.why))
+        why = (conf["text"] if (conf.get("identification_gate") or {}).get("dropped") else
+               "no addition survived: " + (conf["steps"][-1]["text"] if conf["steps"] else selection.why))
     else:
         verdict = "confirmed"
         why = conf["text"]

@@ -53,6 +53,7 @@ from shpb import effects as fx
 
 from .diagnose import EmulatedSHPB, anchored_emulators, measured_curve, record_params
 from .protocol import protocol_model, record_errors
+from .walk import identified
 
 __all__ = ["MIN_STEP", "first_round", "inflate", "misfit_scale", "next_round", "real_misfit", "refit_design",
            "refit_summary", "refit_surrogate", "spans", "verify_inflation"]
@@ -163,36 +164,47 @@ def _posterior(fit: Fit) -> dict:
     return {n: {k: float(v[k]) for k in ("mean", "q05", "q95")} for n, v in fit.posterior().items()}
 
 
-def first_round(selection, shipped: int, model: EmulatedSHPB) -> dict:
-    """Round 0: the design around the shipped step's fit on the selection's surrogate (``phase``
-    ``locate``), or nothing to refit (``done``) when the base model is kept (its posterior is the
-    workflow's, fitted on real runs)."""
+def first_round(selection, shipped: int, model: EmulatedSHPB, *, chain: Sequence[int] | None = None,
+                level: float | None = None, start: int = 0, gated: Sequence[Mapping] = ()) -> dict:
+    """Round ``start`` (0 unless an earlier model was dropped by the gate): the design around the shipped
+    step's fit on the selection's surrogate (``phase`` ``locate``), or nothing to refit (``done``) when the
+    base model is kept (its posterior is the workflow's, fitted on real runs). ``chain``: the confirmed
+    steps the walk went through, base first (default: straight to ``shipped``); ``level``: the
+    identification gate's (:func:`calibration.walk.identified`; None = no gate); ``gated``: the models
+    dropped so far."""
     step = selection.step(int(shipped))
-    state = {"round": 0, "step": int(shipped), "model": step.spec.label(), "names": list(step.final.names),
-             "records": list(selection.calib_records), "history": [], "converged": None}
+    chain = [0, int(shipped)] if chain is None else [int(c) for c in chain]
+    if chain[-1] != int(shipped) or chain[0] != 0:
+        raise ValueError(f"the walk's chain {chain} must run from the base (0) to the shipped step {shipped}")
+    state = {"round": int(start), "start_round": int(start), "step": int(shipped), "model": step.spec.label(),
+             "names": list(step.final.names), "records": list(selection.calib_records), "history": [],
+             "converged": None, "chain": chain, "gate_level": level, "gated": list(gated)}
     if int(shipped) == 0:
         return {**state, "phase": "done", "rows": [], "fit": None,
                 "why": "base model kept: its posterior is the workflow's, on real runs"}
     emu0 = next(iter(model.emulators.values()))
     rows = refit_design(step.final, state["records"], model.input_names, emu0.lower, emu0.upper)
-    return {**state, "phase": "locate", "rows": rows, "fit": _fit_entry(step.final), "design_round": 0,
+    return {**state, "phase": "locate", "rows": rows, "fit": _fit_entry(step.final), "design_round": int(start),
             "selection_posterior": _posterior(step.final), "why": "locate: the design around the selection's fit"}
 
 
 def next_round(prev: Mapping, curves_of: Callable[[int], Sequence], model: EmulatedSHPB, obs: Mapping,
-               noise: Mapping, simulator: Mapping, settings: Mapping, *, rounds: int, replicates: int) -> dict:
+               noise: Mapping, simulator: Mapping, settings: Mapping, *, rounds: int, replicates: int,
+               selection=None) -> dict:
     """The round after ``prev``: fit its runs (``curves_of(r)``: round r's curves in its rows' order), then
-    the next design, the spread round or the end (module docstring). ``rounds``: the most ``locate``
-    rounds; ``replicates``: the check's meshes per record."""
+    the next design, the spread round, the end or, where the identification gate drops the model's last
+    effect, the first round of the model before it (``selection`` needed then). ``rounds``: the most
+    ``locate`` rounds of one model; ``replicates``: the check's meshes per record."""
     if prev["phase"] == "done":
         raise ValueError("the refit is done: there is no next round")
     r = int(prev["round"]) + 1
     names, records = list(prev["names"]), list(prev["records"])
     seed = int(settings["seed"]) + 7919 * r
-    state = {k: prev[k] for k in ("step", "model", "names", "records", "selection_posterior")}
+    state = {k: prev.get(k) for k in _CARRIED}
     state.update({"round": r, "history": list(prev["history"])})
     if prev["phase"] == "verify":
-        return _verified(prev, state, curves_of(r - 1), model, obs, noise, simulator)
+        done = _verified(prev, state, curves_of(r - 1), model, obs, noise, simulator)
+        return _gate(done, selection, model)
     if prev["phase"] == "locate":
         rows = prev["rows"]
         fit = _fit(rows, curves_of(r - 1), model, names, records, obs, noise, simulator, settings, seed)
@@ -201,7 +213,7 @@ def next_round(prev: Mapping, curves_of: Callable[[int], Sequence], model: Emula
         inside = {n: bool(cover[n][0] <= post[n]["mean"] <= cover[n][1]) for n in cover}
         state["history"].append({"round": r - 1, "phase": "locate", "runs": len(rows), "posterior": post,
                                  "mean_inside_runs": inside, "misfit_scale": fit.info["misfit_scale"]})
-        if all(inside.values()) or r >= int(rounds):
+        if all(inside.values()) or r - int(prev.get("start_round", 0)) >= int(rounds):
             state["converged"] = bool(all(inside.values()))
             if int(replicates) > 1:
                 spread = [{**row, "replicate": k} for k in range(1, int(replicates)) for row in rows]
@@ -228,6 +240,29 @@ def next_round(prev: Mapping, curves_of: Callable[[int], Sequence], model: Emula
                              "posterior_per_mesh": [_posterior(f) for f in fits], "misfit_scale_per_mesh": scales})
     state["converged"] = prev["converged"]
     return _to_verify(state, pooled, scales, int(replicates), model, f"the fits on {len(fits)} check meshes pooled")
+
+
+#: What every round of one model's refit carries over from the round before.
+_CARRIED = ("step", "model", "names", "records", "selection_posterior", "start_round", "chain", "gate_level",
+            "gated")
+
+
+def _gate(done: dict, selection, model: EmulatedSHPB) -> dict:
+    """``done`` (a model's finished refit) kept if its last effect is identified on real runs
+    (:func:`calibration.walk.identified`), else the first round of the model the walk confirmed before it,
+    with ``done``'s result listed under ``gated``."""
+    level, chain = done.get("gate_level"), list(done.get("chain") or [0, done["step"]])
+    if level is None or int(done["step"]) == 0:
+        return done
+    effect = selection.step(int(done["step"])).spec.effect_names[-1]
+    verdict = identified(done["names"], np.asarray(done["fit"]["draws"], float), effect, float(level))
+    if verdict["identified"]:
+        return {**done, "identification": verdict}
+    dropped = {"step": int(done["step"]), "model": done["model"], "identification": verdict,
+               "posterior": posterior_dict(np.asarray(done["fit"]["draws"], float), list(done["names"])),
+               "runs": int(sum(h.get("runs", 0) for h in done["history"])), "history": done["history"]}
+    return first_round(selection, chain[-2], model, chain=chain[:-1], level=float(level),
+                       start=int(done["round"]), gated=[*(done.get("gated") or []), dropped])
 
 
 def _to_verify(state: dict, fit: Fit, scales: Sequence[float], replicates: int, model: EmulatedSHPB,
@@ -306,9 +341,11 @@ def refit_summary(state: Mapping) -> dict:
     selection's, where it comes from, the rounds and whether the last locate round's means lay within
     their runs."""
     out = {k: state.get(k) for k in ("step", "model", "names", "records", "converged", "why", "history",
-                                     "selection_posterior")}
+                                     "selection_posterior", "chain", "gate_level", "identification")}
+    out["gated"] = list(state.get("gated") or [])
     out["rounds"] = int(state["round"])
-    out["runs"] = int(sum(h.get("runs", 0) for h in state.get("history") or []))
+    out["runs"] = int(sum(h.get("runs", 0) for h in state.get("history") or [])
+                      + sum(g["runs"] for g in out["gated"]))
     if state.get("fit") is None:
         out["posterior"] = None
         return out

@@ -441,6 +441,9 @@ def diagnosis_check_inputs(wc):
     files["selection"] = f"results/{wc.exp}/diagnosis/selection.pkl"
     files["rows"] = f"results/{wc.exp}/diagnosis/check_runs.json"
     files["check_runs"] = stage_batch_files(wc.exp, "diagnosis_check_member")
+    if refit_on(wc.exp):
+        # the refit's identification gate decides the shipped step (calibration.walk.gated)
+        files["refit"] = f"results/{wc.exp}/diagnosis/refit.json"
     return files
 
 
@@ -475,15 +478,17 @@ def refit_row(wc):
 
 
 def refit_round_inputs(wc):
-    """Round r reads the walk's choice (round 0) or every earlier round's file and runs."""
+    """Round r reads the check's runs, on which it walks (round 0), or every earlier round's file and runs."""
     r = int(wc.r)
     files = {
         "selection": f"results/{wc.exp}/diagnosis/selection.pkl",
-        "report": f"results/{wc.exp}/diagnosis/report.json",
         "obs": f"results/{wc.exp}/observations/obs.csv",
         "obs_meta": f"results/{wc.exp}/observations/obs.json",
     }
-    if r > 0:
+    if r == 0:
+        files["rows"] = f"results/{wc.exp}/diagnosis/check_runs.json"
+        files["check_runs"] = stage_batch_files(wc.exp, "diagnosis_check_member")
+    else:
         files["rounds"] = [refit_round_file(wc.exp, k) for k in range(r)]
         files["runs"] = [
             b

@@ -21,8 +21,10 @@ rows = read_json(inp.rows)["rows"]
 runs = [read_curve(Path(inp.rows).parent / "check" / str(i) / "curve.csv") for i in range(len(rows))]
 obs = read_observations(inp.obs, inp.obs_meta)
 held = read_observations(inp.heldout, inp.heldout_meta) if "heldout" in inp.keys() else None
+# the refit's identification gate can ship an earlier step of the walk (calibration.walk.gated)
+refit = read_json(inp.refit) if "refit" in inp.keys() else None
 report, check, curves, bands = assemble(state["selection"], rows, runs, state["model"], obs, held, state["noise"],
-                                        state["simulator"], state["discrepancy"])
+                                        state["simulator"], state["discrepancy"], refit)
 atomic_write_json(out.report, report)
 atomic_write_json(out.check, check)
 atomic_write_csv(bands, out.band)

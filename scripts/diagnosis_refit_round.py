@@ -11,17 +11,24 @@ from pathlib import Path
 from calibration.model_error import check_replicate_count
 from calibration.observations import read_curve, read_observations
 from calibration.refit import first_round, next_round
+from calibration.walk import chain_of, walk
+from calibration.protocol import real_curves
 from calibration.workflow_io import atomic_write_json, read_json
 
 inp, e = snakemake.input, snakemake.params.exp
 saved = pickle.loads(Path(inp.selection).read_bytes())
 selection, model = saved["selection"], saved["model"]
+obs = read_observations(inp.obs, inp.obs_meta)
 if int(snakemake.wildcards.r) == 0:
-    state = first_round(selection, int(read_json(inp.report)["shipped_step"]), model)
+    # the walk on the check's calibration runs (the held-out records are not read here)
+    rows = read_json(inp.rows)["rows"]
+    runs = [read_curve(Path(inp.rows).parent / "check" / str(i) / "curve.csv") for i in range(len(rows))]
+    conf = walk(selection, real_curves(rows, runs, model), obs, saved["noise"], saved["simulator"])["conf"]
+    state = first_round(selection, int(conf["confirmed"]), model, chain=chain_of(conf),
+                        level=e["diagnosis"]["identified_level"])
 else:
     rounds = [read_json(p) for p in inp.rounds]
     folder = Path(inp.rounds[0]).parent
-    obs = read_observations(inp.obs, inp.obs_meta)
 
     def curves_of(k):
         # round k's runs (rule diagnosis_refit_member), in its rows' order
@@ -29,5 +36,6 @@ else:
 
     state = next_round(rounds[-1], curves_of, model, {r: obs.values[obs.record_slice(r)] for r in obs.records},
                        saved["noise"], saved["simulator"], selection.settings,
-                       rounds=int(e["diagnosis"]["refit_rounds"]), replicates=check_replicate_count(e))
+                       rounds=int(e["diagnosis"]["refit_rounds"]), replicates=check_replicate_count(e),
+                       selection=selection)
 atomic_write_json(snakemake.output.state, state)
