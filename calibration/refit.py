@@ -1,5 +1,5 @@
 """The shipped model's parameters re-fitted on real FDEM runs around its fit, after the confirmation walk
-(docs/closing-the-loop.md, step 7: "The shipped model's parameters on real runs").
+(docs/closing-the-loop.md, step 6: "The shipped model's parameters on real runs").
 
 Why: the selection fits every model on its anchored surrogate (:class:`enkf.emulator.AnchoredEmulator`),
 whose axes run from the base posterior's mean with every effect at its null to a quarter, a half and three

@@ -254,7 +254,7 @@ def _refit(refit) -> list[str]:
     selection's surrogate fit the walk tested."""
     post = refit.get("posterior") if isinstance(refit, Mapping) else None
     if not isinstance(post, Mapping) or not post:
-        return []
+        return _gated(refit)
     sel = refit.get("selection_posterior") if isinstance(refit.get("selection_posterior"), Mapping) else {}
     rows = []
     for p, q in post.items():
@@ -269,7 +269,27 @@ def _refit(refit) -> list[str]:
             f"{escape(str(refit.get('rounds', '?')))} rounds; {conv.get(refit.get('converged'), '?')}; "
             f"{_verified(refit)}diagnosis/refit.json). The selection's fit is on its surrogate, which blends the "
             "curves of runs far apart; the held-out errors above are that fit's:</p>",
-            _table(["parameter", "selection's surrogate: mean [90 %]", "on real runs: mean [90 %]", "unit"], rows)]
+            _table(["parameter", "selection's surrogate: mean [90 %]", "on real runs: mean [90 %]", "unit"], rows),
+            *_gated(refit)]
+
+
+def _gated(refit) -> list[str]:
+    """The models the refit's identification gate dropped (calibration.walk.identified), in words."""
+    out = []
+    for g in (refit.get("gated") or []) if isinstance(refit, Mapping) else []:
+        ident = g.get("identification") if isinstance(g, Mapping) else None
+        if not isinstance(ident, Mapping):
+            continue
+        params = [p for p in ident.get("parameters") or [] if isinstance(p, Mapping)]
+        each = _num(1.0 - (1.0 - float(ident.get("level") or 0.9)) / max(1, len(params)), 1.0, ".1%")
+        held = "; ".join(f"{escape(str(p.get('name')))} [{_num(p.get('lower'), 1.0, '.3g')}, "
+                         f"{_num(p.get('upper'), 1.0, '.3g')}] holds its null {_num(p.get('null'), 1.0, 'g')}"
+                         for p in params)
+        out.append('<p style="margin:0.4em 0 0 0">' + f"The walk also confirmed {escape(str(ident.get('effect')))} "
+                   f"({escape(str(g.get('model')))}), but re-fitted on real runs none of its parameters lies away "
+                   f"from its null ({held}; each interval at {each}): not identified, so the model the walk "
+                   "confirmed before it is shipped.</p>")
+    return out
 
 
 def _verified(refit: Mapping) -> str:

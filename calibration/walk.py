@@ -1,5 +1,5 @@
 """The confirmation walk on the check's real FDEM runs (docs/closing-the-loop.md, step 5), and the
-identification gate the refit applies to what it confirmed (step 7).
+identification gate the refit applies to what it confirmed (step 6).
 
 Why a gate after the walk: the walk confirms whatever lowers the real cross-validated error of the
 calibration records, and after a first effect a second one with a small value can still do so without

@@ -12,6 +12,7 @@ import pytest
 
 from _protocol_standin import BASE, TRUTH, StandIn, noise_model, observe
 from calibration.refit import first_round, next_round, refit_summary
+from calibration.report_summary import _refit as refit_html
 from calibration.walk import chain_of, gated, identified
 from enkf.diagnosis import select_effects
 from shpb import effects as fx
@@ -80,6 +81,11 @@ def test_a_second_effect_real_runs_leave_at_its_null_is_dropped_and_the_model_be
     assert g["confirmed"] == 1 and g["effects"] == ["face_gap"] and g["identification_gate"]["dropped"][0]["step"] == 2
     assert g["text"].startswith("shipped: base + face_gap (real cross-validated RMSE 3e+06 -> 2e+06; weighted error")
     assert "gauge_gain was confirmed by the walk but not identified on real runs (gauge_gain.g@A [" in g["text"]
+    # summary.html says what was dropped and why, beside the kept model's table
+    html = "".join(refit_html(out))
+    assert "The walk also confirmed gauge_gain (base + face_gap + gauge_gain)" in html
+    assert "gauge_gain.g@A [" in html and "holds its null 1; each interval at 97.5%" in html
+    assert "".join(refit_html({**out, "posterior": None})).startswith('<p style="margin:0.4em 0 0 0">The walk also')
     # without a gate (no refit) or with the walk's model kept, the walk's result stands
     assert gated(conf, sel, None)["confirmed"] == 2 and gated(conf, sel, {**out, "gated": []})["confirmed"] == 2
 
