@@ -12,6 +12,8 @@ and this script reads what the run wrote: the verdict, the walk's steps (effect,
 record's errors and band, and the reported parameters (the workflow's posterior, the selection's fit of the
 shipped model, the refit on real runs) against the series' truth (data/examples/planted_gap/truth.json).
 One run of a development series whose answer without the term had been read: nothing is chosen from it.
+Run again with the identification gate (calibration.walk.identified) ->
+studies/results/planted_gap_approximation_gated.json, with what the gate dropped (``gated``).
 """
 from __future__ import annotations
 
@@ -61,7 +63,11 @@ def summarize(folder: Path) -> dict:
                                                  truth, planted)}
     refit = folder / "diagnosis/refit.json"
     if refit.exists():
-        out["refit_posterior"] = _against_truth(json.loads(refit.read_text())["posterior"], truth, planted)
+        ref = json.loads(refit.read_text())
+        out["refit_posterior"] = _against_truth(ref["posterior"], truth, planted)
+        # what the identification gate dropped (calibration.walk.identified), where the code had it
+        out["gated"] = [{"model": g["model"], "effect": g["identification"]["effect"],
+                         "parameters": g["identification"]["parameters"]} for g in ref.get("gated") or []]
     return out
 
 
@@ -69,8 +75,12 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("folder", nargs="?", default="results/planted_gap")
     ap.add_argument("--out")
+    ap.add_argument("--wall", type=float, help="the run's wall time [s] on 2 cores, recorded beside its answers")
     a = ap.parse_args()
-    text = json.dumps(summarize(Path(a.folder)), indent=1)
+    out = summarize(Path(a.folder))
+    if a.wall is not None:
+        out["wall_s_2_cores"] = a.wall
+    text = json.dumps(out, indent=1)
     if a.out:
         Path(a.out).write_text(text + "\n")
     print(text)

@@ -186,6 +186,27 @@ def _planted_gap_approximation(J) -> dict:
             "rb": held["rmse_before_Pa"] / 1e6, "ra": held["rmse_after_Pa"] / 1e6, "c": held["predictive_coverage_90_after"]}
 
 
+def _planted_gap_gated(J) -> dict:
+    """The same series with the approximation error, run again with the identification gate
+    (studies/results/planted_gap_approximation_gated.json): the dropped shift's intervals, the refit's gaps and
+    sigma_t against their truths, the held-out errors; nothing unless the walk is the earlier run's."""
+    d, before = J("studies/results/planted_gap_approximation_gated.json"), J("studies/results/planted_gap_approximation.json")
+    [g] = d["gated"]
+    ref, held = d["refit_posterior"], d["heldout"]["PlantGap_03"]
+    gaps = [ref[f"face_gap.gap_m@PlantGap_0{i}"] for i in (1, 2)]
+    if not ([(s["effect"], round(s["z"], 2)) for s in d["steps"]] == [(s["effect"], round(s["z"], 2)) for s in before["steps"]]
+            and d["added"] == ["face_gap"] and g["effect"] == "trigger_shift" and [q["inside"] for q in gaps] == [True, False]
+            and ref["sigma_t"]["inside"]):
+        return {}
+    us = [(p["lower"] * 1e6, p["upper"] * 1e6) for p in g["parameters"]]
+    return {"a0": us[0][0], "a1": us[0][1], "b0": us[1][0], "b1": us[1][1],
+            **{f"{k}{i}": gaps[i - 1][q] * 1e6 for i in (1, 2) for k, q in (("g", "mean"), ("l", "q05"), ("h", "q95"))},
+            "p1": gaps[0]["truth"] * 1e6, "p2": gaps[1]["truth"] * 1e6,
+            "s": ref["sigma_t"]["mean"] / 1e6, "sl": ref["sigma_t"]["q05"] / 1e6, "sh": ref["sigma_t"]["q95"] / 1e6,
+            "t": ref["sigma_t"]["truth"] / 1e6, "rb": held["rmse_before_Pa"] / 1e6, "ra": held["rmse_after_Pa"] / 1e6,
+            "c": held["predictive_coverage_90_after"]}
+
+
 def _planted_refit(J) -> dict:
     """The default run's planted-gap series re-fitted on real runs (diagnosis/refit.json): the calibration
     records' gaps against their planted values, sigma_t, and the spread of the check meshes' fits."""
@@ -750,6 +771,11 @@ QUOTES: list[Quote] = [
           "of the 2 planted gaps, the workflow's and the refit's `sigma_t`\nintervals hold its truth (the selection's does "
           "not), and the held-out\nrecord's RMSE falls from {rb:.1f} to {ra:.1f} MPa, its band covering {c:.2f} of its curve",
           _planted_gap_approximation),
+    Quote(CL, "the walk is the same and the gate drops the shift: its re-fitted intervals, {a0:.1f} to {a1:.1f} us and "
+          "{b0:.1f} to\n{b1:.1f} us, hold zero. The face gap is shipped alone, its gaps re-fitted on real runs at {g1:.1f} "
+          "[{l1:.1f}, {h1:.1f}] and\n{g2:.1f} [{l2:.1f}, {h2:.1f}] um for the planted {p1:.1f} and {p2:.1f} (the second "
+          "missed), `sigma_t` at {s:.1f} [{sl:.1f}, {sh:.1f}] MPa,\nholding its {t:.0f}. The held-out record's RMSE falls "
+          "from {rb:.1f} to {ra:.1f} MPa, its band covering {c:.2f} of its curve", _planted_gap_gated),
     Quote(CL, "in an earlier run of this series, whose surrogate put PlantGap_02's\ngap at {lo:.0f}-{hi:.0f} um, real `fast` "
           "runs at its `sigma_t` and `E_t` fit the record\nbest at a gap of {best:.0f} um", lambda J: (lambda r: {
               "best": r["least_rmse_gap_m"] * 1e6, "lo": r["reported_90_m"][0] * 1e6, "hi": r["reported_90_m"][1] * 1e6})(
