@@ -254,6 +254,8 @@ def _gate(done: dict, selection, model: EmulatedSHPB) -> dict:
     level, chain = done.get("gate_level"), list(done.get("chain") or [0, done["step"]])
     if level is None or int(done["step"]) == 0:
         return done
+    if selection is None:
+        raise ValueError("the identification gate needs the selection (next_round's `selection`)")
     effect = selection.step(int(done["step"])).spec.effect_names[-1]
     verdict = identified(done["names"], np.asarray(done["fit"]["draws"], float), effect, float(level))
     if verdict["identified"]:

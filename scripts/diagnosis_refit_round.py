@@ -10,9 +10,9 @@ from pathlib import Path
 
 from calibration.model_error import check_replicate_count
 from calibration.observations import read_curve, read_observations
+from calibration.protocol import real_curves
 from calibration.refit import first_round, next_round
 from calibration.walk import chain_of, walk
-from calibration.protocol import real_curves
 from calibration.workflow_io import atomic_write_json, read_json
 
 inp, e = snakemake.input, snakemake.params.exp
