@@ -72,6 +72,20 @@ def named(report: dict) -> str:
     return str(report.get("verdict") or "base_kept")
 
 
+def gate_summary(report: dict) -> dict:
+    """The identification gate's part in a report (calibration.walk.gated): the effects the walk confirmed,
+    the ones shipped, and per gated model its effect, whether identified and its parameters' intervals."""
+    conf = report.get("confirmation") or {}
+    gate = conf.get("identification_gate") or {}
+
+    def entry(ident):
+        return None if not ident else {"effect": ident["effect"], "identified": ident["identified"],
+                                       "intervals": {p["name"]: [p["lower"], p["upper"]] for p in ident["parameters"]}}
+    return {"walk": [s["effect"] for s in conf.get("steps") or [] if s.get("confirmed")],
+            "shipped": list(report.get("added") or []), "level": gate.get("level"), "kept": entry(gate.get("kept")),
+            "dropped": [entry(d["identification"]) for d in gate.get("dropped") or []]}
+
+
 def _shipped_posterior(report: dict) -> dict:
     """The posterior summary (name -> mean, q05, q95) of the model the report ships: a nested step, or a
     round's alternative where the walk confirmed that instead of the round's refuted choice."""
@@ -349,6 +363,7 @@ def run_series(plan: dict, case: dict, seed: int, work: Path, preset: str, recor
         row["proposals"] = proposals(report, case)
         refit = json.loads((diag / "refit.json").read_text()) if (diag / "refit.json").exists() else None
         row["coverage"] = parameter_coverage(report, truth, refit)
+        row["gate"] = gate_summary(report)
         row["why"] = report.get("why", "")
         row["heldout"] = heldout_summary(check)
     except (subprocess.CalledProcessError, OSError, KeyError, ValueError, SystemExit) as exc:

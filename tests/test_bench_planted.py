@@ -15,8 +15,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from benchmarks.bench_planted import (acceptance, bar_counts, effect_size, is_correct, named, named_group,  # noqa: E402
-                                      parameter_coverage, proposals, score)
+from benchmarks.bench_planted import (acceptance, bar_counts, effect_size, gate_summary, is_correct,  # noqa: E402
+                                      named, named_group, parameter_coverage, proposals, score)
 from tools.make_planted_series import ar1_noise, make_series, planted_values  # noqa: E402
 
 PLAN = json.loads((ROOT / "benchmarks" / "planted_plan.json").read_text())
@@ -85,6 +85,23 @@ def test_named_and_coverage_of_hand_made_reports():
     # the closure case is read right when closure follows a confirmed face_gap, not on face_gap alone
     assert is_correct(CASES["closure"], "face_gap", _report("confirmed", ["face_gap", "closure"]))
     assert not is_correct(CASES["closure"], "face_gap", _report("confirmed", ["face_gap"]))
+
+
+def test_the_gate_summary_reads_what_the_walk_confirmed_and_what_the_gate_shipped():
+    """On the default run's planted_gap report (committed): the walk confirmed the face gap and a rate law,
+    the gate kept the face gap (both gaps' intervals above zero) and dropped the rate law (k's holds 0)."""
+    report = json.loads((ROOT / "benchmarks/results/default_run/planted_gap/diagnosis/report.json").read_text())
+    g = gate_summary(report)
+    assert g["walk"] == ["face_gap", "rate_strength"] and g["shipped"] == ["face_gap"] and g["level"] == 0.9
+    assert g["kept"]["effect"] == "face_gap" and g["kept"]["identified"]
+    assert all(lo > 0.0 for lo, _ in g["kept"]["intervals"].values()) and len(g["kept"]["intervals"]) == 2
+    [dropped] = g["dropped"]
+    assert dropped["effect"] == "rate_strength" and not dropped["identified"]
+    assert dropped["intervals"]["rate_strength.k"][0] == 0.0 < dropped["intervals"]["rate_strength.k"][1]
+    # a report written without a gate (a leave-one-record-out fold): the walk's model, nothing gated
+    bare = {"added": ["face_gap"], "confirmation": {"steps": [{"effect": "face_gap", "confirmed": True}]}}
+    assert gate_summary(bare) == {"walk": ["face_gap"], "shipped": ["face_gap"], "level": None, "kept": None,
+                                  "dropped": []}
 
 
 def test_score_gives_the_matrix_and_the_rates():
