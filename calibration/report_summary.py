@@ -264,9 +264,13 @@ def _refit(refit) -> list[str]:
                      f"{_num(q.get('mean'), f)} [{_num(q.get('q05'), f)}, {_num(q.get('q95'), f)}]", escape(unit)])
     conv = {True: "its last round's means lay within their runs",
             False: "its last round's means still lay outside their runs: read them as a direction, not a value"}
+    # its own runs and rounds: a model the identification gate dropped before it had its own (_gated)
+    own = refit.get("history") or []
+    counted = own and all(isinstance(h, Mapping) and "runs" in h for h in own)
+    runs = sum(int(h["runs"]) for h in own) if counted else refit.get("runs", "?")
     return ['<p style="margin:0.4em 0 0 0">' + f"The shipped model ({escape(str(refit.get('model') or '?'))}) re-fitted "
-            f"on real FDEM runs around its fit ({escape(str(refit.get('runs', '?')))} runs on the calibration records, "
-            f"{escape(str(refit.get('rounds', '?')))} rounds; {conv.get(refit.get('converged'), '?')}; "
+            f"on real FDEM runs around its fit ({escape(str(runs))} runs on the calibration records, "
+            f"{escape(str(len(own) or refit.get('rounds', '?')))} rounds; {conv.get(refit.get('converged'), '?')}; "
             f"{_verified(refit)}diagnosis/refit.json). The selection's fit is on its surrogate, which blends the "
             "curves of runs far apart; the held-out errors above are that fit's:</p>",
             _table(["parameter", "selection's surrogate: mean [90 %]", "on real runs: mean [90 %]", "unit"], rows),
@@ -286,7 +290,8 @@ def _gated(refit) -> list[str]:
                          f"{_num(p.get('upper'), 1.0, '.3g')}] holds its null {_num(p.get('null'), 1.0, 'g')}"
                          for p in params)
         out.append('<p style="margin:0.4em 0 0 0">' + f"The walk also confirmed {escape(str(ident.get('effect')))} "
-                   f"({escape(str(g.get('model')))}), but re-fitted on real runs none of its parameters lies away "
+                   f"({escape(str(g.get('model')))}), but re-fitted on real runs ({escape(str(g.get('runs', '?')))} "
+                   "runs) none of its parameters lies away "
                    f"from its null ({held}; each interval at {each}): not identified, so the model the walk "
                    "confirmed before it is shipped.</p>")
     return out

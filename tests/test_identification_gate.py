@@ -83,7 +83,11 @@ def test_a_second_effect_real_runs_leave_at_its_null_is_dropped_and_the_model_be
     assert "gauge_gain was confirmed by the walk but not identified on real runs (gauge_gain.g@A [" in g["text"]
     # summary.html says what was dropped and why, beside the kept model's table
     html = "".join(refit_html(out))
-    assert "The walk also confirmed gauge_gain (base + face_gap + gauge_gain)" in html
+    assert "The walk also confirmed gauge_gain (base + face_gap + gauge_gain), but re-fitted on real runs (" in html
+    # the kept model's own runs and rounds, the dropped model's beside its sentence
+    kept_runs = sum(h["runs"] for h in out["history"])
+    assert f"({kept_runs} runs on the calibration records, {len(out['history'])} rounds;" in html
+    assert f"re-fitted on real runs ({dropped['runs']} runs)" in html
     assert "gauge_gain.g@A [" in html and "holds its null 1; each interval at 97.5%" in html
     assert "".join(refit_html({**out, "posterior": None})).startswith('<p style="margin:0.4em 0 0 0">The walk also')
     # without a gate (no refit) or with the walk's model kept, the walk's result stands
