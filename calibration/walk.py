@@ -21,11 +21,10 @@ from enkf.covariance import DenseError
 from enkf.diagnosis import replicated, walk_weights
 from shpb import effects as fx
 
-from .diagnose import EmulatedSHPB
 from .observations import Observations
-from .protocol import confirm, real_curves
+from .protocol import confirm
 
-__all__ = ["identified", "walk", "walk_step"]
+__all__ = ["chain_of", "gated", "identified", "walk"]
 
 
 def walk(selection, real: Mapping, obs: Observations, noise: Mapping, simulator: Mapping) -> dict:
@@ -51,19 +50,13 @@ def walk(selection, real: Mapping, obs: Observations, noise: Mapping, simulator:
     return {"conf": conf, "noise": walk_noise, "simulator": walk_sim, "weights": weights}
 
 
-def walk_step(selection, rows: Sequence[Mapping], runs: Sequence, model: EmulatedSHPB, obs: Observations,
-              noise: Mapping, simulator: Mapping) -> int:
-    """The step the walk confirms on the check's runs (``runs[i]`` the curve of ``rows[i]``): what the
-    refit starts from, before the held-out records are read."""
-    return int(walk(selection, real_curves(rows, runs, model), obs, noise, simulator)["conf"]["confirmed"])
-
-
 def identified(names: Sequence[str], draws, effect: str, level: float) -> dict:
     """Whether real runs place ``effect``'s parameters away from their nulls: ``draws`` (rows over
     ``names``) is the refit's posterior of the model that added ``effect`` last. The effect is identified
     when at least one of its parameters (every per-record copy) has a central interval that excludes its
-    null value; with m such parameters each interval is at ``1 - (1 - level) / m`` (Bonferroni), so that a
-    null effect is kept with probability at most ``1 - level`` however many records it has a copy for.
+    null value; with m such parameters each interval is at ``1 - (1 - level) / m`` (Bonferroni), so that,
+    where the refit's intervals hold their truths at their level, a null effect is kept with probability at
+    most ``1 - level`` however many records it has a copy for.
     An interval whose end lies on the null (a draw clipped to the box's edge, where most nulls sit) holds
     it. Returns ``{"effect", "identified", "level", "parameters": [{name, null, lower, upper, excludes}]}``."""
     draws = np.asarray(draws, float)
