@@ -95,14 +95,13 @@ def test_the_flag_split_table_is_generated_and_its_prose_is_its_rows():
     assert f"those the verdict calls informative held the truth in {k} of {n} and {k2} of {n2} twins at 90 %" in readme
 
 
-def test_the_readme_quotes_the_default_runs_time_from_its_idle_benchmark():
-    # a fresh clone on an idle machine (benchmarks/bench_default_run.py, the current code as "new")
-    bench = json.loads((ROOT / "benchmarks" / "results" / "bench_default_run_sleeping.json").read_text())
-    run = bench["runs"]["new"]
+def test_the_readme_quotes_the_default_runs_time_from_its_idle_run():
+    # the committed default run: a fresh clone on an idle machine (its run.json), its results beside it
+    run = json.loads((ROOT / "benchmarks" / "results" / "default_run" / "run.json").read_text())
     text = (ROOT / "README.md").read_text()
-    assert run["exit_code"] == 0 and bench["cores"] == 2 and bench["command"] == "snakemake --cores 2 (fresh clone)"
-    assert bench["load_average_before"][0] < 0.5  # idle when it started
-    assert f"on an idle 2-core machine the default run took {run['wall_s']} s, {run['fdem_runs']} FDEM runs" in " ".join(
+    assert run["exit_code"] == 0 and run["cores"] == 2 and run["fresh_clone_empty_folder"] and run["machine_idle"]
+    assert run["load_average_at_start"][0] < 0.5  # idle when it started
+    assert f"on an idle 2-core machine the default run took {run['run_s']} s, {run['fdem_runs']} FDEM runs" in " ".join(
         text.split())
 
 
