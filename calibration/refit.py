@@ -52,10 +52,10 @@ from enkf.diagnostics import posterior_dict
 from shpb import effects as fx
 
 from .diagnose import EmulatedSHPB, anchored_emulators, measured_curve, record_params
-from .protocol import protocol_model, record_errors
-from .walk import identified
+from .protocol import protocol_model, real_curves, record_errors
+from .walk import chain_of, identified, walk
 
-__all__ = ["MIN_STEP", "first_round", "inflate", "misfit_scale", "next_round", "real_misfit", "refit_design",
+__all__ = ["MIN_STEP", "first_round", "first_round_after_walk", "inflate", "misfit_scale", "next_round", "real_misfit", "refit_design",
            "refit_summary", "refit_surrogate", "spans", "verify_inflation"]
 
 #: The smallest move of a parameter in a refit design, as a share of its design box: an ES-MDA fit's sd
@@ -186,6 +186,15 @@ def first_round(selection, shipped: int, model: EmulatedSHPB, *, chain: Sequence
     rows = refit_design(step.final, state["records"], model.input_names, emu0.lower, emu0.upper)
     return {**state, "phase": "locate", "rows": rows, "fit": _fit_entry(step.final), "design_round": int(start),
             "selection_posterior": _posterior(step.final), "why": "locate: the design around the selection's fit"}
+
+
+def first_round_after_walk(selection, rows: Sequence[Mapping], runs: Sequence, model: EmulatedSHPB, obs,
+                           noise: Mapping, simulator: Mapping, *, level: float | None) -> dict:
+    """Round 0 of the refit of the model the confirmation walk ships on the check's runs (``runs[i]`` the
+    curve of ``rows[i]``; :func:`calibration.walk.walk`), with the walk's chain for the gate to fall back
+    on; ``obs``: the calibration records' Observations (the held-out records are not read)."""
+    conf = walk(selection, real_curves(rows, runs, model), obs, noise, simulator)["conf"]
+    return first_round(selection, int(conf["confirmed"]), model, chain=chain_of(conf), level=level)
 
 
 def next_round(prev: Mapping, curves_of: Callable[[int], Sequence], model: EmulatedSHPB, obs: Mapping,

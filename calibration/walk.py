@@ -13,7 +13,9 @@ parameters away from its null value: improvement and identification.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping, Sequence
+from pathlib import Path
 
 import numpy as np
 
@@ -21,10 +23,19 @@ from enkf.covariance import DenseError
 from enkf.diagnosis import replicated, walk_weights
 from shpb import effects as fx
 
-from .observations import Observations
+from .observations import Observations, read_curve
 from .protocol import confirm
 
-__all__ = ["chain_of", "gated", "identified", "walk"]
+__all__ = ["chain_of", "check_runs_of", "gated", "identified", "walk"]
+
+
+def check_runs_of(diagnosis: str | Path) -> tuple[list[dict], list]:
+    """``(rows, runs)`` of an experiment's check (``diagnosis``: its ``results/<exp>/diagnosis`` folder):
+    the rows of ``check_runs.json`` and each row's FDEM curve (``check/<i>/curve.csv``; an empty frame for a
+    failed run, :func:`calibration.observations.read_curve`)."""
+    d = Path(diagnosis)
+    rows = json.loads((d / "check_runs.json").read_text())["rows"]
+    return rows, [read_curve(d / "check" / str(i) / "curve.csv") for i in range(len(rows))]
 
 
 def walk(selection, real: Mapping, obs: Observations, noise: Mapping, simulator: Mapping) -> dict:

@@ -8,17 +8,17 @@ import pickle
 from pathlib import Path
 
 from calibration.closing import assemble
-from calibration.observations import read_curve, read_observations
+from calibration.observations import read_observations
 from calibration.plots import plot_diagnosis_check
+from calibration.walk import check_runs_of
 from calibration.workflow_io import atomic_write_csv, atomic_write_json, read_json
 
 inp, out = snakemake.input, snakemake.output
 state = pickle.loads(open(inp.selection, "rb").read())
 if "discrepancy" not in state:  # written before the bands needed the calibration's discrepancy
     raise RuntimeError(f"{inp.selection} holds no discrepancy: re-run rule diagnosis_select for it")
-rows = read_json(inp.rows)["rows"]
 # row i's run, written by the check's batches (rules/inputs.smk, diagnosis_check_inputs)
-runs = [read_curve(Path(inp.rows).parent / "check" / str(i) / "curve.csv") for i in range(len(rows))]
+rows, runs = check_runs_of(Path(inp.rows).parent)
 obs = read_observations(inp.obs, inp.obs_meta)
 held = read_observations(inp.heldout, inp.heldout_meta) if "heldout" in inp.keys() else None
 # the refit's identification gate can ship an earlier step of the walk (calibration.walk.gated)

@@ -10,9 +10,8 @@ from pathlib import Path
 
 from calibration.model_error import check_replicate_count
 from calibration.observations import read_curve, read_observations
-from calibration.protocol import real_curves
-from calibration.refit import first_round, next_round
-from calibration.walk import chain_of, walk
+from calibration.refit import first_round_after_walk, next_round
+from calibration.walk import check_runs_of
 from calibration.workflow_io import atomic_write_json, read_json
 
 inp, e = snakemake.input, snakemake.params.exp
@@ -20,12 +19,10 @@ saved = pickle.loads(Path(inp.selection).read_bytes())
 selection, model = saved["selection"], saved["model"]
 obs = read_observations(inp.obs, inp.obs_meta)
 if int(snakemake.wildcards.r) == 0:
-    # the walk on the check's calibration runs (the held-out records are not read here)
-    rows = read_json(inp.rows)["rows"]
-    runs = [read_curve(Path(inp.rows).parent / "check" / str(i) / "curve.csv") for i in range(len(rows))]
-    conf = walk(selection, real_curves(rows, runs, model), obs, saved["noise"], saved["simulator"])["conf"]
-    state = first_round(selection, int(conf["confirmed"]), model, chain=chain_of(conf),
-                        level=e["diagnosis"]["identified_level"])
+    # the model the walk ships on the check's runs (the held-out records are not read here)
+    rows, runs = check_runs_of(Path(inp.rows).parent)
+    state = first_round_after_walk(selection, rows, runs, model, obs, saved["noise"], saved["simulator"],
+                                   level=e["diagnosis"]["identified_level"])
 else:
     rounds = [read_json(p) for p in inp.rounds]
     folder = Path(inp.rounds[0]).parent

@@ -28,7 +28,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT)]
 
 from calibration.closing import _cv_residuals, _discrepancy_from, _mean_block  # noqa: E402
-from calibration.observations import read_curve, read_observations  # noqa: E402
+from calibration.observations import read_observations  # noqa: E402
+from calibration.walk import check_runs_of  # noqa: E402
 from calibration.protocol import real_curves  # noqa: E402
 from enkf.diagnosis.band import replicate_variance, run_band  # noqa: E402
 
@@ -37,8 +38,7 @@ WINDOWS = (5, 11, 21, 41, 81, 161)
 
 def fold_data(fold: Path):
     state = pickle.loads((fold / "diagnosis" / "selection.pkl").read_bytes())
-    rows = json.loads((fold / "diagnosis" / "check_runs.json").read_text())["rows"]
-    runs = [read_curve(fold / "diagnosis" / "check" / str(i) / "curve.csv") for i in range(len(rows))]
+    rows, runs = check_runs_of(fold / "diagnosis")
     obs = read_observations(fold / "observations" / "obs.csv", fold / "observations" / "obs.json")
     return state, real_curves(rows, runs, state["model"]), obs
 

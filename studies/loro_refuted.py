@@ -17,7 +17,8 @@ import pickle
 import sys
 from pathlib import Path
 
-from calibration.observations import read_curve, read_observations
+from calibration.observations import read_observations
+from calibration.walk import check_runs_of
 from calibration.protocol import real_curves
 from enkf.diagnosis import replicate_curve_errors
 
@@ -26,8 +27,7 @@ def fold_steps(folder: Path) -> dict:
     """``{"fold", "heldout", "steps": [{"step", "model", "confirmed", "rmse", "peak_rel_error"}]}``."""
     d = folder / "diagnosis"
     state = pickle.loads((d / "selection.pkl").read_bytes())
-    rows = json.loads((d / "check_runs.json").read_text())["rows"]
-    runs = [read_curve(d / "check" / str(i) / "curve.csv") for i in range(len(rows))]
+    rows, runs = check_runs_of(d)
     real = real_curves(rows, runs, state["model"])["heldout"]
     held = read_observations(d / "heldout" / "obs.csv", d / "heldout" / "obs.json")
     report = json.loads((d / "report.json").read_text())

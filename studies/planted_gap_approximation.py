@@ -26,6 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from enkf.diagnosis.protocol import step_summary  # noqa: E402
+from shpb.atomic import emit_json  # noqa: E402
 
 
 def _interval(row: dict) -> dict:
@@ -80,10 +81,7 @@ def main():
     out = summarize(Path(a.folder))
     if a.wall is not None:
         out["wall_s_2_cores"] = a.wall
-    text = json.dumps(out, indent=1)
-    if a.out:
-        Path(a.out).write_text(text + "\n")
-    print(text)
+    emit_json(out, a.out)
 
 
 if __name__ == "__main__":

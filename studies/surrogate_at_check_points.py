@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from calibration.observations import read_curve, read_observations
+from calibration.observations import read_observations
+from calibration.walk import check_runs_of
 from calibration.protocol import emulator_errors, real_curves
 from shpb.atomic import emit_json
 
@@ -28,8 +29,7 @@ def one_run(run: Path) -> dict:
     d = run / "diagnosis"
     state = pickle.loads((d / "selection.pkl").read_bytes())
     sel, model = state["selection"], state["model"]
-    rows = json.loads((d / "check_runs.json").read_text())["rows"]
-    runs = [read_curve(d / "check" / str(i) / "curve.csv") for i in range(len(rows))]
+    rows, runs = check_runs_of(d)
     real = real_curves(rows, runs, model)["cv"]
     o = read_observations(run / "observations" / "obs.csv", run / "observations" / "obs.json")
     own = emulator_errors(model, sel.calib_records)

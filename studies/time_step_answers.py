@@ -27,11 +27,12 @@ Prints one JSON object; with --out writes it. Usage:
 from __future__ import annotations
 
 import argparse
-import json
 import os
 from pathlib import Path
 
 import numpy as np
+
+from shpb.atomic import emit_json
 
 ROOT = Path(__file__).resolve().parents[1]
 FACTORS = (1.25, 1.5, 2.0, 2.5)
@@ -141,10 +142,7 @@ def main():
     doc = {"study": "time_step_answers", "cores_on_machine": os.cpu_count(), "threads_used": 1,
            "factors": list(FACTORS), "paper_factors": list(PAPER_FACTORS), "mesh_seeds": list(MESH_SEEDS),
            "cases": rows, "paired": {c: paired(c) for c in PAIRED_CASES if c in cases}}
-    text = json.dumps(doc, indent=1)
-    if a.out:
-        Path(a.out).write_text(text + "\n")
-    print(text)
+    emit_json(doc, a.out)
 
 
 if __name__ == "__main__":

@@ -23,7 +23,8 @@ import pickle
 from pathlib import Path
 
 from calibration.closing import assemble
-from calibration.observations import read_curve, read_observations
+from calibration.observations import read_observations
+from calibration.walk import check_runs_of
 from surrogate_at_check_points import main as read_runs  # studies/ is the script's own folder
 
 
@@ -40,8 +41,7 @@ def one_run(run: Path) -> dict:
     state = pickle.loads((d / "selection.pkl").read_bytes())
     if not hasattr(state["selection"], "alternatives"):  # pickled before the walk had alternatives
         state["selection"].alternatives = []
-    rows = json.loads((d / "check_runs.json").read_text())["rows"]
-    runs = [read_curve(d / "check" / str(i) / "curve.csv") for i in range(len(rows))]
+    rows, runs = check_runs_of(d)
     obs = read_observations(run / "observations" / "obs.csv", run / "observations" / "obs.json")
     held = read_observations(d / "heldout" / "obs.csv", d / "heldout" / "obs.json")
     report, *_ = assemble(state["selection"], rows, runs, state["model"], obs, held, state["noise"],

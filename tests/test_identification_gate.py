@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from _protocol_standin import BASE, TRUTH, StandIn, noise_model, observe
-from calibration.refit import first_round, next_round, refit_summary
+from calibration.refit import first_round, first_round_after_walk, next_round, refit_summary
 from calibration.report_summary import _refit as refit_html
-from calibration.walk import chain_of, gated, identified
+from calibration.walk import chain_of, check_runs_of, gated, identified
 from enkf.diagnosis import select_effects
 from shpb import effects as fx
 from test_anchored_selection import ANCHOR, GAP_K, GAPS, _anchored_standin, _with_own_error
@@ -121,6 +121,9 @@ def test_the_check_ships_the_gate_s_step_and_says_why(loop):  # noqa: F811
     args = (sel, rows, runs, emulated(), cal, held, NOISE, {}, disc)
     walked = assemble(*args)[0]
     assert walked["shipped_step"] == 1 and walked["confirmation"]["identification_gate"] is None
+    # the refit starts from the same walk on the same runs, before any held-out record is read
+    start = first_round_after_walk(sel, rows, runs, emulated(), cal, NOISE, {}, level=0.9)
+    assert start["step"] == 1 and start["chain"] == [0, 1] and start["gate_level"] == 0.9 and start["phase"] == "locate"
     ident = {"effect": "face_gap", "identified": False, "level": 0.9,
              "parameters": [{"name": "face_gap.gap_m@A", "null": 0.0, "lower": 0.0, "upper": 1e-5, "excludes": False}]}
     refit = {"step": 0, "gate_level": 0.9, "identification": None,
@@ -131,3 +134,19 @@ def test_the_check_ships_the_gate_s_step_and_says_why(loop):  # noqa: F811
     assert report["heldout"]["H"]["after"]["rmse"] == report["heldout"]["H"]["before"]["rmse"]
     assert report["heldout"]["H"]["before"]["rmse"] == walked["heldout"]["H"]["before"]["rmse"]
     assert report["confirmation"]["identification_gate"]["dropped"][0]["model"] == "base + face_gap"
+
+
+def test_the_check_s_runs_are_read_in_their_rows_order_and_a_failed_run_is_empty(tmp_path):
+    import json
+
+    import pandas as pd
+
+    rows = [{"record": "A", "step": 0}, {"record": "A", "step": 1}]
+    (tmp_path / "check_runs.json").write_text(json.dumps({"rows": rows}))
+    (tmp_path / "check" / "0").mkdir(parents=True)
+    pd.DataFrame({"time_s": [0.0, 1e-6], "stress_Pa": [0.0, 2e6]}).to_csv(tmp_path / "check" / "0" / "curve.csv",
+                                                                          index=False)
+    (tmp_path / "check" / "1").mkdir()
+    (tmp_path / "check" / "1" / "curve.csv").write_text("")  # a failed run's curve file
+    got_rows, runs = check_runs_of(tmp_path)
+    assert got_rows == rows and runs[1].empty and list(runs[0]["stress_Pa"]) == [0.0, 2e6]
