@@ -113,7 +113,8 @@ def _gate_entry(refit: Mapping | None) -> dict | None:
     if refit is None:
         return None
     return {"level": refit.get("gate_level"), "kept": refit.get("identification"),
-            "dropped": [{k: g[k] for k in ("step", "model", "identification")} for g in refit.get("gated") or []]}
+            "dropped": [{k: g[k] for k in ("step", "model", "identification")} for g in refit.get("gated") or []],
+            "earlier": refit.get("earlier_identification")}
 
 
 def _dropped_text(g: Mapping) -> str:

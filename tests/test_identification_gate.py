@@ -56,6 +56,16 @@ def test_a_second_effect_real_runs_place_off_its_null_is_kept(two_steps):
     for p in gains.values():
         # Bonferroni over four copies: each interval at 97.5 %, all excluding 1 and holding the planted gain
         assert p["null"] == 1.0 and p["excludes"] and p["lower"] < GAIN < p["upper"] < 0.9
+    # the earlier effect through the same test on the same refit (reported, not gated): the planted gaps
+    [gap] = out["earlier_identification"]
+    assert gap["effect"] == "face_gap" and gap["identified"] and gap["level"] == 0.9
+    assert all(p["excludes"] and p["lower"] > 0.0 for p in gap["parameters"]) and len(gap["parameters"]) == len(GAP_K)
+    assert "In this refit none of" not in "".join(refit_html(out))
+    # were the gaps left at zero, summary.html would say so and ship the model as walked
+    held = {**gap, "identified": False, "parameters": [{**p, "lower": 0.0, "excludes": False} for p in gap["parameters"]]}
+    html = "".join(refit_html({**out, "earlier_identification": [held]}))
+    assert "In this refit none of face_gap's parameters lies away from its null (face_gap.gap_m@A [0, " in html
+    assert "each interval at 97.5%" in html and "the model without face_gap was never walked" in html
 
 
 def test_a_second_effect_real_runs_leave_at_its_null_is_dropped_and_the_model_before_it_refitted(two_steps):
@@ -68,6 +78,7 @@ def test_a_second_effect_real_runs_leave_at_its_null_is_dropped_and_the_model_be
         assert p["lower"] < 1.0 < p["upper"] and p["upper"] - p["lower"] < 0.03
     # the face-gap model's own refit: its gaps off zero and on the planted ones within 6 um
     assert out["identification"]["effect"] == "face_gap" and out["identification"]["identified"]
+    assert out["earlier_identification"] == []  # the face-gap model has no effect before its last
     for r in GAP_K:
         assert out["posterior"][f"face_gap.gap_m@{r}"]["mean"] == pytest.approx(GAPS[r], abs=6e-6)
     # both models' runs are counted: the dropped one's rounds, then the kept one's
