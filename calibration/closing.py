@@ -47,7 +47,7 @@ from .diagnosis_config import FOLD_SEPARATOR, candidate_effects, loro_folds  # n
 from .model_error import stored_error
 from .observations import UNCORRECTED_COLUMN, Observations
 from .protocol import check_runs, real_curves, real_group, select
-from .walk import gated, walk
+from .walk import chain_of, gated, walk
 
 __all__ = ["FOLD_SEPARATOR", "blind", "candidate_effects", "emulated_model", "protocol_errors", "select_effects",
            "base_posterior_mismatches", "calibration_discrepancy", "check_rows", "covariate_table", "assemble",
@@ -388,9 +388,9 @@ def identification(selection, k: int) -> list[dict]:
     """Per effect kept (the rounds that chose the shipped step ``k``'s effects), its group: the candidates
     of its round that the calibration records do not tell apart from it
     (:func:`enkf.diagnosis.identification_group`), with the evidence and a sentence. For an alternative
-    shipped, its own group in its round. This is the emulator's evidence; :func:`assemble` adds the real
-    FDEM runs' comparison of the kept effect with the other models of its round that were run (its
-    choice and alternatives, :func:`real_group_text`)."""
+    shipped, its own group in its round. This is the emulator's evidence; :func:`assemble` adds, to each
+    kept effect's group, the real FDEM runs' comparison of that effect with the other models of its round
+    that were run (its choice and alternatives, :func:`real_group_text`)."""
     step = selection.step(k)
     chain = step.index if step.alternative_to is None else step.alternative_to - 1
     groups = [rnd["group"] for rnd in selection.rounds[:chain] if rnd.get("group")]
@@ -402,10 +402,14 @@ def identification(selection, k: int) -> list[dict]:
 def real_group_text(name: str, evidence: Sequence[Mapping]) -> str:
     """One sentence on the kept effect against the other models of its round run on real FDEM."""
     told = [f"{e['effect']} (z = {e['z']:.2f})" for e in evidence if e["told_apart"]]
-    alike = [f"{e['effect']} (z = {e['z']:.2f})" for e in evidence if not e["told_apart"]]
+    better = [f"{e['effect']} (z = {-e['z']:.2f})" for e in evidence if e.get("other_better")]
+    alike = [f"{e['effect']} (z = {e['z']:.2f})" for e in evidence if not (e["told_apart"] or e.get("other_better"))]
     parts = []
     if told:
         parts.append(f"on real FDEM runs {name} predicts better than {', '.join(told)}")
+    if better:
+        parts.append(f"on real FDEM runs {', '.join(better)} predicts better than {name}, which the walk kept as "
+                     "its round's first confirmed proposal")
     if alike:
         parts.append(f"real FDEM runs do not tell it apart from {', '.join(alike)}")
     return "; ".join(parts) + f" (one-sided, Bonferroni over {len(evidence)})"
@@ -475,11 +479,13 @@ def assemble(selection, rows: Sequence[Mapping], runs: Sequence, model: Emulated
         why = conf["text"]
     errors = _errors_table(selection, conf, real, obs, held)
     risk = cv_risk(errors, k)
-    ident = identification(selection, k)
-    real_ev = real_group(selection, real["cv"], y, walk_noise, k, simulator=walk_sim, weights=weights)
-    if ident and real_ev:
-        ident[-1] = {**ident[-1], "real_evidence": real_ev,
-                     "text": ident[-1]["text"] + "; " + real_group_text(ident[-1]["chosen"], real_ev)}
+    ident, chain = identification(selection, k), chain_of(conf)
+    # each kept effect against the other models of its round run on real FDEM (one group per kept step)
+    for i, st in enumerate(chain[1:chain.index(k) + 1]):
+        real_ev = real_group(selection, real["cv"], y, walk_noise, st, simulator=walk_sim, weights=weights)
+        if i < len(ident) and real_ev:
+            ident[i] = {**ident[i], "real_evidence": real_ev,
+                        "text": ident[i]["text"] + "; " + real_group_text(ident[i]["chosen"], real_ev)}
     report = {"protocol": "frozen (docs/closing-the-loop.md): effects chosen by cross-validation within the "
                           "calibration records on the emulator, confirmed on real FDEM runs at the "
                           "cross-validation points, the held-out records read last",

@@ -232,7 +232,19 @@ def test_the_kept_effect_is_compared_on_real_runs_with_the_other_models_of_its_r
         ev = {e["effect"]: e for e in real_identification(sel, real, y, errors, 3)}
         assert set(ev) == {"gauge_gain", "baseline"} and ev["gauge_gain"]["told_apart"]
         assert ev["baseline"]["told_apart"] is apart and ev["baseline"]["level"] == pytest.approx(0.05 / 2)
+        assert not ev["baseline"]["other_better"] and not ev["gauge_gain"]["other_better"]
     assert real_identification(sel, real, y, errors, 0) == []
+    # the other alternative nearer the data than the kept one (0.2 x against 0.9 x): it predicts better,
+    # which the report says (the walk keeps its round's first confirmed proposal, not the best)
+    y, real, errors = walk_data([3.0, 4.0, 0.1, 0.9, 0.2])
+    assert confirm_additions(sel, real, y, errors)["confirmed"] == 3
+    ev = real_identification(sel, real, y, errors, 3)
+    base = next(e for e in ev if e["effect"] == "baseline")
+    assert base["other_better"] and not base["told_apart"] and base["z"] < 0
+    from calibration.closing import real_group_text
+    text = real_group_text("face_gap", ev)
+    assert text.startswith("on real FDEM runs face_gap predicts better than gauge_gain (z = ")
+    assert f"on real FDEM runs baseline (z = {-base['z']:.2f}) predicts better than face_gap, which the walk" in text
 
 
 # ----------------------------------------------------------------------------------------------

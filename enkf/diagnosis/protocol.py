@@ -457,8 +457,9 @@ def real_identification(selection: Selection, real: Mapping[int, Mapping[str, np
     choice and its alternatives: each the same model with another effect added), as the walk compares
     (paired over replicates where there are, else :func:`~.crossval.compare_cv`). ``told_apart``: the kept
     effect predicts better at one-sided ``level`` (default the selection's alpha), Bonferroni over those
-    compared; ``weights`` as the walk's (:func:`confirm_additions`). Empty for the base model or a round
-    without another model run."""
+    compared; ``other_better``: the other model predicts better at that level (the other tail; the walk
+    keeps its round's first confirmed model, not the best); ``weights`` as the walk's
+    (:func:`confirm_additions`). Empty for the base model or a round without another model run."""
     if int(step) == 0:
         return []
     kept = selection.step(step)
@@ -476,6 +477,8 @@ def real_identification(selection: Selection, real: Mapping[int, Mapping[str, np
         cmp = _compare_real(y, real[m.index], real[kept.index], calib, errors, False, weighted)
         out.append({"effect": m.spec.effect_names[-1], "step": m.index, "delta_sq_error": cmp["delta"], "sd": cmp["sd"],
                     "z": cmp["z"], "p": cmp["p"], "level": level, "told_apart": bool(cmp["p"] <= level),
+                    # the other tail at the same level: the other model predicts better than the kept one
+                    "other_better": bool(1.0 - cmp["p"] <= level),
                     **{k: cmp[k] for k in ("dof", "test") if k in cmp}})
     return out
 
