@@ -408,8 +408,8 @@ def real_group_text(name: str, evidence: Sequence[Mapping]) -> str:
     if told:
         parts.append(f"on real FDEM runs {name} predicts better than {', '.join(told)}")
     if better:
-        parts.append(f"on real FDEM runs {', '.join(better)} predicts better than {name}, which the walk kept as "
-                     "its round's first confirmed proposal")
+        parts.append(f"on real FDEM runs {', '.join(better)} predict{'s' if len(better) == 1 else ''} better "
+                     f"than {name}, which the walk kept as its round's first confirmed proposal")
     if alike:
         parts.append(f"real FDEM runs do not tell it apart from {', '.join(alike)}")
     return "; ".join(parts) + f" (one-sided, Bonferroni over {len(evidence)})"
