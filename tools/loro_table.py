@@ -62,8 +62,9 @@ def _mean_coverage(series: dict) -> str:
 
 #: Committed folders of series run again, and how the table marks them: ``loro_rerun_*`` the same records
 #: and config through later code, ``loro_anchored_*`` that, with the shipped default selection
-#: (``selection_model: anchored``) instead of the emulator of the first runs.
-MARKS = {"loro_rerun": " (re-run)", "loro_anchored": " (re-run, anchored)"}
+#: (``selection_model: anchored``) instead of the emulator of the first runs, ``loro_gated_*`` that, with
+#: each fold re-fitted and gated as a held-out experiment is.
+MARKS = {"loro_rerun": " (re-run)", "loro_anchored": " (re-run, anchored)", "loro_gated": " (re-run, folds gated)"}
 
 
 def _label(series: dict, path: str) -> str:
