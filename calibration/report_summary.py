@@ -16,6 +16,7 @@ from collections.abc import Mapping
 from html import escape
 
 from enkf.scores import INFORMATIVE_RATIO
+from shpb import effects as fx
 from shpb.lab.init_config_yaml import APPROXIMATION_ERROR
 from .scored import approximation_form, learned_holds, misspecified_90
 
@@ -274,7 +275,32 @@ def _refit(refit) -> list[str]:
             f"{_verified(refit)}diagnosis/refit.json). The selection's fit is on its surrogate, which blends the "
             "curves of runs far apart; the held-out errors above are that fit's:</p>",
             _table(["parameter", "selection's surrogate: mean [90 %]", "on real runs: mean [90 %]", "unit"], rows),
-            *_earlier(refit), *_gated(refit)]
+            *_at_edge(post), *_earlier(refit), *_gated(refit)]
+
+
+#: An interval's end within this fraction of its box's width from an edge is on it (draws are clipped there,
+#: and a quantile between the edge and the next draw lands a little inside)
+EDGE_FRACTION = 0.005
+
+
+def _at_edge(post: Mapping) -> list[str]:
+    """The refit's effect parameters whose 90 % interval reaches an end of the catalogue's range where no
+    null lies: the effect is taken as far as the catalogue allows (what it stands in for may be larger)."""
+    hits = []
+    for name, q in post.items():
+        if not isinstance(q, Mapping) or fx.effect_of(str(name)) is None:
+            continue
+        (lo,), (hi,) = fx.bounds([name])
+        null, tol = fx.null_values([name])[name], EDGE_FRACTION * (hi - lo)
+        for edge, end, side in ((lo, q.get("q05"), "lower"), (hi, q.get("q95"), "upper")):
+            if isinstance(end, (int, float)) and abs(end - edge) <= tol and abs(edge - null) > tol:
+                hits.append(f"{escape(str(name))} ({side} end {_num(end, 1.0, '.3g')}, the catalogue's "
+                            f"{_num(edge, 1.0, 'g')})")
+    if not hits:
+        return []
+    return ['<p style="margin:0.4em 0 0 0">' + "On real runs these intervals reach an end of their catalogue range, "
+            f"away from the effect's null: {'; '.join(hits)}. The effect is taken as far as the catalogue allows: "
+            "what it stands in for may be larger, or another effect the catalogue lacks.</p>"]
 
 
 def _null_intervals(ident: Mapping) -> tuple[str, str]:

@@ -66,6 +66,14 @@ def test_a_second_effect_real_runs_place_off_its_null_is_kept(two_steps):
     html = "".join(refit_html({**out, "earlier_identification": [held]}))
     assert "In this refit none of face_gap's parameters lies away from its null (face_gap.gap_m@A [0, " in html
     assert "each interval at 97.5%" in html and "the model without face_gap was never walked" in html
+    # a gain whose interval reaches the catalogue's lowest gain (0.8, away from its null 1) is named as taken
+    # as far as the catalogue allows; the gaps' lower ends at zero are their null, not an edge to report
+    assert "reach an end of their catalogue range" not in "".join(refit_html(out))
+    name = f"gauge_gain.g@{sorted(GAP_K)[0]}"
+    post = {**out["posterior"], name: {**out["posterior"][name], "q05": 0.8},
+            f"face_gap.gap_m@{sorted(GAP_K)[0]}": {"mean": 1e-6, "q05": 0.0, "q95": 2e-6}}
+    html = "".join(refit_html({**out, "posterior": post}))
+    assert f"away from the effect's null: {name} (lower end 0.8, the catalogue's 0.8). The effect is taken" in html
 
 
 def test_a_second_effect_real_runs_leave_at_its_null_is_dropped_and_the_model_before_it_refitted(two_steps):
