@@ -836,11 +836,15 @@ QUOTES: list[Quote] = [
               J(f"{RUN}/planted_gap/diagnosis/report.json"), J(f"{RUN}/planted_gap/diagnosis/check.json"),
               J(f"{RUN}/planted_gap/diagnosis/refit.json"))),
     Quote(CL, "On the real runs `{kept}` predicts better than `{b}` (z = {zb:.2f}), one of its round's other\n"
-          "proposals run for real, and is not told apart from `{a}` (z = {za:.2f}), which fits those runs better",
+          "proposals run for real, and `{a}`, another, predicts better than `{kept}` (z = {za:.2f}; the report says\nso)",
           lambda J: (lambda idn: (lambda ev: {
-              "kept": idn["chosen"], "a": ev[0]["effect"], "za": ev[0]["z"], "b": ev[1]["effect"], "zb": ev[1]["z"]}
-              if [e["told_apart"] for e in ev] == [False, True] and ev[0]["z"] < 0 else {})(
+              "kept": idn["chosen"], "a": ev[0]["effect"], "za": -ev[0]["z"], "b": ev[1]["effect"], "zb": ev[1]["z"]}
+              if [e["told_apart"] for e in ev] == [False, True] and ev[0]["other_better"] else {})(
               idn["real_evidence"]))(J(f"{RUN}/planted_gap/diagnosis/report.json")["identification"][-1])),
+    Quote("README.md", "both gains' 90 % intervals reach the catalogue's lowest, {g:g}", lambda J: (
+        lambda post, lo: {"g": lo} if [q["q05"] for k, q in post.items() if k.startswith("gauge_gain.g@")] == [lo, lo]
+        else {})(J(f"{RUN}/marble_loop/diagnosis/refit.json")["posterior"],
+                 __import__("shpb.effects", fromlist=["get_effect"]).get_effect("gauge_gain").params[0].lower)),
     Quote("README.md", "the held-out record's RMSE falls from {rb} to {ra} MPa", lambda J: {
         "rb": _mpa(J(f"{RUN}/planted_gap/diagnosis/check.json")["heldout"]["PlantGap_03"]["before"]["rmse"]),
         "ra": _mpa(J(f"{RUN}/planted_gap/diagnosis/check.json")["heldout"]["PlantGap_03"]["after"]["rmse"])}),
