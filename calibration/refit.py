@@ -55,8 +55,8 @@ from .diagnose import EmulatedSHPB, anchored_emulators, measured_curve, record_p
 from .protocol import protocol_model, real_curves, record_errors
 from .walk import chain_of, identified, walk
 
-__all__ = ["MIN_STEP", "first_round", "first_round_after_walk", "inflate", "misfit_scale", "next_round", "real_misfit", "refit_design",
-           "refit_summary", "refit_surrogate", "spans", "verify_inflation"]
+__all__ = ["MIN_STEP", "first_round", "first_round_after_walk", "inflate", "misfit_scale", "next_round",
+           "real_misfit", "refit_design", "refit_summary", "refit_surrogate", "spans", "verify_inflation"]
 
 #: The smallest move of a parameter in a refit design, as a share of its design box: an ES-MDA fit's sd
 #: can be far below what the runs resolve (a few um of gap), and a step below the mesh's own scatter

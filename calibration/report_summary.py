@@ -290,10 +290,9 @@ def _at_edge(post: Mapping) -> list[str]:
     for name, q in post.items():
         if not isinstance(q, Mapping) or fx.effect_of(str(name)) is None:
             continue
-        (lo,), (hi,) = fx.bounds([name])
-        null, tol = fx.null_values([name])[name], EDGE_FRACTION * (hi - lo)
-        for edge, end, side in ((lo, q.get("q05"), "lower"), (hi, q.get("q95"), "upper")):
-            if isinstance(end, (int, float)) and abs(end - edge) <= tol and abs(edge - null) > tol:
+        for end, side, (edge,) in ((q.get("q05"), "lower", fx.bounds([name])[0]),
+                                   (q.get("q95"), "upper", fx.bounds([name])[1])):
+            if isinstance(end, (int, float)) and fx.catalogue_edge(name, end, EDGE_FRACTION) == side:
                 hits.append(f"{escape(str(name))} ({side} end {_num(end, 1.0, '.3g')}, the catalogue's "
                             f"{_num(edge, 1.0, 'g')})")
     if not hits:

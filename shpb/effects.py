@@ -458,6 +458,19 @@ def bounds(param_names: Iterable[str]) -> tuple[np.ndarray, np.ndarray]:
     return np.array([p.lower for p in ps]), np.array([p.upper for p in ps])
 
 
+def catalogue_edge(param_name: str, value: float, tol_fraction: float = 0.0) -> str | None:
+    """``"lower"`` or ``"upper"`` where ``value`` of an effect parameter (or a per-record copy) lies within
+    ``tol_fraction`` of its box's width from that end of the catalogue's range and the end is not its null
+    (an effect taken as far as the catalogue allows); else None (inside, or on the null, where "no effect"
+    sits)."""
+    p = _param(param_name)
+    tol = float(tol_fraction) * (p.upper - p.lower)
+    for side, edge in (("lower", p.lower), ("upper", p.upper)):
+        if abs(float(value) - edge) <= tol and abs(edge - p.null) > tol:
+            return side
+    return None
+
+
 def null_values(param_names: Iterable[str] | None = None) -> dict[str, float]:
     """``{param: null}`` for the named effect parameters or per-record copies (all of the catalogue by
     default)."""

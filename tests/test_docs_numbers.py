@@ -21,6 +21,7 @@ from typing import Callable
 
 from enkf.diagnosis.protocol import step_summary
 from enkf.scores import interval_score
+from shpb import effects as fx
 from tools import coverage_table, docs_numbers
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -487,13 +488,12 @@ def _rerun_bands(rock="sandstone", kind="rerun") -> list[dict]:
 def _gated_edges(J) -> dict:
     """The gated folds' second effects at their box's edge: every gauge gain's gate interval starting at the
     catalogue's lowest gain, every lowpass time constant's ending at its largest ({} unless each does)."""
-    from shpb import effects as fx
-
     folds = J("benchmarks/results/loro_gated_sandstone/run.json")["refit_per_fold"].values()
     gains = [p for f in folds if f["identification"]["effect"] == "gauge_gain" for p in f["identification"]["parameters"]]
     taus = [p for f in folds if f["identification"]["effect"] == "lowpass" for p in f["identification"]["parameters"]]
     g_lo, t_hi = fx.get_effect("gauge_gain").params[0].lower, fx.get_effect("lowpass").params[0].upper
-    edges = gains and taus and all(p["lower"] == g_lo for p in gains) and all(p["upper"] == t_hi for p in taus)
+    edges = (gains and taus and all(fx.catalogue_edge(p["name"], p["lower"]) == "lower" for p in gains)
+             and all(fx.catalogue_edge(p["name"], p["upper"]) == "upper" for p in taus))
     levels = {round(100 * (1 - (1 - f["identification"]["level"]) / len(f["identification"]["parameters"])), 6)
               for f in folds}
     return {"g": g_lo, "t": t_hi * 1e6, "lv": levels.pop()} if edges and len(levels) == 1 else {}
@@ -842,9 +842,10 @@ QUOTES: list[Quote] = [
               if [e["told_apart"] for e in ev] == [False, True] and ev[0]["other_better"] else {})(
               idn["real_evidence"]))(J(f"{RUN}/planted_gap/diagnosis/report.json")["identification"][-1])),
     Quote("README.md", "both gains' 90 % intervals reach the catalogue's lowest, {g:g}", lambda J: (
-        lambda post, lo: {"g": lo} if [q["q05"] for k, q in post.items() if k.startswith("gauge_gain.g@")] == [lo, lo]
-        else {})(J(f"{RUN}/marble_loop/diagnosis/refit.json")["posterior"],
-                 __import__("shpb.effects", fromlist=["get_effect"]).get_effect("gauge_gain").params[0].lower)),
+        lambda ends: {"g": fx.get_effect("gauge_gain").params[0].lower}
+        if len(ends) == 2 and all(fx.catalogue_edge(k, v) == "lower" for k, v in ends.items()) else {})(
+        {k: q["q05"] for k, q in J(f"{RUN}/marble_loop/diagnosis/refit.json")["posterior"].items()
+         if k.startswith("gauge_gain.g@")})),
     Quote("README.md", "the held-out record's RMSE falls from {rb} to {ra} MPa", lambda J: {
         "rb": _mpa(J(f"{RUN}/planted_gap/diagnosis/check.json")["heldout"]["PlantGap_03"]["before"]["rmse"]),
         "ra": _mpa(J(f"{RUN}/planted_gap/diagnosis/check.json")["heldout"]["PlantGap_03"]["after"]["rmse"])}),

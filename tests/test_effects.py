@@ -177,3 +177,12 @@ def test_every_catalogue_entry_declares_a_scope_and_per_record_copies_resolve_to
     t = np.linspace(0.0, 1e-4, 11)
     with pytest.raises(ValueError, match="per-record parameters"):
         fx.apply_measurement(t, t, {"gauge_gain.g@A": 1.1})
+
+
+def test_an_end_of_the_catalogue_range_away_from_the_null_is_an_edge_and_the_null_is_not():
+    # gauge gain: box [0.8, 1.2], null 1 (inside); lowpass: [0, 5 us], null 0 (its lower end); face gap: null 0
+    assert fx.catalogue_edge("gauge_gain.g@A", 0.8) == "lower" and fx.catalogue_edge("gauge_gain.g", 1.2) == "upper"
+    assert fx.catalogue_edge("gauge_gain.g", 1.0) is None and fx.catalogue_edge("gauge_gain.g", 0.801) is None
+    assert fx.catalogue_edge("gauge_gain.g", 0.801, 0.005) == "lower"  # within 0.5 % of the 0.4 width
+    assert fx.catalogue_edge("lowpass.tau_s@B", 5e-6) == "upper" and fx.catalogue_edge("lowpass.tau_s", 0.0) is None
+    assert fx.catalogue_edge("face_gap.gap_m", 0.0, 0.005) is None
