@@ -1,0 +1,76 @@
+"""Why the held-out bands of a leave-one-record-out series cover less than the calibration records' do.
+
+A held-out record's band takes its model discrepancy from the calibration records' cross-validated
+residuals (calibration.closing.predictive_bands). Those records also chose the effects the loop added (the
+walk compares real runs on them), so after the loop their cross-validated errors are the errors of a model
+picked to make them small; the held-out record had no say. This study reads the committed series' fold
+checks (no runs) and compares, before and after the loop, the held-out records' RMSE with the calibration
+records' cross-validated RMSE (root mean square over the series' folds) and the mean coverage of their 90 %
+bands. Before the loop no selection has acted, so the two errors should agree; after it, a ratio above 1 is
+the selection's optimism, which the calibration records' residuals cannot show.
+
+    python studies/selection_optimism.py
+
+Writes ``studies/results/selection_optimism.json``. Development data (every series' records were read
+before); nothing is chosen from it.
+"""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(ROOT)]
+
+from shpb.atomic import emit_json  # noqa: E402
+
+SERIES = ("loro_gated_sandstone", "loro_rerun_sandstone", "loro_rerun_marble", "loro_unseen_sandstone",
+          "loro_unseen_marble")
+
+
+def _rms(values: list[float]) -> float | None:
+    return float(np.sqrt(np.mean(np.square(values)))) if values else None
+
+
+def _mean(values: list[float]) -> float | None:
+    return float(np.mean(values)) if values else None
+
+
+def series_errors(folder: Path, step: str) -> dict:
+    """RMSE [Pa] of the held-out and the calibration records over a series' folds at ``step`` (before or
+    after), and the mean coverage of their 90 % bands where the checks scored them."""
+    rmse = {"heldout": [], "calibration": []}
+    cover = {"heldout": [], "calibration": []}
+    for f in sorted(folder.glob("*_check.json")):
+        check = json.loads(f.read_text())
+        bands = (check.get("predictive_band") or {}).get("records") or {}
+        for rec, e in (check.get("errors_per_record") or {}).items():
+            if not isinstance(e, dict) or not isinstance(e.get(step), dict):
+                continue
+            role = "heldout" if e.get("data") == "heldout" else "calibration"
+            rmse[role].append(float(e[step]["rmse"]))
+            c = ((bands.get(rec) or {}).get(step) or {}).get("predictive_coverage_90")
+            if c is not None:
+                cover[role].append(float(c))
+    h, c = _rms(rmse["heldout"]), _rms(rmse["calibration"])
+    return {"records": {k: len(v) for k, v in rmse.items()}, "rmse_heldout_Pa": h, "rmse_calibration_cv_Pa": c,
+            "ratio": h / c if h and c else None, "band_coverage_90_heldout": _mean(cover["heldout"]),
+            "band_coverage_90_calibration": _mean(cover["calibration"])}
+
+
+def main():
+    out = {"what": "held-out RMSE over the calibration records' cross-validated RMSE, before and after the loop, "
+                   "and the mean coverage of their 90 % bands, on the committed leave-one-record-out series",
+           "source": "benchmarks/results/<series>/*_check.json (errors_per_record, predictive_band)",
+           "series": {s: {step: series_errors(ROOT / "benchmarks" / "results" / s, step) for step in ("before", "after")}
+                      for s in SERIES}}
+    after = [v["after"]["ratio"] for v in out["series"].values() if v["after"]["ratio"]]
+    out["ratio_after_mean"] = float(np.mean(after))
+    emit_json(out, ROOT / "studies" / "results" / "selection_optimism.json")
+
+
+if __name__ == "__main__":
+    main()
