@@ -154,7 +154,7 @@ def _in_short(summary: Mapping, check: Mapping, refit) -> list[str]:
            "end of its catalogue range, is said below" if added else
            "no effect the loop tried made real FDEM runs predict better")
     text = (f"<b>In short.</b> This run ships {escape(model)} ({why}). The rock's parameters, calibrated "
-            f"(the posterior below, the form the coverage harness scored): {calibrated}.")
+            f"(the posterior below, the form the coverage harness scored on twins): {calibrated}.")
     if refitted:
         text += (f" Under the shipped model, re-fitted on real FDEM runs (diagnosis/refit.json; no benchmark has "
                  f"scored these intervals for the rock's parameters): {_rock_values(post, prior)}. Quote the "
