@@ -235,7 +235,7 @@ rule diagnosis_refit:
 
 rule loro:
     """Leave one record out over a series: the folds' held-out errors before and after, per fold and in
-    total, and the figure."""
+    total, the series' page (summary.html) and the figure."""
     input:
         reports=lambda wc: expand(
             "results/{fold}/diagnosis/report.json", fold=loro_fold_names(wc.exp)
@@ -245,6 +245,12 @@ rule loro:
         ),
     output:
         summary="results/{exp}/loro/summary.json",
+        html=report(
+            "results/{exp}/loro/summary.html",
+            category="0 Summary",
+            caption="../report/series.rst",
+            labels={"experiment": "{exp}", "page": "leave one record out"},
+        ),
         png=report(
             "results/{exp}/loro/folds.png",
             category="{exp}",

@@ -94,7 +94,7 @@ def test_a_dry_run_of_a_series_runs_its_folds_and_not_the_series_itself(tmp_path
         assert f"results/marble_loro__{rec}/iter_0/params.csv" in text
         # each fold is re-fitted and gated as a held-out experiment is (the table scores what one ships)
         assert f"results/marble_loro__{rec}/diagnosis/refit.json" in text
-    assert "results/marble_loro/loro/summary.json" in text
+    assert "results/marble_loro/loro/summary.json" in text and "results/marble_loro/loro/summary.html" in text
     assert "results/marble_loro/iter_0/params.csv" not in text
 
 

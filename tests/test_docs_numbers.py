@@ -1101,6 +1101,9 @@ QUOTES: list[Quote] = [
               J("benchmarks/results/loro_gated_sandstone/run.json"))),
     Quote(CL, "at {lv:g} % for each\nof a fold's four copies, every gauge gain's starts at {g:g}, the catalogue's lowest "
           "gain, and every\n`lowpass` time constant's ends at {t:g} us, its largest", lambda J: _gated_edges(J)),
+    Quote(CL, "After the loop the held-out RMSE is {r:.2f} times the calibration\nrecords' cross-validated RMSE, before it "
+          "{b:.2f} times", lambda J: (lambda s: {"r": s["after"]["ratio"], "b": s["before"]["ratio"]})(
+              J("studies/results/selection_optimism.json")["series"]["loro_gated_sandstone"])),
     Quote(CL, "The held-out RMSE falls\n{b} -> {a} MPa on average, and the held-out bands cover {cb:.2f} -> {ca:.2f} of the "
           "curves ({lo:.2f}-{hi:.2f} per fold\nafter the loop)", lambda J: {
               "b": _mpa(_rerun(kind="gated")["totals"]["mean_rmse_before"]),
