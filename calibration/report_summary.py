@@ -1,7 +1,9 @@
 """The summary an experiment's HTML report opens on (``results/<exp>/summary.html``, the report's
-"0 Summary" category, shown on the report's first page): the verdict, the parameters with their 90 %
-intervals, the misfit per iteration, each record's error before and after the calibration, and where
-the diagnosis ran its FDEM check the calibration and held-out errors before and after the loop.
+"0 Summary" category, shown on the report's first page): the verdict; where the diagnosis ran, a short
+answer (what to quote: the shipped model, the calibrated sigma_t and E_t beside their re-fit under it, the
+held-out errors); the parameters with their 90 % intervals, the misfit per iteration, each record's error
+before and after the calibration, and where the diagnosis ran its FDEM check the calibration and held-out
+errors before and after the loop.
 
 Read from ``summary.json`` (:func:`calibration.experiment.summary`) and, for an experiment with a
 ``diagnosis`` block, ``diagnosis/check.json``. The HTML is a fragment with inline styles and ASCII
