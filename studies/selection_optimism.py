@@ -27,8 +27,8 @@ sys.path[:0] = [str(ROOT)]
 
 from shpb.atomic import emit_json  # noqa: E402
 
-SERIES = ("loro_gated_sandstone", "loro_rerun_sandstone", "loro_rerun_marble", "loro_unseen_sandstone",
-          "loro_unseen_marble")
+SERIES = ("loro_gated_sandstone", "loro_gated_marble", "loro_rerun_sandstone", "loro_rerun_marble",
+          "loro_unseen_sandstone", "loro_unseen_marble")
 
 
 def _rms(values: list[float]) -> float | None:
