@@ -40,10 +40,18 @@ def _bands(t: Mapping) -> str:
     return text
 
 
-def _spread(rows, name: str = "sigma_t", scale: float = 1e-6, unit: str = "MPa") -> str:
+def _post(row: Mapping, calibrated: Mapping | None) -> Mapping:
+    """A fold's parameters: its calibrated posterior (the fold's summary.json) where given, else the selection's
+    fit of the shipped model (the table's ``estimates``)."""
+    if calibrated is not None:
+        return calibrated.get(row.get("fold")) or {}
+    return row.get("estimates") or {}
+
+
+def _spread(rows, calibrated: Mapping | None, name: str = "sigma_t", scale: float = 1e-6, unit: str = "MPa") -> str:
     """The fitted mean's range over the folds against the widest fold's 90 % interval: a range wider than
     any interval says that leaving one record out moves the estimate more than its interval allows."""
-    qs = [(r.get("estimates") or {}).get(name) for r in rows]
+    qs = [_post(r, calibrated).get(name) for r in rows]
     qs = [q for q in qs if isinstance(q, Mapping) and all(isinstance(q.get(k), (int, float))
                                                           for k in ("mean", "q05", "q95"))]
     if len(qs) < 2:
@@ -51,7 +59,8 @@ def _spread(rows, name: str = "sigma_t", scale: float = 1e-6, unit: str = "MPa")
     means = [q["mean"] for q in qs]
     width = max(q["q95"] - q["q05"] for q in qs)
     span = max(means) - min(means)
-    text = (f" The folds' {name} runs from {_num(min(means), scale, '.3g')} to {_num(max(means), scale, '.3g')} "
+    which = "calibrated" if calibrated is not None else "fitted (the selection's)"
+    text = (f" The folds' {which} {name} runs from {_num(min(means), scale, '.3g')} to {_num(max(means), scale, '.3g')} "
             f"{unit}")
     if span > width:
         return text + (f", a spread wider than any fold's 90 % interval ({_num(width, scale, '.2g')} {unit} at the "
@@ -59,7 +68,7 @@ def _spread(rows, name: str = "sigma_t", scale: float = 1e-6, unit: str = "MPa")
     return text + f", within the widest fold's 90 % interval ({_num(width, scale, '.2g')} {unit})."
 
 
-def _in_short(t: Mapping, rows=()) -> str:
+def _in_short(t: Mapping, rows=(), calibrated: Mapping | None = None) -> str:
     n = t.get("folds") or 0
     kept = t.get("effects_kept") or {}
     shipped = (", ".join(f"{escape(str(e))} in {k} of {n}" for e, k in kept.items()) if kept
@@ -69,17 +78,17 @@ def _in_short(t: Mapping, rows=()) -> str:
             f"never read it. The loop shipped {shipped}. The held-out RMSE of real FDEM runs went from "
             f"{_num(t.get('mean_rmse_before'), 1e-6, '.3g')} to {_num(t.get('mean_rmse_after'), 1e-6, '.3g')} MPa "
             f"on average ({escape(str(t.get('folds_better', '?')))} folds better, "
-            f"{escape(str(t.get('folds_worse', '?')))} worse). {_bands(t)}{_spread(rows)}</p>")
+            f"{escape(str(t.get('folds_worse', '?')))} worse). {_bands(t)}{_spread(rows, calibrated)}</p>")
 
 
-def _estimate(row: Mapping, name: str, scale: float) -> str:
-    q = (row.get("estimates") or {}).get(name)
+def _estimate(post: Mapping, name: str, scale: float) -> str:
+    q = post.get(name)
     if not isinstance(q, Mapping):
         return "?"
     return f"{_num(q.get('mean'), scale, '.3g')} [{_num(q.get('q05'), scale, '.3g')}, {_num(q.get('q95'), scale, '.3g')}]"
 
 
-def _rows(rows) -> list[list[str]]:
+def _rows(rows, calibrated: Mapping | None) -> list[list[str]]:
     out = []
     for r in rows:
         pair = [f"{_num(r.get(f'{k}_before'), s, f)} -> {_num(r.get(f'{k}_after'), s, f)}"
@@ -87,22 +96,27 @@ def _rows(rows) -> list[list[str]]:
                                 ("interval_score_over_box", 1.0, ".2f"))]
         out.append([escape(str(r.get("heldout", "?"))), _num(r.get("strain_rate_per_s"), 1.0, ".0f"),
                     escape(", ".join(r.get("effects") or []) or "none (base kept)"),
-                    _estimate(r, "sigma_t", 1e-6), _estimate(r, "E_t", 1e-3), *pair])
+                    _estimate(_post(r, calibrated), "sigma_t", 1e-6), _estimate(_post(r, calibrated), "E_t", 1e-3),
+                    *pair])
     return out
 
 
-def series_html(name: str, table: Mapping) -> str:
-    """The series page as an HTML fragment (module docstring); ``table`` is ``loro/summary.json``."""
+def series_html(name: str, table: Mapping, calibrated: Mapping | None = None) -> str:
+    """The series page as an HTML fragment (module docstring); ``table`` is ``loro/summary.json``, ``calibrated``
+    ``{fold: posterior}`` of the folds' summary.json (the posterior a lab quotes; without it the page shows the
+    selection's fits)."""
     try:
         t = table.get("totals") or {}
+        rows = table.get("rows") or []
+        source = ("the fold's calibrated posterior, the one its summary.html says to quote" if calibrated is not None
+                  else "the selection's fit of the shipped model")
         parts = ['<meta charset="utf-8">', '<div class="series-summary" style="font-family:sans-serif">',
-                 f'<h3 style="margin:0.8em 0 0.2em 0">{escape(name)}: leave one record out</h3>', _in_short(t, table.get("rows") or []),
+                 f'<h3 style="margin:0.8em 0 0.2em 0">{escape(name)}: leave one record out</h3>', _in_short(t, rows, calibrated),
                  '<p style="margin:0.4em 0 0 0">Per fold: the held-out record and its strain rate, the effects '
-                 "the fold shipped, its fit's sigma_t and E_t (mean [90 %], the selection's fit of the shipped "
-                 "model), and the held-out record's RMSE, band coverage and band score over the design box's, "
-                 "before -> after the loop:</p>",
+                 f"the fold shipped, its sigma_t and E_t (mean [90 %], {source}), and the held-out record's "
+                 "RMSE, band coverage and band score over the design box's, before -> after the loop:</p>",
                  _table(["held out", "strain rate [1/s]", "effects shipped", "sigma_t [MPa]", "E_t [kJ/m^2]",
-                         "RMSE [MPa]", "band covers", "band score / box"], _rows(table.get("rows") or [])),
+                         "RMSE [MPa]", "band covers", "band score / box"], _rows(rows, calibrated)),
                  f'<p style="margin:0.2em 0;font-size:0.85em">From results/{escape(name)}/loro/summary.json; each '
                  "fold's own page is its experiment's summary.html.</p>"]
     except Exception as exc:  # noqa: BLE001 - a page of the report must never fail the run

@@ -243,6 +243,9 @@ rule loro:
         obs=lambda wc: expand(
             "results/{fold}/diagnosis/heldout/obs.json", fold=loro_fold_names(wc.exp)
         ),
+        summaries=lambda wc: expand(
+            "results/{fold}/summary.json", fold=loro_fold_names(wc.exp)
+        ),
     output:
         summary="results/{exp}/loro/summary.json",
         html=report(

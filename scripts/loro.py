@@ -16,5 +16,7 @@ for p in snakemake.input.obs:
 table = loro_table(folds, info)
 summary = {"experiment": snakemake.wildcards.exp, **table}
 atomic_write_json(snakemake.output.summary, summary)
-atomic_write_text(snakemake.output.html, series_html(snakemake.wildcards.exp, summary))
+# the posterior each fold's own page says to quote (its summary.json), beside the table's selection fits
+calibrated = {f: read_json(p).get("posterior") or {} for f, p in zip(snakemake.params.folds, snakemake.input.summaries)}
+atomic_write_text(snakemake.output.html, series_html(snakemake.wildcards.exp, summary, calibrated))
 plot_loro(snakemake.output.png, table)

@@ -66,3 +66,23 @@ def test_calibrated_bands_read_as_calibrated_and_each_fold_has_its_row():
     assert set(body) == {r["heldout"] for r in TABLE["rows"]}
     assert body[first["heldout"]][5] == f"{first['rmse_before'] / 1e6:.3g} -> {first['rmse_after'] / 1e6:.3g}"
     assert "not readable" in series_html("s", {"rows": [None]})
+
+
+def test_with_the_folds_summaries_the_page_shows_the_calibrated_posterior_each_fold_quotes():
+    """The workflow passes each fold's summary.json posterior (what the fold's own page says to quote): the
+    rows and the spread sentence then read those, not the selection's fits. Fixture: the committed re-run
+    sandstone series, whose folds' summaries are kept."""
+    folder = REPO / "benchmarks" / "results" / "loro_rerun_sandstone"
+    table = json.loads((folder / "sandstone_unseen.json").read_text())
+    calibrated = {r["fold"]: json.loads((folder / f"{r['heldout']}_summary.json").read_text())["posterior"]
+                  for r in table["rows"]}
+    html = series_html("sandstone_unseen", table, calibrated)
+    body = {r[0]: r for r in _cells(html)[1:]}
+    for r in table["rows"]:
+        q = calibrated[r["fold"]]["sigma_t"]
+        assert body[r["heldout"]][3] == f"{q['mean'] / 1e6:.3g} [{q['q05'] / 1e6:.3g}, {q['q95'] / 1e6:.3g}]"
+    means = [calibrated[r["fold"]]["sigma_t"]["mean"] / 1e6 for r in table["rows"]]
+    text = _short(html)
+    assert f"The folds' calibrated sigma_t runs from {min(means):.3g} to {max(means):.3g} MPa" in text
+    assert "the fold's calibrated posterior, the one its summary.html says to quote" in html
+    assert "fitted (the selection's) sigma_t" in _short(series_html("sandstone_unseen", table))
