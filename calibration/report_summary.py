@@ -93,8 +93,8 @@ def _box_end(q: Mapping, box: Mapping) -> str:
     lo, hi = _get(box, "lower"), _get(box, "upper")
     if not all(isinstance(v, (int, float)) for v in (lo, hi, q.get("q05"), q.get("q95"))):
         return ""
-    tol = EDGE_FRACTION * (float(hi) - float(lo))
-    low, high = float(q["q05"]) - float(lo) <= tol, float(hi) - float(q["q95"]) <= tol
+    low = fx.box_end(q["q05"], lo, hi, EDGE_FRACTION) == "lower"
+    high = fx.box_end(q["q95"], lo, hi, EDGE_FRACTION) == "upper"
     if low and high:
         return "; the whole prior box: not constrained"
     if high:
@@ -105,11 +105,10 @@ def _box_end(q: Mapping, box: Mapping) -> str:
 
 
 def _caveat(q: Mapping, holds: bool | None) -> str:
-    """_learned's reading of a parameter's interval, short: only where it is not simply learned."""
+    """:func:`_reading` of a parameter's interval, short: only where it is not simply learned."""
     ratio = q.get("score_over_prior")
-    if isinstance(ratio, (int, float)) and float(ratio) > INFORMATIVE_RATIO:
-        return "; not constrained: mostly the prior"
-    return "; read it as the prior narrowed" if holds is False and ratio is not None else ""
+    reading = _reading(ratio, holds) if isinstance(ratio, (int, float)) else None
+    return {"prior": "; not constrained: mostly the prior", "narrowed": "; read it as the prior narrowed"}.get(reading, "")
 
 
 def _rock_values(post: Mapping, prior: Mapping, holds: Mapping | None = None) -> str:
@@ -196,18 +195,26 @@ def _parameters(s: Mapping) -> list[str]:
              _table(header, rows)] + ([f"<p style=\"margin:0.4em 0 0 0\">{mis}</p>"] if mis else []))
 
 
-def _learned(ratio, holds: bool | None = None) -> str:
-    """The score a parameter's posterior expects over the prior box's, and whether that counts as learned
-    (calibration.verdict's ``uninformative``); ``holds`` False: the coverage harness found this form's
-    intervals of the parameter too sure where it counts as learned (calibration.scored.learned_holds)."""
+def _reading(ratio, holds: bool | None = None) -> str | None:
+    """How a parameter's interval reads from the score its posterior expects over the prior box's
+    (calibration.verdict's ``uninformative``) and ``holds`` (False: the coverage harness found this form's
+    intervals of the parameter too sure where it counts as learned, calibration.scored.learned_holds):
+    ``"prior"``, ``"narrowed"``, ``"learned"``, or None without a score."""
     if ratio is None:
-        return "-"
+        return None
     if float(ratio) > INFORMATIVE_RATIO:
-        return f"{float(ratio):.2f} (not constrained: mostly the prior)"
-    if holds is False:
-        return (f"{float(ratio):.2f} (learned, but on the coverage harness's twins this form's intervals of it held "
-                "the truth less often than stated where it counts as learned: read it as the prior narrowed)")
-    return f"{float(ratio):.2f} (learned)"
+        return "prior"
+    return "narrowed" if holds is False else "learned"
+
+
+def _learned(ratio, holds: bool | None = None) -> str:
+    """The score over the prior's and its reading (:func:`_reading`), for the parameters' table."""
+    words = {"prior": "not constrained: mostly the prior",
+             "narrowed": ("learned, but on the coverage harness's twins this form's intervals of it held the truth "
+                          "less often than stated where it counts as learned: read it as the prior narrowed"),
+             "learned": "learned"}
+    reading = _reading(ratio, holds)
+    return "-" if reading is None else f"{float(ratio):.2f} ({words[reading]})"
 
 
 def _scored(s: Mapping) -> str:

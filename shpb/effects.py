@@ -464,9 +464,18 @@ def catalogue_edge(param_name: str, value: float, tol_fraction: float = 0.0) -> 
     (an effect taken as far as the catalogue allows); else None (inside, or on the null, where "no effect"
     sits)."""
     p = _param(param_name)
+    side = box_end(value, p.lower, p.upper, tol_fraction)
     tol = float(tol_fraction) * (p.upper - p.lower)
-    for side, edge in (("lower", p.lower), ("upper", p.upper)):
-        if abs(float(value) - edge) <= tol and abs(edge - p.null) > tol:
+    edge = p.lower if side == "lower" else p.upper
+    return side if side is not None and abs(edge - p.null) > tol else None
+
+
+def box_end(value: float, lower: float, upper: float, tol_fraction: float = 0.0) -> str | None:
+    """``"lower"`` or ``"upper"`` where ``value`` lies within ``tol_fraction`` of the box's width from that end of
+    ``[lower, upper]``; else None."""
+    tol = float(tol_fraction) * (float(upper) - float(lower))
+    for side, edge in (("lower", lower), ("upper", upper)):
+        if abs(float(value) - float(edge)) <= tol:
             return side
     return None
 

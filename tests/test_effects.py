@@ -184,5 +184,8 @@ def test_an_end_of_the_catalogue_range_away_from_the_null_is_an_edge_and_the_nul
     assert fx.catalogue_edge("gauge_gain.g@A", 0.8) == "lower" and fx.catalogue_edge("gauge_gain.g", 1.2) == "upper"
     assert fx.catalogue_edge("gauge_gain.g", 1.0) is None and fx.catalogue_edge("gauge_gain.g", 0.801) is None
     assert fx.catalogue_edge("gauge_gain.g", 0.801, 0.005) == "lower"  # within 0.5 % of the 0.4 width
+    # the end test it rests on, for any box (summary.html's prior-box ends use it too)
+    assert fx.box_end(0.801, 0.8, 1.2, 0.005) == "lower" and fx.box_end(1.199, 0.8, 1.2, 0.005) == "upper"
+    assert fx.box_end(0.803, 0.8, 1.2, 0.005) is None and fx.box_end(1.0, 0.8, 1.2) is None
     assert fx.catalogue_edge("lowpass.tau_s@B", 5e-6) == "upper" and fx.catalogue_edge("lowpass.tau_s", 0.0) is None
     assert fx.catalogue_edge("face_gap.gap_m", 0.0, 0.005) is None
