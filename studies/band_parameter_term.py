@@ -83,7 +83,8 @@ def score_fold(fold_dir: Path) -> dict:
     sel, model, noise = state["selection"], state["model"], state["noise"]
     real = real_curves(rows, runs, model)
     seed = int(sel.settings.get("seed", 0))
-    k = max(real["cv"])
+    # the shipped step (the walk also ran the steps it refuted)
+    k = int(json.loads((fold_dir / "diagnosis" / "report.json").read_text())["shipped_step"])
     st = sel.step(k)
     calib = list(obs.records)
     pooled = _mean_block([np.diag(noise[r].dense()) for r in calib])
