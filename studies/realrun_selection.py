@@ -1,0 +1,270 @@
+"""A selection on real runs alone: each physical candidate fitted to the calibration records by Gauss-Newton
+on real FDEM runs and compared with the base model by the walk's paired test (issue 53, item 2).
+
+Why: `studies/oracle_power.py` found the planted end friction and seating confirmable at their truth
+(z 18.9 and 76 against the base model's best absorbing fit), while the benchmark's walk never named
+them: its proposals and their fitted points come from the anchored surrogate, which cannot follow the
+strength a friction or a rate law trades off with. Here no surrogate: the base model and each
+candidate (its parameters with `sigma_t` and `E_t`) are fitted by Gauss-Newton steps whose Jacobian is
+taken from real runs (finite differences on two meshes, from the workflow's base posterior mean with
+every effect at its null); each calibration record is then predicted from the fit on the others
+(per-record parameters at the mean of the others' fitted values), run on three check meshes, and
+compared with the base model's prediction of it on the same meshes, weighted per time by
+1 / (noise^2 + mesh scatter^2) (enkf.diagnosis.crossval.compare_replicated). A candidate is named when
+its p is below the walk's level, 0.005; the largest z among those is the name.
+
+Development only: run on development series (seed 5392) whose truths are known; nothing in the
+product changes with it. Per series it writes each candidate's fit, each record's z and the name.
+
+    python studies/realrun_selection.py --run results/<exp> --config <config.yaml> --exp <exp> \
+        [--candidates rate_strength,interface_friction,seating,face_gap] --out F
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+from multiprocessing import Pool
+from pathlib import Path
+
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+import yaml  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(ROOT)]
+
+from calibration.observations import curve_on_grid, read_observations  # noqa: E402
+from enkf.covariance import DenseError  # noqa: E402
+from enkf.diagnosis.crossval import compare_replicated  # noqa: E402
+from shpb import effects as fx  # noqa: E402
+
+FIT_MESHES = (3101, 3102)
+CHECK_MESHES = (3201, 3202, 3203)
+GN_STEPS = 3
+LEVEL = 0.005
+SMOOTH = 11
+REL_STEP = {"sigma_t": 0.03, "E_t": 0.15}
+EFFECT_STEP = 0.1       # of the effect parameter's box width
+MAX_MOVE = 0.5          # of a parameter's box width per Gauss-Newton step
+
+_OBS = {}
+
+
+def _init(run):
+    _OBS["run"] = run
+    _OBS["obs"] = read_observations(Path(run) / "observations/obs.csv", Path(run) / "observations/obs.json")
+
+
+def _run(job):
+    rec, params, mesh, t_end, sample_dt = job
+    from shpb.simulate import simulate
+    obs = _OBS["obs"]
+    sim = simulate("cylinder", "fast", params=dict(params), record=str(Path(_OBS["run"]) / "observations" / rec),
+                   t_end=t_end, sample_dt=sample_dt, mesh_seed=mesh)
+    t = obs.time[obs.record_slice(rec)]
+    if sim.run["status"] != "ok":
+        return np.full(t.size, np.nan)
+    f = curve_on_grid(np.asarray(sim.columns["time_s"]), np.asarray(sim.columns["stress_Pa"]), t)
+    return np.nan_to_num(f, nan=0.0)
+
+
+class Series:
+    def __init__(self, run, config, exp, pool):
+        self.run, self.pool = Path(run), pool
+        cfg = yaml.safe_load(Path(config).read_text())["experiments"][exp]
+        self.t_end, self.sample_dt = float(cfg["simulation"]["t_end"]), float(cfg["simulation"]["sample_dt"])
+        self.box = {n: tuple(map(float, v)) for n, v in cfg["parameters"].items()}
+        self.upper = {k: float(v) for k, v in (cfg.get("diagnosis", {}).get("physical_upper") or {}).items()}
+        self.obs = read_observations(self.run / "observations/obs.csv", self.run / "observations/obs.json")
+        self.records = list(self.obs.records)
+        info = self.obs.meta["record_info"]
+        self.y = {r: self.obs.values[self.obs.record_slice(r)] for r in self.records}
+        self.noise = {r: (float(info[r]["noise_estimate"]["sigma"]), float(info[r]["noise_estimate"]["rho1"]))
+                      for r in self.records}
+        post = json.loads((self.run / "summary.json").read_text())["posterior"]
+        self.start = {n: float(post[n]["mean"]) for n in ("sigma_t", "E_t")}
+        self.runs = 0
+
+    def curves(self, jobs):
+        keys = [(r, tuple(sorted(p.items())), m, self.t_end, self.sample_dt) for r, p, m in jobs]
+        self.runs += len(keys)
+        return self.pool.map(_run, keys)
+
+    def bounds(self, name):
+        base = name.split("@")[0]
+        if base in self.box:
+            return self.box[base]
+        lo, hi = fx.bounds([base])
+        return float(lo[0]), float(min(hi[0], self.upper.get(base, hi[0])))
+
+
+def _names(effect, records):
+    """(shared names, {record: its own names}) of the base model plus ``effect`` (None: the base)."""
+    shared, own = ["sigma_t", "E_t"], {r: [] for r in records}
+    if effect is not None:
+        e = fx.get_effect(effect)
+        for p in e.params:
+            name = f"{e.name}.{p.name}"
+            if e.scope == "shared":
+                shared.append(name)
+            else:
+                for r in records:
+                    own[r].append(f"{name}@{r}")
+    return shared, own
+
+
+def _sim_params(theta, record, shared, own):
+    p = {n: theta[n] for n in shared}
+    p.update({n.split("@")[0]: theta[n] for n in own[record]})
+    return p
+
+
+def _step_of(s, name, theta):
+    if name in REL_STEP:
+        return REL_STEP[name] * theta[name]
+    lo, hi = s.bounds(name)
+    return EFFECT_STEP * (hi - lo)
+
+
+def linearise(s, theta, shared, own, records):
+    """Per record its mean curve over the fit meshes at ``theta`` and the Jacobian over every name."""
+    allnames = shared + [n for r in records for n in own[r]]
+    jobs, index = [], []
+    for r in records:
+        for name in [None] + shared + own[r]:
+            th = dict(theta)
+            if name is not None:
+                lo, hi = s.bounds(name)
+                h = _step_of(s, name, theta)
+                th[name] = theta[name] + h if theta[name] + h <= hi else theta[name] - h
+            for m in FIT_MESHES:
+                jobs.append((r, _sim_params(th, r, shared, own), m))
+                index.append((r, name, th[name] - theta[name] if name else 0.0))
+    out = s.curves(jobs)
+    base, jac = {}, {}
+    for r in records:
+        rows = [(k, i) for k, i in enumerate(index) if i[0] == r]
+        at = np.mean([out[k] for k, i in rows if i[1] is None], axis=0)
+        J = np.zeros((at.size, len(allnames)))
+        for name in shared + own[r]:
+            ks = [k for k, i in rows if i[1] == name]
+            h = index[ks[0]][2]
+            J[:, allnames.index(name)] = (np.mean([out[k] for k in ks], axis=0) - at) / h
+        base[r], jac[r] = at, J
+    return base, jac, allnames
+
+
+def gn_solve(s, theta, base, jac, allnames, w, records):
+    """One Gauss-Newton update of ``theta`` from the records' data (weighted), each move capped and clipped."""
+    cols = sorted({allnames.index(n) for r in records for n in allnames
+                   if np.any(jac[r][:, allnames.index(n)] != 0)})
+    A = np.vstack([np.sqrt(w[r])[:, None] * jac[r][:, cols] for r in records])
+    b = np.concatenate([np.sqrt(w[r]) * (s.y[r] - base[r]) for r in records])
+    scale = np.linalg.norm(A, axis=0)
+    scale[scale == 0] = 1.0
+    d, *_ = np.linalg.lstsq(A / scale, b, rcond=None)
+    d = d / scale
+    new = dict(theta)
+    for j, c in enumerate(cols):
+        n = allnames[c]
+        lo, hi = s.bounds(n)
+        move = float(np.clip(d[j], -MAX_MOVE * (hi - lo), MAX_MOVE * (hi - lo)))
+        new[n] = float(np.clip(theta[n] + move, lo, hi))
+    return new
+
+
+def weights(s):
+    """1 / (noise^2 + mesh scatter^2) per time: the scatter of the base model at the start on the check meshes."""
+    runs = s.curves([(r, dict(s.start), m) for r in s.records for m in CHECK_MESHES])
+    out, k = {}, 0
+    for r in s.records:
+        Y = np.array(runs[k:k + len(CHECK_MESHES)])
+        k += len(CHECK_MESHES)
+        var = np.convolve(np.var(Y, axis=0, ddof=1), np.ones(SMOOTH) / SMOOTH, mode="same")
+        out[r] = 1.0 / (s.noise[r][0] ** 2 + var)
+    return out
+
+
+def fit_model(s, effect, w):
+    """Gauss-Newton fit on every record, then each record's cross-validation point and its check runs."""
+    shared, own = _names(effect, s.records)
+    theta = dict(s.start)
+    for n in shared[2:] + [n for r in s.records for n in own[r]]:
+        theta[n] = float(fx.null_values([n.split("@")[0]])[n.split("@")[0]])
+    path = [dict(theta)]
+    for _ in range(GN_STEPS):
+        base, jac, allnames = linearise(s, theta, shared, own, s.records)
+        last = dict(theta)
+        theta = gn_solve(s, theta, base, jac, allnames, w, s.records)
+        path.append(dict(theta))
+    cv = {}
+    for r in s.records:
+        others = [o for o in s.records if o != r]
+        fit = gn_solve(s, last, base, jac, allnames, w, others)
+        point = {n: fit[n] for n in shared}
+        for n in own[r]:
+            stem = n.split("@")[0]
+            point[n] = float(np.mean([fit[f"{stem}@{o}"] for o in others]))
+        cv[r] = point
+    jobs = [(r, _sim_params(cv[r], r, shared, own), m) for r in s.records for m in CHECK_MESHES]
+    out = s.curves(jobs)
+    runs = {r: np.array(out[i * len(CHECK_MESHES):(i + 1) * len(CHECK_MESHES)]) for i, r in enumerate(s.records)}
+    return {"fit": theta, "path": path, "cv_points": cv}, runs
+
+
+def compare(s, w, base_runs, cand_runs):
+    y, cur, cand, noise = {}, {}, {}, {}
+    for r in s.records:
+        sw = np.sqrt(w[r])
+        sd, rho08 = s.noise[r]
+        dt = float(np.median(np.diff(s.obs.time[s.obs.record_slice(r)])))
+        rho = max(rho08, 1e-9) ** (dt / 0.8e-6)
+        n = sw.size
+        lag = np.abs(np.subtract.outer(np.arange(n), np.arange(n)))
+        y[r], cur[r], cand[r] = sw * s.y[r], sw * base_runs[r], sw * cand_runs[r]
+        noise[r] = DenseError(sw[:, None] * (sd ** 2 * rho ** lag) * sw[None, :], _symmetric=True)
+    c = compare_replicated(y, cur, cand, noise)
+    return {"z": c["z"], "p": c["p"], "dof": c["dof"],
+            "per_record_z": {r: v["delta"] / v["sd"] for r, v in c["records"].items()}}
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--run", required=True)
+    ap.add_argument("--config", required=True)
+    ap.add_argument("--exp", required=True)
+    ap.add_argument("--candidates", default="rate_strength,interface_friction,seating,face_gap")
+    ap.add_argument("--truth")
+    ap.add_argument("--out", required=True)
+    a = ap.parse_args(argv)
+    t0 = time.perf_counter()
+    with Pool(2, initializer=_init, initargs=(a.run,)) as pool:
+        s = Series(a.run, a.config, a.exp, pool)
+        w = weights(s)
+        base, base_runs = fit_model(s, None, w)
+        result = {"study": "realrun_selection", "run": a.run, "exp": a.exp, "cores": 2, "level": LEVEL,
+                  "start": s.start, "base": base, "candidates": {}}
+        if a.truth:
+            result["truth"] = json.loads(Path(a.truth).read_text()).get("plant")
+        for effect in a.candidates.split(","):
+            fit, runs = fit_model(s, effect, w)
+            result["candidates"][effect] = {**fit, **compare(s, w, base_runs, runs)}
+            c = result["candidates"][effect]
+            print(f"{effect}: z {c['z']:.2f} p {c['p']:.4f}; fit {fit['fit']}", flush=True)
+            Path(a.out).write_text(json.dumps(result, indent=1) + "\n")
+        passing = {e: c["z"] for e, c in result["candidates"].items() if c["p"] < LEVEL}
+        result["named"] = max(passing, key=passing.get) if passing else "base_kept"
+        result["runs"], result["wall_s"] = s.runs, round(time.perf_counter() - t0, 1)
+        Path(a.out).write_text(json.dumps(result, indent=1) + "\n")
+        print("named:", result["named"], f"({s.runs} runs, {result['wall_s']} s)")
+    return result
+
+
+if __name__ == "__main__":
+    main()
