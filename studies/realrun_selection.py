@@ -132,12 +132,13 @@ def _step_of(s, name, theta):
     return EFFECT_STEP * (hi - lo)
 
 
-def linearise(s, theta, shared, own, records):
-    """Per record its mean curve over the fit meshes at ``theta`` and the Jacobian over every name."""
+def linearise(s, theta, shared, own, records, vary=None):
+    """Per record its mean curve over the fit meshes at ``theta`` and the Jacobian over every name
+    (``vary``: only these names get derivative runs; the others' columns stay zero)."""
     allnames = shared + [n for r in records for n in own[r]]
     jobs, index = [], []
     for r in records:
-        for name in [None] + shared + own[r]:
+        for name in [None] + [n for n in shared + own[r] if vary is None or n in vary]:
             th = dict(theta)
             if name is not None:
                 lo, hi = s.bounds(name)
@@ -154,6 +155,8 @@ def linearise(s, theta, shared, own, records):
         J = np.zeros((at.size, len(allnames)))
         for name in shared + own[r]:
             ks = [k for k, i in rows if i[1] == name]
+            if not ks:
+                continue
             h = index[ks[0]][2]
             J[:, allnames.index(name)] = (np.mean([out[k] for k in ks], axis=0) - at) / h
         base[r], jac[r] = at, J
@@ -191,13 +194,39 @@ def weights(s):
     return out
 
 
-def fit_model(s, effect, w):
+def _predicted_sse(s, theta, last, base, jac, allnames, w):
+    d = np.array([theta[n] - last[n] for n in allnames])
+    return float(sum(np.sum(w[r] * (s.y[r] - base[r] - jac[r] @ d) ** 2) for r in s.records))
+
+
+def _profiled_start(s, theta, shared, own, w, profile, path):
+    """The shared effect's parameter on ``profile`` interior grid values of its box, ``sigma_t`` and ``E_t``
+    fitted at each (two Gauss-Newton steps); the start is the grid value whose fit leaves the least weighted
+    squared error (predicted by its last linearisation)."""
+    name = shared[2]
+    lo, hi = s.bounds(name)
+    best = None
+    for v in np.linspace(lo, hi, profile + 2)[1:-1]:
+        th = {**theta, name: float(v)}
+        for _ in range(2):
+            base, jac, allnames = linearise(s, th, shared, own, s.records, vary=("sigma_t", "E_t"))
+            last, th = dict(th), gn_solve(s, th, base, jac, allnames, w, s.records)
+        sse = _predicted_sse(s, th, last, base, jac, allnames, w)
+        path.append({**th, "profile_sse": sse})
+        if best is None or sse < best[0]:
+            best = (sse, th)
+    return dict(best[1])
+
+
+def fit_model(s, effect, w, profile=0):
     """Gauss-Newton fit on every record, then each record's cross-validation point and its check runs."""
     shared, own = _names(effect, s.records)
     theta = dict(s.start)
     for n in shared[2:] + [n for r in s.records for n in own[r]]:
         theta[n] = float(fx.null_values([n.split("@")[0]])[n.split("@")[0]])
     path = [dict(theta)]
+    if profile and effect is not None and fx.get_effect(effect).scope == "shared":
+        theta = _profiled_start(s, theta, shared, own, w, profile, path)
     for _ in range(GN_STEPS):
         base, jac, allnames = linearise(s, theta, shared, own, s.records)
         last = dict(theta)
@@ -241,6 +270,8 @@ def main(argv=None):
     ap.add_argument("--exp", required=True)
     ap.add_argument("--candidates", default="rate_strength,interface_friction,seating,face_gap")
     ap.add_argument("--truth")
+    ap.add_argument("--profile", type=int, default=0, help="a shared effect's start: the best of this many "
+                    "interior grid values of its box, sigma_t and E_t fitted at each")
     ap.add_argument("--out", required=True)
     a = ap.parse_args(argv)
     t0 = time.perf_counter()
@@ -249,11 +280,12 @@ def main(argv=None):
         w = weights(s)
         base, base_runs = fit_model(s, None, w)
         result = {"study": "realrun_selection", "run": a.run, "exp": a.exp, "cores": 2, "level": LEVEL,
+                  "profile": a.profile,
                   "start": s.start, "base": base, "candidates": {}}
         if a.truth:
             result["truth"] = json.loads(Path(a.truth).read_text()).get("plant")
         for effect in a.candidates.split(","):
-            fit, runs = fit_model(s, effect, w)
+            fit, runs = fit_model(s, effect, w, a.profile)
             result["candidates"][effect] = {**fit, **compare(s, w, base_runs, runs)}
             c = result["candidates"][effect]
             print(f"{effect}: z {c['z']:.2f} p {c['p']:.4f}; fit {fit['fit']}", flush=True)
