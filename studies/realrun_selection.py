@@ -52,6 +52,8 @@ SMOOTH = 11
 REL_STEP = {"sigma_t": 0.03, "E_t": 0.15}
 EFFECT_STEP = 0.1       # of the effect parameter's box width
 MAX_MOVE = 0.5          # of a parameter's box width per Gauss-Newton step
+PROFILE_STEPS = 2       # --profile-steps: Gauss-Newton steps of sigma_t and E_t at each grid value
+PROFILE_REAL = False    # --profile-real: each grid value's error from real runs at its fit
 
 _OBS = {}
 
@@ -208,10 +210,14 @@ def _profiled_start(s, theta, shared, own, w, profile, path):
     best = None
     for v in np.linspace(lo, hi, profile + 2)[1:-1]:
         th = {**theta, name: float(v)}
-        for _ in range(2):
+        for _ in range(PROFILE_STEPS):
             base, jac, allnames = linearise(s, th, shared, own, s.records, vary=("sigma_t", "E_t"))
             last, th = dict(th), gn_solve(s, th, base, jac, allnames, w, s.records)
-        sse = _predicted_sse(s, th, last, base, jac, allnames, w)
+        if PROFILE_REAL:   # the error of real runs at the fitted point, not its linear prediction
+            at, _, _ = linearise(s, th, shared, own, s.records, vary=())
+            sse = float(sum(np.sum(w[r] * (s.y[r] - at[r]) ** 2) for r in s.records))
+        else:
+            sse = _predicted_sse(s, th, last, base, jac, allnames, w)
         path.append({**th, "profile_sse": sse})
         if best is None or sse < best[0]:
             best = (sse, th)
@@ -273,14 +279,18 @@ def main(argv=None):
     ap.add_argument("--profile", type=int, default=0, help="a shared effect's start: the best of this many "
                     "interior grid values of its box, sigma_t and E_t fitted at each")
     ap.add_argument("--out", required=True)
+    ap.add_argument("--profile-steps", type=int, default=2)
+    ap.add_argument("--profile-real", action="store_true")
     a = ap.parse_args(argv)
+    global PROFILE_STEPS, PROFILE_REAL
+    PROFILE_STEPS, PROFILE_REAL = a.profile_steps, a.profile_real
     t0 = time.perf_counter()
     with Pool(2, initializer=_init, initargs=(a.run,)) as pool:
         s = Series(a.run, a.config, a.exp, pool)
         w = weights(s)
         base, base_runs = fit_model(s, None, w)
         result = {"study": "realrun_selection", "run": a.run, "exp": a.exp, "cores": 2, "level": LEVEL,
-                  "profile": a.profile,
+                  "profile": a.profile, "profile_steps": a.profile_steps, "profile_real": a.profile_real,
                   "start": s.start, "base": base, "candidates": {}}
         if a.truth:
             result["truth"] = json.loads(Path(a.truth).read_text()).get("plant")
