@@ -76,15 +76,19 @@ def score_fold(fold: Path) -> dict:
     return {"steps": out, "shipped_step": k}
 
 
-def main(argv) -> dict:
+def score_series(argv, score) -> tuple[dict, str | None]:
+    """``({series: {fold: score(fold folder)}}, --out path)`` from ``<clone root> <series> ... [--out F]``."""
     args = [a for a in argv if not a.startswith("--")]
     out_path = argv[argv.index("--out") + 1] if "--out" in argv else None
     if out_path:
         args.remove(out_path)
-    result = {"study": "band_discrepancy", "windows": list(WINDOWS), "series": {}}
-    for root, series in zip(args[0::2], args[1::2]):
-        folds = sorted(Path(root, "results").glob(f"{series}__*"))
-        result["series"][series] = {f.name: score_fold(f) for f in folds}
+    return ({series: {f.name: score(f) for f in sorted(Path(root, "results").glob(f"{series}__*"))}
+             for root, series in zip(args[0::2], args[1::2])}, out_path)
+
+
+def main(argv) -> dict:
+    scored, out_path = score_series(argv, score_fold)
+    result = {"study": "band_discrepancy", "windows": list(WINDOWS), "series": scored}
     totals = {}
     for series in result["series"].values():
         for fold in series.values():

@@ -47,6 +47,7 @@ from calibration.closing import _mean_block, _window_samples  # noqa: E402
 from calibration.observations import read_observations  # noqa: E402
 from calibration.protocol import real_curves  # noqa: E402
 from calibration.walk import check_runs_of  # noqa: E402
+from studies.band_discrepancy import score_series  # noqa: E402
 from enkf.diagnosis.band import replicate_variance, residual_discrepancy, run_band  # noqa: E402
 from enkf.diagnosis.crossval import predict_record, seed_for  # noqa: E402
 from enkf.diagnosis.population import record_name  # noqa: E402
@@ -139,14 +140,8 @@ def totals(result: dict) -> dict:
 
 
 def main(argv) -> dict:
-    args = [a for a in argv if not a.startswith("--")]
-    out_path = argv[argv.index("--out") + 1] if "--out" in argv else None
-    if out_path:
-        args.remove(out_path)
-    result = {"study": "band_parameter_term", "forms": list(FORMS), "series": {}}
-    for root, series in zip(args[0::2], args[1::2]):
-        folds = sorted(Path(root, "results").glob(f"{series}__*"))
-        result["series"][series] = {f.name: score_fold(f) for f in folds}
+    scored, out_path = score_series(argv, score_fold)
+    result = {"study": "band_parameter_term", "forms": list(FORMS), "series": scored}
     result["totals"] = totals(result)
     text = json.dumps(result, indent=1)
     if out_path:
