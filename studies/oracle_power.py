@@ -9,8 +9,9 @@ cross-validation training records (the two others) at the point that best absorb
 fraction of data realizations on which the test passes is an upper bound on how often the walk can
 confirm the effect on those records, whatever proposed it.
 
-Why an upper bound: the data are simulated on the `fast` mesh the models run on (the benchmark's are on
-the `standard` one, whose own error is one more misfit both models carry); the effect enters at its
+Why an upper bound: by default the data are simulated on the `fast` mesh the models run on (the
+benchmark's are on the `standard` one, whose own error is one more misfit both models carry:
+``--data-preset standard`` measures that case too); the effect enters at its
 truth, not at a fit; the base model's fit is to the effect's mean curve over eleven meshes with the
 noise left out (an easier target than one noisy record). What it shares with the walk: the records
 (the plan's three calibration drivers of each series), the `fast` mesh on three common realizations per
