@@ -45,7 +45,7 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT)]
 
-from enkf.covariance import DenseError  # noqa: E402
+from enkf.covariance import AR1Error  # noqa: E402
 from enkf.diagnosis.crossval import compare_replicated  # noqa: E402
 
 CAMA = ROOT / "data/freiburg-rae-rock-shpb/Rae2021/SHPBdata/CaMa"
@@ -182,8 +182,8 @@ def study_case(pool, name):
             y[d] = sw * (data[(geometry, d, eff_p, dm)] + e)
             cur[d] = np.array([sw * base[(geometry, d, tuple(sorted(cv[d].items())), m)] for m in MODEL_MESHES])
             cand[d] = np.array([sw * eff[(geometry, d, eff_p, m)] for m in MODEL_MESHES])
-            lag = np.abs(np.subtract.outer(np.arange(n), np.arange(n)))
-            noise[d] = DenseError(sw[:, None] * (sd ** 2 * rho ** lag) * sw[None, :], _symmetric=True)
+            # the noise the data were drawn with, weighted as the curves are
+            noise[d] = AR1Error(sw * sd, _grid(geometry), -DT_OBS / math.log(rho))
         c = compare_replicated(y, cur, cand, noise)
         tests.append({"data_mesh": dm, "z": c["z"], "p": c["p"], "dof": c["dof"], "passes": bool(c["p"] < LEVEL),
                       "per_record_delta_over_sd": {Path(str(k)).name[:13]: v["delta"] / v["sd"]

@@ -40,7 +40,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT)]
 
 from calibration.observations import curve_on_grid, read_observations  # noqa: E402
-from enkf.covariance import DenseError  # noqa: E402
+from enkf.covariance import AR1Error  # noqa: E402
 from enkf.diagnosis.crossval import compare_replicated  # noqa: E402
 from shpb import effects as fx  # noqa: E402
 
@@ -87,7 +87,7 @@ class Series:
         self.records = list(self.obs.records)
         info = self.obs.meta["record_info"]
         self.y = {r: self.obs.values[self.obs.record_slice(r)] for r in self.records}
-        self.noise = {r: (float(info[r]["noise_estimate"]["sigma"]), float(info[r]["noise_estimate"]["rho1"]))
+        self.noise = {r: (float(info[r]["noise_estimate"]["sigma"]), float(info[r]["noise_estimate"]["corr_time"]))
                       for r in self.records}
         post = json.loads((self.run / "summary.json").read_text())["posterior"]
         self.start = {n: float(post[n]["mean"]) for n in ("sigma_t", "E_t")}
@@ -257,13 +257,10 @@ def compare(s, w, base_runs, cand_runs):
     y, cur, cand, noise = {}, {}, {}, {}
     for r in s.records:
         sw = np.sqrt(w[r])
-        sd, rho08 = s.noise[r]
-        dt = float(np.median(np.diff(s.obs.time[s.obs.record_slice(r)])))
-        rho = max(rho08, 1e-9) ** (dt / 0.8e-6)
-        n = sw.size
-        lag = np.abs(np.subtract.outer(np.arange(n), np.arange(n)))
+        sd, corr_time = s.noise[r]
         y[r], cur[r], cand[r] = sw * s.y[r], sw * base_runs[r], sw * cand_runs[r]
-        noise[r] = DenseError(sw[:, None] * (sd ** 2 * rho ** lag) * sw[None, :], _symmetric=True)
+        # the record's AR(1) noise as the workflow estimated it, weighted as the curves are
+        noise[r] = AR1Error(sw * sd, s.obs.time[s.obs.record_slice(r)], corr_time)
     c = compare_replicated(y, cur, cand, noise)
     return {"z": c["z"], "p": c["p"], "dof": c["dof"],
             "per_record_z": {r: v["delta"] / v["sd"] for r, v in c["records"].items()}}
