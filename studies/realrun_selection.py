@@ -18,6 +18,13 @@ product changes with it. Per series it writes each candidate's fit, each record'
 
     python studies/realrun_selection.py --run results/<exp> --config <config.yaml> --exp <exp> \
         [--candidates rate_strength,interface_friction,seating,face_gap] --out F
+
+``--recheck FIT.json --check-meshes K``: no fitting; the base's and each candidate's cross-validation
+points of an earlier run of this script are run on K check meshes (the first three are the earlier run's
+own, so its z is reproduced on them first) and compared by the same test, with the same weights (the
+earlier run's three meshes). Why: with three meshes a record's realization part of the paired
+difference has two degrees of freedom, and the friction series' z 4.88 stayed at p 0.0135; the plan for
+K is fixed before the runs (studies/README.md, the row of this mode).
 """
 from __future__ import annotations
 
@@ -46,6 +53,7 @@ from shpb import effects as fx  # noqa: E402
 
 FIT_MESHES = (3101, 3102)
 CHECK_MESHES = (3201, 3202, 3203)
+RECHECK_FIRST = 3201    # --recheck: meshes RECHECK_FIRST .. RECHECK_FIRST + K - 1
 GN_STEPS = 3
 LEVEL = 0.005
 SMOOTH = 11
@@ -247,10 +255,32 @@ def fit_model(s, effect, w, profile=0):
             stem = n.split("@")[0]
             point[n] = float(np.mean([fit[f"{stem}@{o}"] for o in others]))
         cv[r] = point
-    jobs = [(r, _sim_params(cv[r], r, shared, own), m) for r in s.records for m in CHECK_MESHES]
-    out = s.curves(jobs)
-    runs = {r: np.array(out[i * len(CHECK_MESHES):(i + 1) * len(CHECK_MESHES)]) for i, r in enumerate(s.records)}
-    return {"fit": theta, "path": path, "cv_points": cv}, runs
+    return {"fit": theta, "path": path, "cv_points": cv}, check_runs(s, effect, cv, CHECK_MESHES)
+
+
+def check_runs(s, effect, cv, meshes):
+    """Each record's runs at its cross-validation point ``cv[record]`` on ``meshes``: ``{record: (K, m)}``."""
+    shared, own = _names(effect, s.records)
+    out = s.curves([(r, _sim_params(cv[r], r, shared, own), m) for r in s.records for m in meshes])
+    K = len(meshes)
+    return {r: np.array(out[i * K:(i + 1) * K]) for i, r in enumerate(s.records)}
+
+
+def recheck(s, w, earlier: dict, k_meshes: int) -> dict:
+    """The earlier run's fits compared on ``k_meshes`` check meshes, and on its own three first."""
+    meshes = tuple(range(RECHECK_FIRST, RECHECK_FIRST + int(k_meshes)))
+    base = check_runs(s, None, earlier["base"]["cv_points"], meshes)
+    out = {"check_meshes": list(meshes), "candidates": {}}
+    for effect, c in earlier["candidates"].items():
+        cand = check_runs(s, effect, c["cv_points"], meshes)
+        first = compare(s, w, {r: v[:3] for r, v in base.items()}, {r: v[:3] for r, v in cand.items()})
+        out["candidates"][effect] = {"on_first_three": first, f"on_{len(meshes)}": compare(s, w, base, cand),
+                                     "earlier": {k: c[k] for k in ("z", "p", "dof")}}
+        print(effect, out["candidates"][effect], flush=True)
+    passing = {e: v[f"on_{len(meshes)}"]["z"] for e, v in out["candidates"].items()
+               if v[f"on_{len(meshes)}"]["p"] < LEVEL}
+    out["named"] = max(passing, key=passing.get) if passing else "base_kept"
+    return out
 
 
 def compare(s, w, base_runs, cand_runs):
@@ -278,6 +308,8 @@ def main(argv=None):
     ap.add_argument("--out", required=True)
     ap.add_argument("--profile-steps", type=int, default=2)
     ap.add_argument("--profile-real", action="store_true")
+    ap.add_argument("--recheck", help="an earlier output of this script: compare its fits on more check meshes")
+    ap.add_argument("--check-meshes", type=int, default=8)
     a = ap.parse_args(argv)
     global PROFILE_STEPS, PROFILE_REAL
     PROFILE_STEPS, PROFILE_REAL = a.profile_steps, a.profile_real
@@ -285,6 +317,14 @@ def main(argv=None):
     with Pool(2, initializer=_init, initargs=(a.run,)) as pool:
         s = Series(a.run, a.config, a.exp, pool)
         w = weights(s)
+        if a.recheck:
+            result = {"study": "realrun_selection (recheck)", "run": a.run, "exp": a.exp, "cores": 2,
+                      "level": LEVEL, "fits_from": a.recheck,
+                      **recheck(s, w, json.loads(Path(a.recheck).read_text()), a.check_meshes)}
+            result["runs"], result["wall_s"] = s.runs, round(time.perf_counter() - t0, 1)
+            Path(a.out).write_text(json.dumps(result, indent=1) + "\n")
+            print("named:", result["named"], f"({s.runs} runs, {result['wall_s']} s)")
+            return result
         base, base_runs = fit_model(s, None, w)
         result = {"study": "realrun_selection", "run": a.run, "exp": a.exp, "cores": 2, "level": LEVEL,
                   "profile": a.profile, "profile_steps": a.profile_steps, "profile_real": a.profile_real,
