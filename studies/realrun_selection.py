@@ -53,7 +53,8 @@ from shpb import effects as fx  # noqa: E402
 
 FIT_MESHES = (3101, 3102)
 CHECK_MESHES = (3201, 3202, 3203)
-RECHECK_FIRST = 3201    # --recheck: meshes RECHECK_FIRST .. RECHECK_FIRST + K - 1
+RECHECK_FIRST = 3201    # --check-meshes K: the comparison on meshes RECHECK_FIRST .. RECHECK_FIRST + K - 1
+COMPARE_MESHES = CHECK_MESHES   # the weights always take the first three
 GN_STEPS = 3
 LEVEL = 0.005
 SMOOTH = 11
@@ -255,7 +256,7 @@ def fit_model(s, effect, w, profile=0):
             stem = n.split("@")[0]
             point[n] = float(np.mean([fit[f"{stem}@{o}"] for o in others]))
         cv[r] = point
-    return {"fit": theta, "path": path, "cv_points": cv}, check_runs(s, effect, cv, CHECK_MESHES)
+    return {"fit": theta, "path": path, "cv_points": cv}, check_runs(s, effect, cv, COMPARE_MESHES)
 
 
 def check_runs(s, effect, cv, meshes):
@@ -309,10 +310,12 @@ def main(argv=None):
     ap.add_argument("--profile-steps", type=int, default=2)
     ap.add_argument("--profile-real", action="store_true")
     ap.add_argument("--recheck", help="an earlier output of this script: compare its fits on more check meshes")
-    ap.add_argument("--check-meshes", type=int, default=8)
+    ap.add_argument("--check-meshes", type=int, default=len(CHECK_MESHES),
+                    help="check meshes of the comparison (the first three also set the weights)")
     a = ap.parse_args(argv)
-    global PROFILE_STEPS, PROFILE_REAL
+    global PROFILE_STEPS, PROFILE_REAL, COMPARE_MESHES
     PROFILE_STEPS, PROFILE_REAL = a.profile_steps, a.profile_real
+    COMPARE_MESHES = tuple(range(RECHECK_FIRST, RECHECK_FIRST + a.check_meshes))
     t0 = time.perf_counter()
     with Pool(2, initializer=_init, initargs=(a.run,)) as pool:
         s = Series(a.run, a.config, a.exp, pool)
@@ -328,6 +331,7 @@ def main(argv=None):
         base, base_runs = fit_model(s, None, w)
         result = {"study": "realrun_selection", "run": a.run, "exp": a.exp, "cores": 2, "level": LEVEL,
                   "profile": a.profile, "profile_steps": a.profile_steps, "profile_real": a.profile_real,
+                  "check_meshes": list(COMPARE_MESHES),
                   "start": s.start, "base": base, "candidates": {}}
         if a.truth:
             result["truth"] = json.loads(Path(a.truth).read_text()).get("plant")
