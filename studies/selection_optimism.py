@@ -9,6 +9,12 @@ records' cross-validated RMSE (root mean square over the series' folds) and the 
 bands. Before the loop no selection has acted, so the two errors should agree; after it, a ratio above 1 is
 the selection's optimism, which the calibration records' residuals cannot show.
 
+Paired by record (``paired``): in a leave-one-record-out series each record is held out once and
+cross-validated inside every other fold, where it took part in that fold's selection. Its held-out RMSE
+and band coverage against the mean of its cross-validated ones: the same record, so the records' own
+difficulty cancels; a held-out prediction is made from one more record than a cross-validated one, which
+should favour it.
+
     python studies/selection_optimism.py
 
 Writes ``studies/results/selection_optimism.json``. Development data (every series' records were read
@@ -61,12 +67,52 @@ def series_errors(folder: Path, step: str) -> dict:
             "band_coverage_90_calibration": _mean(cover["calibration"])}
 
 
+def _by_record(folder: Path, step: str) -> tuple[dict, dict]:
+    held, cv = {}, {}
+    for f in sorted(folder.glob("*_check.json")):
+        check = json.loads(f.read_text())
+        bands = (check.get("predictive_band") or {}).get("records") or {}
+        for rec, e in (check.get("errors_per_record") or {}).items():
+            if not isinstance(e, dict) or not isinstance(e.get(step), dict):
+                continue
+            c = ((bands.get(rec) or {}).get(step) or {}).get("predictive_coverage_90")
+            row = (float(e[step]["rmse"]), None if c is None else float(c))
+            if e.get("data") == "heldout":
+                held[rec] = row
+            else:
+                cv.setdefault(rec, []).append(row)
+    return held, cv
+
+
+def paired(folder: Path, step: str) -> dict:
+    """Per record its held-out RMSE [Pa] and band coverage against the means of its cross-validated ones, and
+    the counts of records predicted worse and covered less when held out."""
+    held, cv = _by_record(folder, step)
+    rows = {}
+    for rec, (rmse, cover) in held.items():
+        if rec not in cv:
+            continue
+        covers = [c for _, c in cv[rec] if c is not None]
+        rows[rec] = {"rmse_heldout_Pa": rmse, "rmse_cv_mean_Pa": float(np.mean([r for r, _ in cv[rec]])),
+                     "coverage_heldout": cover, "coverage_cv_mean": _mean(covers)}
+    scored = [v for v in rows.values() if v["coverage_heldout"] is not None and v["coverage_cv_mean"] is not None]
+    return {"records": rows, "rmse_worse_heldout": sum(v["rmse_heldout_Pa"] > v["rmse_cv_mean_Pa"] for v in rows.values()),
+            "coverage_lower_heldout": sum(v["coverage_heldout"] < v["coverage_cv_mean"] for v in scored),
+            "compared": len(rows), "compared_coverage": len(scored)}
+
+
 def main():
     out = {"what": "held-out RMSE over the calibration records' cross-validated RMSE, before and after the loop, "
                    "and the mean coverage of their 90 % bands, on the committed leave-one-record-out series",
            "source": "benchmarks/results/<series>/*_check.json (errors_per_record, predictive_band)",
            "series": {s: {step: series_errors(ROOT / "benchmarks" / "results" / s, step) for step in ("before", "after")}
                       for s in SERIES}}
+    for s in SERIES:
+        out["series"][s]["paired"] = {step: paired(ROOT / "benchmarks" / "results" / s, step) for step in ("before", "after")}
+    for step in ("before", "after"):
+        got = [v["paired"][step] for v in out["series"].values()]
+        out[f"paired_{step}"] = {k: int(sum(g[k] for g in got)) for k in
+                                 ("rmse_worse_heldout", "coverage_lower_heldout", "compared", "compared_coverage")}
     after = [v["after"]["ratio"] for v in out["series"].values() if v["after"]["ratio"]]
     out["ratio_after_mean"] = float(np.mean(after))
     emit_json(out, ROOT / "studies" / "results" / "selection_optimism.json")
