@@ -34,7 +34,7 @@ import pandas as pd
 
 from enkf.covariance import DenseError, ObservationError
 from enkf.diagnosis import box_draws, group_text, heldout_evaluation, replicate_curve_errors
-from enkf.diagnosis.band import replicate_variance, residual_discrepancy, run_band
+from enkf.diagnosis.band import plugin_draws, replicate_variance, residual_discrepancy, run_band
 from enkf.diagnosis.crossval import seed_for
 from enkf.diagnosis.protocol import step_summary
 from enkf.emulator import AnchoredEmulator
@@ -252,21 +252,23 @@ def _window_samples(times: np.ndarray) -> int:
     return int(round(BAND_DISCREPANCY_WINDOW_S / dt)) | 1  # odd: centred on each time
 
 
-def _cv_residuals(selection, real: Mapping, step: int, obs: Observations, noise: Mapping, simulator: Mapping) -> dict:
-    """``{record: (residual, counted)}`` of the calibration records with real runs at their
-    cross-validation point of ``step``: the data less the runs' mean, and the variance the band's other
-    terms give it there (parameters, simulator ``S (1 + 1/K)``, the record's noise)."""
+def _cv_residuals(selection, real: Mapping, step: int, obs: Observations, noise: Mapping, simulator: Mapping,
+                  model) -> dict:
+    """``{record: (residual, counted)}`` of the calibration records with real runs at their cross-validation
+    point of ``step``: the data less the runs' mean, and the variance the band's other terms give it there
+    (parameters, with plugin_draws' per-record values; simulator ``S (1 + 1/K)``, the record's noise)."""
     out = {}
     for r in obs.records:
         runs = real["cv"].get(step, {}).get(r)
         if runs is None:
             continue
         Y = np.array(runs, dtype=float, ndmin=2)
-        pred = selection.step(step).cv.folds[r]["prediction"]
+        st = selection.step(step)
+        draws = plugin_draws(model, st.spec, st.cv.folds[r], seed=int(selection.settings.get("seed", 0)))
         S, _ = replicate_variance([c[r] for c in real["cv"].values() if c.get(r) is not None])
         if S is None:
             S = np.diag(simulator[r].dense()) if r in simulator else np.zeros(Y.shape[1])
-        counted = (np.var(np.asarray(pred.draws, float) - np.asarray(pred.curve, float), axis=0)
+        counted = (np.var(draws - np.asarray(st.cv.folds[r]["prediction"].curve, float), axis=0)
                    + S * (1.0 + 1.0 / Y.shape[0]) + np.diag(noise[r].dense()))
         out[r] = (obs.values[obs.record_slice(r)] - Y.mean(axis=0), counted)
     return out
@@ -283,7 +285,7 @@ def _discrepancy_from(cv: Mapping, leave_out: str | None, window: int, fallback:
 
 
 def predictive_bands(selection, real: Mapping, k: int, obs: Observations, heldout: Observations | None,
-                     noise: Mapping, simulator: Mapping, discrepancy: Mapping[str, np.ndarray], model=None):
+                     noise: Mapping, simulator: Mapping, discrepancy: Mapping[str, np.ndarray], model):
     """``({record: {"data", "before", "after"}}, frame)``: each record's 90 % predictive band of its curve
     under the base model (step 0) and the shipped one (step ``k``), centred on the mean of the real FDEM
     runs at its prediction point, with :func:`enkf.diagnosis.band.run_band`'s terms:
@@ -294,7 +296,8 @@ def predictive_bands(selection, real: Mapping, k: int, obs: Observations, heldou
         steps' points; with one run per point the protocol's ``simulator`` term);
     (c) the model discrepancy of that step's model, read off the calibration records' residuals against
         their real runs at their cross-validation points (each fitted without the record), less what
-        (a), (b) and (d) give them, averaged over BAND_DISCREPANCY_WINDOW_S
+        (a) (its per-record values from the plug-in population), (b) and (d) give them, averaged over
+        BAND_DISCREPANCY_WINDOW_S
         (:func:`enkf.diagnosis.band.residual_discrepancy`): large where the model errs, none where it
         does not, and smaller after the loop where the shipped model errs less. A calibration record's
         band takes the other calibration records' residuals only. Without another record's residuals,
@@ -306,7 +309,7 @@ def predictive_bands(selection, real: Mapping, k: int, obs: Observations, heldou
     band is fixed before its curve is read; the curve only scores it (``frame`` holds the bands, SI).
     A calibration record's curve enters its band only through the posterior (a) and the pooled noise (d).
 
-    With ``model`` (the emulated forward model), each band is scored against the design box's: the same
+    ``model``: the emulated forward model. Each band is scored against the design box's: the same
     band with the posterior's draws in (a) replaced by draws uniform over the emulator's design box
     (:func:`enkf.diagnosis.box_draws`: the base posterior's neighbourhood, clipped to the prior box, and
     the candidates' ranges; the emulator holds nowhere else, so the prior box itself cannot be drawn).
@@ -316,7 +319,7 @@ def predictive_bands(selection, real: Mapping, k: int, obs: Observations, heldou
     fallback = _mean_block([np.asarray(discrepancy[r], float) for r in calib])
     pooled_noise = _mean_block([np.diag(noise[r].dense()) for r in calib])
     window = _window_samples(obs.time[obs.record_slice(calib[0])])
-    cv = {step: _cv_residuals(selection, real, step, obs, noise, simulator) for step in {0, k}}
+    cv = {step: _cv_residuals(selection, real, step, obs, noise, simulator, model) for step in {0, k}}
     seed = int(selection.settings.get("seed", 0))
     jobs = [(r, "cv", "calibration (cross-validated; its band's discrepancy from the other calibration records)",
              obs) for r in calib]
@@ -334,11 +337,9 @@ def predictive_bands(selection, real: Mapping, k: int, obs: Observations, heldou
             D, source = _discrepancy_from(cv[step], rec if role == "cv" else None, window, fallback)
             terms = {"discrepancy": D, "noise": pooled_noise}
             got = _band_of(pred, real[role].get(step, {}).get(rec), pts, terms, simulator.get(rec), seed, (rec, step))
-            box = None
-            if got is not None and model is not None:
-                draws = box_draws(model, st.spec, rec, pred.draws.shape[0], seed=seed)
-                box = _band_of(replace(pred, draws=draws), real[role][step][rec], pts, terms, simulator.get(rec),
-                               seed, (rec, step, "box"))[0]
+            box = None if got is None else _band_of(
+                replace(pred, draws=box_draws(model, st.spec, rec, pred.draws.shape[0], seed=seed)),
+                real[role][step][rec], pts, terms, simulator.get(rec), seed, (rec, step, "box"))[0]
             bands[when] = None if got is None else (got[0], {**got[1], "discrepancy_from": source}, box)
         s = src.record_slice(rec)
         t, y = src.time[s], src.values[s]

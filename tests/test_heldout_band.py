@@ -215,7 +215,8 @@ def test_the_band_of_a_record_with_one_run_per_point_takes_the_protocol_simulato
     real = real_curves([rows[i] for i in keep], [runs[i] for i in keep], emulated())
     cal, held = _obs({r: obs[r] for r in CALIB}, 0.3e6), _obs({"H": obs["H"]}, 0.3e6)
     S = {"H": AR1Error(0.7e6, OBS_T, 5e-6)}
-    out, _ = predictive_bands(sel, real, 1, cal, held, NOISE, S, {r: np.zeros(OBS_T.size) for r in CALIB})
+    out, _ = predictive_bands(sel, real, 1, cal, held, NOISE, S, {r: np.zeros(OBS_T.size) for r in CALIB},
+                              emulated())
     after = out["H"]["after"]
     # one run: its own departure and the data's, 2 S
     assert after["simulator_from"] == "calibration's replicates" and after["replicates"] == 1
@@ -236,8 +237,8 @@ def test_a_calibration_records_band_takes_the_other_records_residuals_not_its_ow
     a, b = CALIB[0], CALIB[1]
     clean = _obs({r: obs[r] for r in CALIB}, 0.3e6)
     bad = _obs({r: (obs[r] + 20e6 * np.sin(OBS_T / 7e-6) if r == a else obs[r]) for r in CALIB}, 0.3e6)
-    out, frame = predictive_bands(sel, real, 1, clean, held, NOISE, {}, disc)
-    out2, frame2 = predictive_bands(sel, real, 1, bad, held, NOISE, {}, disc)
+    out, frame = predictive_bands(sel, real, 1, clean, held, NOISE, {}, disc, emulated())
+    out2, frame2 = predictive_bands(sel, real, 1, bad, held, NOISE, {}, disc, emulated())
 
     def edges(f, r):
         g = f[(f.record == r) & (f.model == "after")]
@@ -308,3 +309,59 @@ def test_the_series_table_carries_each_folds_band_coverage_and_shows_a_dash_wher
     old = loro_table({"s__C": _fold("C")})
     assert old["totals"]["mean_predictive_coverage_90_after"] is None
     assert table_rows({"experiment": "s", **old})[-1].endswith("| - |")
+
+
+# ---------------------------------------------------------------------------------------------------
+# what the discrepancy is read net of: the plug-in population's spread, not the predictive t's
+# ---------------------------------------------------------------------------------------------------
+def _netted_discrepancy(k: int, replicates: int = 600, d0: float = 1.0, seed: int = 3) -> dict:
+    """A per-record value theta ~ N(0, 1) over records, each estimated with sd 0.2; a new record predicted
+    at the population median of ``k`` others, its residual ``theta_new + delta - median`` with a
+    discrepancy ``delta ~ N(0, d0)``: the mean of ``residual^2`` less the variance of each population's
+    draws, the t's and the plug-in normal's, over ``replicates`` populations."""
+    import math
+    from dataclasses import replace
+
+    from enkf.diagnosis.population import fit_population
+
+    rng = np.random.default_rng(seed)
+    net = {"t": [], "plugin": []}
+    for _ in range(replicates):
+        theta = rng.standard_normal(k + 1)
+        x = theta + 0.2 * rng.standard_normal(k + 1)
+        pop = fit_population({f"r{i}": (x[i], 0.2) for i in range(k)}, param="g", lower=-6.0, upper=6.0, summary=True)
+        res2 = (theta[k] + math.sqrt(d0) * rng.standard_normal() - pop.median()) ** 2
+        net["t"].append(res2 - np.var(pop.draw(rng, 400)))
+        net["plugin"].append(res2 - np.var(replace(pop, df=math.inf).draw(rng, 400)))
+    return {k2: float(np.mean(v)) for k2, v in net.items()}
+
+
+@pytest.mark.parametrize("k", [3, 4])
+def test_the_discrepancy_is_read_net_of_the_plug_in_population_not_the_predictive_t(k):
+    """With three or four records the t has one or two degrees of freedom: infinite variance, so the
+    variance of its (box-clipped) draws is set by the box and the discrepancy read net of it is far below
+    the truth (measured -4.1 and -1.2 for a true 1.0 over 2,000 populations; residual_discrepancy floors
+    it at zero). Net of the plug-in ``tau^2 + se^2``: 1.07 and 1.07 (se 0.08). Here 600 populations, se
+    about 0.14: a 0.35 tolerance is 2.5 se."""
+    got = _netted_discrepancy(k)
+    assert abs(got["plugin"] - 1.0) < 0.35
+    assert got["t"] < 0.0
+
+
+def test_the_band_nets_out_plug_in_draws_of_the_per_record_values(loop):
+    """enkf.diagnosis.band.plugin_draws on the stand-in's cross-validation folds (four records each, a t
+    with two degrees of freedom): the base model's draws are the prediction's own; the face-gap model's
+    spread over its plug-in draws is narrower than over the t's, and the same seed gives the same draws."""
+    from enkf.diagnosis.band import plugin_draws
+
+    _, sel, _, _ = loop
+    seed = int(sel.settings.get("seed", 0))
+    base, gap = sel.steps[0], sel.steps[1]
+    fold0 = base.cv.folds["A"]
+    assert np.array_equal(plugin_draws(emulated(), base.spec, fold0, seed=seed), fold0["prediction"].draws)
+    fold = gap.cv.folds["A"]
+    assert fold["prediction"].populations["face_gap.gap_m"].df == 2
+    plug = plugin_draws(emulated(), gap.spec, fold, seed=seed)
+    t_var = np.var(fold["prediction"].draws, axis=0).mean()
+    assert np.var(plug, axis=0).mean() < 0.8 * t_var
+    assert np.array_equal(plug, plugin_draws(emulated(), gap.spec, fold, seed=seed))

@@ -29,12 +29,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+import math
+from dataclasses import replace
+
 from ..covariance import DiagonalError
 from ..predictive import predictive_band
 from ..scores import interval_score as _interval_score
 from ..variability import SMOOTH_WINDOW, _smooth, smoothed_variance
 
-__all__ = ["RunBand", "informative", "interval_score", "replicate_variance", "residual_discrepancy", "run_band"]
+__all__ = ["RunBand", "informative", "interval_score", "plugin_draws", "replicate_variance", "residual_discrepancy",
+           "run_band"]
 
 #: The informativeness bar: a band's mean interval score at most this fraction of the prior band's. The
 #: loosest of issue 52's bars for a posterior's own interval score over the prior's (0.55, for ``E_t``).
@@ -97,11 +101,29 @@ def replicate_variance(point_runs: Sequence, window: int = SMOOTH_WINDOW) -> tup
     return smoothed_variance(dev, dof, np.zeros(dev.shape[1], int), window), dof
 
 
+def plugin_draws(model, spec, fold: Mapping, *, seed: int) -> np.ndarray:
+    """The curves of a cross-validated record's prediction (``fold``: :func:`enkf.diagnosis.cross_validate`'s
+    fold, its ``fit`` and ``prediction``) with each per-record value drawn from its population's plug-in
+    normal, ``N(mu, tau^2 + se(mu)^2)``, instead of the predictive t: what :func:`residual_discrepancy` nets
+    out of the record's residual. Why not the t: the residual's expected square holds the value's expected
+    squared departure from the point, ``tau^2 + se(mu)^2``; the t's variance is infinite at the one and two
+    degrees of freedom of three- and four-record populations, so its draws' variance is set by the box
+    that clips them, and ``D`` read net of it comes out near zero. The band still draws from the t (its
+    quantiles carry the uncertainty of ``tau``)."""
+    pred = fold["prediction"]
+    if not spec.per_record:
+        return np.asarray(pred.draws, float)
+    from .crossval import predict_record  # crossval is the heavier module; imported where used
+    normal = {p: replace(pop, df=math.inf) for p, pop in pred.populations.items()}
+    return np.asarray(predict_record(model, spec, fold["fit"], pred.record, normal, seed=seed).draws, float)
+
+
 def residual_discrepancy(residuals: Sequence, counted: Sequence, window: int) -> np.ndarray:
     """Per-time variance of the model discrepancy ``D`` read off other records' residuals: ``residuals[i]``
     (m,) a record's data less the mean of its real runs at a point fitted without it (its cross-validation
     point), ``counted[i]`` (m,) the variance the band's other terms already give that residual (parameters,
-    simulator ``S (1 + 1/K)``, noise). The mean over records of ``residual^2 - counted``, averaged over
+    their per-record values from the plug-in population, :func:`plugin_draws`; simulator ``S (1 + 1/K)``;
+    noise). The mean over records of ``residual^2 - counted``, averaged over
     ``window`` neighbouring times and floored at zero: ``D`` where the model errs (the toe, the peak, the
     post-peak), none where it does not (before the wave arrives)."""
     E = np.array(residuals, dtype=float, ndmin=2)
