@@ -45,22 +45,29 @@ def _mean(values: list[float]) -> float | None:
     return float(np.mean(values)) if values else None
 
 
-def series_errors(folder: Path, step: str) -> dict:
-    """RMSE [Pa] of the held-out and the calibration records over a series' folds at ``step`` (before or
-    after), and the mean coverage of their 90 % bands where the checks scored them."""
-    rmse = {"heldout": [], "calibration": []}
-    cover = {"heldout": [], "calibration": []}
+def _rows(folder: Path, step: str):
+    """``(record, held out?, RMSE [Pa], band coverage or None)`` of every record of a series' fold checks at
+    ``step`` (before or after)."""
     for f in sorted(folder.glob("*_check.json")):
         check = json.loads(f.read_text())
         bands = (check.get("predictive_band") or {}).get("records") or {}
         for rec, e in (check.get("errors_per_record") or {}).items():
             if not isinstance(e, dict) or not isinstance(e.get(step), dict):
                 continue
-            role = "heldout" if e.get("data") == "heldout" else "calibration"
-            rmse[role].append(float(e[step]["rmse"]))
             c = ((bands.get(rec) or {}).get(step) or {}).get("predictive_coverage_90")
-            if c is not None:
-                cover[role].append(float(c))
+            yield rec, e.get("data") == "heldout", float(e[step]["rmse"]), None if c is None else float(c)
+
+
+def series_errors(folder: Path, step: str) -> dict:
+    """RMSE [Pa] of the held-out and the calibration records over a series' folds at ``step`` (before or
+    after), and the mean coverage of their 90 % bands where the checks scored them."""
+    rmse = {"heldout": [], "calibration": []}
+    cover = {"heldout": [], "calibration": []}
+    for _, held, r, c in _rows(folder, step):
+        role = "heldout" if held else "calibration"
+        rmse[role].append(r)
+        if c is not None:
+            cover[role].append(c)
     h, c = _rms(rmse["heldout"]), _rms(rmse["calibration"])
     return {"records": {k: len(v) for k, v in rmse.items()}, "rmse_heldout_Pa": h, "rmse_calibration_cv_Pa": c,
             "ratio": h / c if h and c else None, "band_coverage_90_heldout": _mean(cover["heldout"]),
@@ -69,18 +76,11 @@ def series_errors(folder: Path, step: str) -> dict:
 
 def _by_record(folder: Path, step: str) -> tuple[dict, dict]:
     held, cv = {}, {}
-    for f in sorted(folder.glob("*_check.json")):
-        check = json.loads(f.read_text())
-        bands = (check.get("predictive_band") or {}).get("records") or {}
-        for rec, e in (check.get("errors_per_record") or {}).items():
-            if not isinstance(e, dict) or not isinstance(e.get(step), dict):
-                continue
-            c = ((bands.get(rec) or {}).get(step) or {}).get("predictive_coverage_90")
-            row = (float(e[step]["rmse"]), None if c is None else float(c))
-            if e.get("data") == "heldout":
-                held[rec] = row
-            else:
-                cv.setdefault(rec, []).append(row)
+    for rec, is_held, r, c in _rows(folder, step):
+        if is_held:
+            held[rec] = (r, c)
+        else:
+            cv.setdefault(rec, []).append((r, c))
     return held, cv
 
 
