@@ -8,7 +8,8 @@ with ``K`` real runs ``y_k = mu(theta_0) + eta_k`` scatters about the runs' mean
 * ``mu(theta) - mu(theta_0)`` over the posterior members x population draws, read on the emulator
   (``draws - emulated_point``: an emulator bias common to both cancels);
 * ``eta - mean_k eta_k``: variance ``S (1 + 1/K)``, ``S`` the simulator's variability;
-* ``delta``: the model discrepancy ``D``;
+* ``delta``: the model discrepancy ``D``, read off other records' residuals net of the other terms, the
+  per-record values' spread taken from the population's plug-in normal (:func:`plugin_draws`);
 * ``e``: the instrument noise ``R``.
 
 The band is pointwise (each time's quantiles), so only the per-time variances of ``S``, ``D`` and ``R``
@@ -24,13 +25,11 @@ Raftery (2007, eq. 43) per observation, ``(u - l) + (2/a)(l - y)1{y < l} + (2/a)
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
-
-import math
-from dataclasses import replace
 
 from ..covariance import DiagonalError
 from ..predictive import predictive_band
