@@ -1212,7 +1212,8 @@ QUOTES: list[Quote] = [
           "{old:.2f} s before the rules collecting", lambda J: {
               "new": J("benchmarks/results/bench_batch.json")["new"]["overhead_per_member_s_median"],
               "old": J("benchmarks/results/bench_batch.json")["old"]["overhead_per_member_s_median"]}),
-    Quote(CL, "residual less what (a), (b) and (d) already give it, averaged over {w:.0f} us and floored at zero",
+    Quote(CL, "residual less what (a), (b) and (d) already give it (in (a) the per-record values from the population's\n"
+          "plug-in normal, whose spread is what a residual's expected square holds), averaged over {w:.0f} us and\nfloored at zero",
           lambda J: {"w": _band_window_us()}),
     Quote(CL, "so its curve scores it out of sample as well. The {w:.0f} us were chosen on the",
           lambda J: {"w": _band_window_us()}),
