@@ -257,14 +257,13 @@ def _cv_residuals(selection, real: Mapping, step: int, obs: Observations, noise:
     """``{record: (residual, counted)}`` of the calibration records with real runs at their cross-validation
     point of ``step``: the data less the runs' mean, and the variance the band's other terms give it there
     (parameters, with plugin_draws' per-record values; simulator ``S (1 + 1/K)``, the record's noise)."""
-    out = {}
+    out, st, seed = {}, selection.step(step), int(selection.settings.get("seed", 0))
     for r in obs.records:
         runs = real["cv"].get(step, {}).get(r)
         if runs is None:
             continue
         Y = np.array(runs, dtype=float, ndmin=2)
-        st = selection.step(step)
-        draws = plugin_draws(model, st.spec, st.cv.folds[r], seed=int(selection.settings.get("seed", 0)))
+        draws = plugin_draws(model, st.spec, st.cv.folds[r], seed=seed)
         S, _ = replicate_variance([c[r] for c in real["cv"].values() if c.get(r) is not None])
         if S is None:
             S = np.diag(simulator[r].dense()) if r in simulator else np.zeros(Y.shape[1])

@@ -32,10 +32,8 @@ otherwise the shipped form stays. Held-out records are not read.
 from __future__ import annotations
 
 import json
-import math
 import pickle
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -48,8 +46,8 @@ from calibration.observations import read_observations  # noqa: E402
 from calibration.protocol import real_curves  # noqa: E402
 from calibration.walk import check_runs_of  # noqa: E402
 from studies.band_discrepancy import score_series  # noqa: E402
-from enkf.diagnosis.band import replicate_variance, residual_discrepancy, run_band  # noqa: E402
-from enkf.diagnosis.crossval import predict_record, seed_for  # noqa: E402
+from enkf.diagnosis.band import plugin_draws, replicate_variance, residual_discrepancy, run_band  # noqa: E402
+from enkf.diagnosis.crossval import seed_for  # noqa: E402
 from enkf.diagnosis.population import record_name  # noqa: E402
 
 FORMS = ("predictive", "plugin", "lumped")
@@ -71,8 +69,7 @@ def _form_draws(form, model, spec, fold, seed) -> tuple[np.ndarray, np.ndarray]:
     if form == "predictive" or not spec.per_record:
         return pred.draws, pred.draws
     if form == "plugin":
-        normal = {p: replace(pop, df=math.inf) for p, pop in pred.populations.items()}
-        return predict_record(model, spec, fold["fit"], pred.record, normal, seed=seed).draws, pred.draws
+        return plugin_draws(model, spec, fold, seed=seed), pred.draws
     members = _members_draws(model, spec, fold["fit"], pred)
     return members, members
 

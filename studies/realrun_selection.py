@@ -267,9 +267,15 @@ def check_runs(s, effect, cv, meshes):
     return {r: np.array(out[i * K:(i + 1) * K]) for i, r in enumerate(s.records)}
 
 
-def recheck(s, w, earlier: dict, k_meshes: int) -> dict:
-    """The earlier run's fits compared on ``k_meshes`` check meshes, and on its own three first."""
-    meshes = tuple(range(RECHECK_FIRST, RECHECK_FIRST + int(k_meshes)))
+def named(z_p: dict) -> str:
+    """The rule: among the candidates whose ``(z, p)`` has p below LEVEL, the largest z; else the base."""
+    passing = {e: z for e, (z, p) in z_p.items() if p < LEVEL}
+    return max(passing, key=passing.get) if passing else "base_kept"
+
+
+def recheck(s, w, earlier: dict) -> dict:
+    """The earlier run's fits compared on COMPARE_MESHES, and on its own three first."""
+    meshes = COMPARE_MESHES
     base = check_runs(s, None, earlier["base"]["cv_points"], meshes)
     out = {"check_meshes": list(meshes), "candidates": {}}
     for effect, c in earlier["candidates"].items():
@@ -278,9 +284,8 @@ def recheck(s, w, earlier: dict, k_meshes: int) -> dict:
         out["candidates"][effect] = {"on_first_three": first, f"on_{len(meshes)}": compare(s, w, base, cand),
                                      "earlier": {k: c[k] for k in ("z", "p", "dof")}}
         print(effect, out["candidates"][effect], flush=True)
-    passing = {e: v[f"on_{len(meshes)}"]["z"] for e, v in out["candidates"].items()
-               if v[f"on_{len(meshes)}"]["p"] < LEVEL}
-    out["named"] = max(passing, key=passing.get) if passing else "base_kept"
+    key = f"on_{len(meshes)}"
+    out["named"] = named({e: (v[key]["z"], v[key]["p"]) for e, v in out["candidates"].items()})
     return out
 
 
@@ -323,7 +328,7 @@ def main(argv=None):
         if a.recheck:
             result = {"study": "realrun_selection (recheck)", "run": a.run, "exp": a.exp, "cores": 2,
                       "level": LEVEL, "fits_from": a.recheck,
-                      **recheck(s, w, json.loads(Path(a.recheck).read_text()), a.check_meshes)}
+                      **recheck(s, w, json.loads(Path(a.recheck).read_text()))}
             result["runs"], result["wall_s"] = s.runs, round(time.perf_counter() - t0, 1)
             Path(a.out).write_text(json.dumps(result, indent=1) + "\n")
             print("named:", result["named"], f"({s.runs} runs, {result['wall_s']} s)")
@@ -341,8 +346,7 @@ def main(argv=None):
             c = result["candidates"][effect]
             print(f"{effect}: z {c['z']:.2f} p {c['p']:.4f}; fit {fit['fit']}", flush=True)
             Path(a.out).write_text(json.dumps(result, indent=1) + "\n")
-        passing = {e: c["z"] for e, c in result["candidates"].items() if c["p"] < LEVEL}
-        result["named"] = max(passing, key=passing.get) if passing else "base_kept"
+        result["named"] = named({e: (c["z"], c["p"]) for e, c in result["candidates"].items()})
         result["runs"], result["wall_s"] = s.runs, round(time.perf_counter() - t0, 1)
         Path(a.out).write_text(json.dumps(result, indent=1) + "\n")
         print("named:", result["named"], f"({s.runs} runs, {result['wall_s']} s)")

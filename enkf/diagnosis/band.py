@@ -25,9 +25,8 @@ Raftery (2007, eq. 43) per observation, ``(u - l) + (2/a)(l - y)1{y < l} + (2/a)
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -35,6 +34,7 @@ from ..covariance import DiagonalError
 from ..predictive import predictive_band
 from ..scores import interval_score as _interval_score
 from ..variability import SMOOTH_WINDOW, _smooth, smoothed_variance
+from .crossval import predict_record
 
 __all__ = ["RunBand", "informative", "interval_score", "plugin_draws", "replicate_variance", "residual_discrepancy",
            "run_band"]
@@ -112,8 +112,7 @@ def plugin_draws(model, spec, fold: Mapping, *, seed: int) -> np.ndarray:
     pred = fold["prediction"]
     if not spec.per_record:
         return np.asarray(pred.draws, float)
-    from .crossval import predict_record  # crossval is the heavier module; imported where used
-    normal = {p: replace(pop, df=math.inf) for p, pop in pred.populations.items()}
+    normal = {p: pop.plugin() for p, pop in pred.populations.items()}
     return np.asarray(predict_record(model, spec, fold["fit"], pred.record, normal, seed=seed).draws, float)
 
 

@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import optimize, stats
@@ -97,6 +97,11 @@ class Population:
     def predictive_sd_work(self) -> float:
         """``sqrt(tau^2 + se(mu)^2)``, the scale of the predictive t (or normal)."""
         return math.hypot(self.tau_work, self.se_mu_work)
+
+    def plugin(self) -> "Population":
+        """The same population with the plug-in normal predictive, ``N(mu, tau^2 + se(mu)^2)`` on the working
+        scale: what a new record's value departs from the point by in expectation, ``tau`` taken as known."""
+        return replace(self, df=math.inf)
 
     def _to(self, x):
         return np.exp(x) if self.scale == "log" else x
