@@ -25,6 +25,11 @@ own, so its z is reproduced on them first) and compared by the same test, with t
 earlier run's three meshes). Why: with three meshes a record's realization part of the paired
 difference has two degrees of freedom, and the friction series' z 4.88 stayed at p 0.0135; the plan for
 K is fixed before the runs (studies/README.md, the row of this mode).
+
+``--versus FIT.json --check-meshes K``: no fitting; the earlier run's named candidate against each other
+candidate that passed against the base there, on the same check meshes (z > 0: the named one predicts
+better). Why: on two development series a second candidate passed too (a sibling of the planted effect,
+or the strength-confounded rate law); the rule of :func:`grouped` says whether the data tell them apart.
 """
 from __future__ import annotations
 
@@ -289,6 +294,32 @@ def recheck(s, w, earlier: dict) -> dict:
     return out
 
 
+def versus(s, w, earlier: dict) -> dict:
+    """The named candidate of an earlier run of this script against every other candidate that passed against
+    the base there: both fits' cross-validation points run on COMPARE_MESHES and compared by the same paired
+    test, the other candidate as the reference (z > 0: the named one predicts the records better). The rule
+    (:func:`grouped`): the named effect stands alone where it beats each of them at LEVEL, else the ones it
+    does not beat share its group."""
+    name = earlier["named"]
+    cands = earlier["candidates"]
+    others = [e for e, c in cands.items() if e != name and c["p"] < LEVEL]
+    out = {"named": name, "check_meshes": list(COMPARE_MESHES), "versus": {}}
+    if name not in cands:
+        return {**out, "group": [], "note": "nothing named: nothing to tell apart"}
+    mine = check_runs(s, name, cands[name]["cv_points"], COMPARE_MESHES)
+    for e in others:
+        theirs = check_runs(s, e, cands[e]["cv_points"], COMPARE_MESHES)
+        out["versus"][e] = {**compare(s, w, theirs, mine), "against_base": {k: cands[e][k] for k in ("z", "p", "dof")}}
+        print(name, "vs", e, out["versus"][e], flush=True)
+    out["group"] = grouped(name, {e: (v["z"], v["p"]) for e, v in out["versus"].items()})
+    return out
+
+
+def grouped(name: str, z_p: dict) -> list:
+    """The named effect's group: itself and every other passing candidate it does not beat at LEVEL."""
+    return [name] + sorted(e for e, (z, p) in z_p.items() if not p < LEVEL)
+
+
 def compare(s, w, base_runs, cand_runs):
     y, cur, cand, noise = {}, {}, {}, {}
     for r in s.records:
@@ -315,6 +346,8 @@ def main(argv=None):
     ap.add_argument("--profile-steps", type=int, default=2)
     ap.add_argument("--profile-real", action="store_true")
     ap.add_argument("--recheck", help="an earlier output of this script: compare its fits on more check meshes")
+    ap.add_argument("--versus", help="an earlier output of this script: its named candidate against the others "
+                    "that passed there, on the check meshes")
     ap.add_argument("--check-meshes", type=int, default=len(CHECK_MESHES),
                     help="check meshes of the comparison (the first three also set the weights)")
     a = ap.parse_args(argv)
@@ -325,6 +358,14 @@ def main(argv=None):
     with Pool(2, initializer=_init, initargs=(a.run,)) as pool:
         s = Series(a.run, a.config, a.exp, pool)
         w = weights(s)
+        if a.versus:
+            result = {"study": "realrun_selection (versus)", "run": a.run, "exp": a.exp, "cores": 2,
+                      "level": LEVEL, "fits_from": a.versus,
+                      **versus(s, w, json.loads(Path(a.versus).read_text()))}
+            result["runs"], result["wall_s"] = s.runs, round(time.perf_counter() - t0, 1)
+            Path(a.out).write_text(json.dumps(result, indent=1) + "\n")
+            print("group:", result["group"], f"({s.runs} runs, {result['wall_s']} s)")
+            return result
         if a.recheck:
             result = {"study": "realrun_selection (recheck)", "run": a.run, "exp": a.exp, "cores": 2,
                       "level": LEVEL, "fits_from": a.recheck,
