@@ -124,6 +124,7 @@ rule all:
         expand("results/{exp}/diagnosis/report.json", exp=diagnosed_experiments()),
         expand("results/{exp}/diagnosis/check.json", exp=diagnosed_experiments()),
         expand("results/{exp}/diagnosis/refit.json", exp=refitted_experiments()),
+        expand("results/{exp}/diagnosis/realrun.json", exp=realrun_experiments()),
         expand("results/{exp}/loro/summary.json", exp=loro_experiments()),
         expand("results/{exp}/sensitivity/report.json", exp=SENSITIVITY_RUN),
 

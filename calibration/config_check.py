@@ -45,7 +45,9 @@ def _key(path: Sequence) -> str:
 def apply_defaults(instance, schema: Mapping):
     """Fill in the ``default`` of every schema property missing from ``instance`` (recursively, also
     through ``additionalProperties`` and array ``items``). Returns a new object."""
-    if isinstance(instance, dict) and schema.get("type") in ("object", None):
+    kind = schema.get("type")
+    # an object that may also be null (``type: [object, "null"]``) gets its defaults where it is given
+    if isinstance(instance, dict) and (kind in ("object", None) or (isinstance(kind, list) and "object" in kind)):
         out = dict(instance)
         props = schema.get("properties", {})
         for key, sub in props.items():

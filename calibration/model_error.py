@@ -82,7 +82,8 @@ def check_replicate_count(exp: Mapping) -> int:
 #: The spawn key of the mesh realizations' stream (``calibration.experiment.PURPOSES["mesh"]``) and what a
 #: simulation's realization is drawn for.
 MESH_PURPOSE = 6
-MESH_STAGES = {"member": 1, "truth": 2, "replicate": 3, "design": 4, "check": 5, "approximation": 6, "refine": 7}
+MESH_STAGES = {"member": 1, "truth": 2, "replicate": 3, "design": 4, "check": 5, "approximation": 6, "refine": 7,
+               "realrun": 8}
 
 
 def mesh_seed(seed: int, stage: str, k: int = 0, index: int = 0, record: int = 0) -> int:

@@ -485,9 +485,40 @@ def _covariates(cov) -> list[str]:
     return out
 
 
-def summary_html(name: str, summary: Mapping, check: Mapping | None = None, refit: Mapping | None = None) -> str:
+def _realrun(real) -> list[str]:
+    """What the selection on real runs names (diagnosis/realrun.json, calibration.realrun), beside the walk."""
+    if not isinstance(real, Mapping) or not isinstance(real.get("candidates"), Mapping):
+        return []
+    rows = []
+    for e, c in real["candidates"].items():
+        own = {k: v for k, v in (c.get("fit") or {}).items() if k not in ("sigma_t", "E_t")}
+        fit = ", ".join(f"{escape(k)} {_num(v, _unit(k.split('@')[0])[0])} {escape(_unit(k.split('@')[0])[1])}".strip()
+                        for k, v in own.items())
+        rows.append([escape(str(e)), fit, _num(c.get("fit", {}).get("sigma_t"), 1e-6), _num(c.get("z"), fmt=".3g"),
+                     _num(c.get("p"), fmt=".2g")])
+    name = str(real.get("named"))
+    if name == "base_kept":
+        said = (f"No candidate's real runs predict the calibration records better than the base model's at "
+                f"p &lt; {_num(real.get('level'))}: the base model is kept")
+    else:
+        group = [escape(str(g)) for g in real.get("group") or [name]]
+        said = (f"<b>{escape(name)}</b> is named: its real runs predict the calibration records better than the "
+                f"base model's, with the largest z of those below p &lt; {_num(real.get('level'))}"
+                + (f"; the records do not tell it apart from {', '.join(group[1:])}" if len(group) > 1 else
+                   "; it beats every other candidate that passed"))
+    return ['<p style="margin:0.4em 0 0 0">' + f"The selection on real runs ({escape(str(real.get('runs', '?')))} FDEM "
+            f"runs on the calibration records; diagnosis/realrun.json): each candidate and the base model fitted on "
+            f"real runs, each calibration record predicted from the others on "
+            f"{escape(str(real.get('check_meshes', '?')))} meshes. {said}. This is beside the walk: the verdict "
+            "above is the walk's.</p>",
+            _table(["candidate", "its fitted parameters", "sigma_t [MPa]", "z against the base", "p"], rows)]
+
+
+def summary_html(name: str, summary: Mapping, check: Mapping | None = None, refit: Mapping | None = None,
+                 realrun: Mapping | None = None) -> str:
     """The summary of experiment ``name`` as an HTML fragment (ASCII, inline styles); ``refit``:
-    diagnosis/refit.json where the shipped model was re-fitted on real runs."""
+    diagnosis/refit.json where the shipped model was re-fitted on real runs; ``realrun``:
+    diagnosis/realrun.json where the selection on real runs ran."""
     try:
         parts = ['<meta charset="utf-8">', '<div class="experiment-summary" style="font-family:sans-serif">']
         parts += _headline(name, summary)
@@ -495,10 +526,11 @@ def summary_html(name: str, summary: Mapping, check: Mapping | None = None, refi
             parts += _in_short(summary, check, refit)
         parts += _parameters(summary) + _misfit(summary) + _records(summary)
         if isinstance(check, Mapping):
-            parts += _diagnosis(check, summary) + _refit(refit)
+            parts += _diagnosis(check, summary) + _refit(refit) + _realrun(realrun)
         parts.append(f"<p style=\"margin:0.2em 0;font-size:0.85em\">From results/{escape(name)}/summary.json"
                      + (f" and results/{escape(name)}/diagnosis/check.json" if isinstance(check, Mapping) else "")
                      + (f" and results/{escape(name)}/diagnosis/refit.json" if isinstance(refit, Mapping) else "")
+                     + (f" and results/{escape(name)}/diagnosis/realrun.json" if isinstance(realrun, Mapping) else "")
                      + "; the plots are under the experiment's own category.</p>")
     except Exception as exc:  # noqa: BLE001 - a page of the report must never fail the run
         parts = ['<meta charset="utf-8">', f"<div><p>{escape(name)}: summary not readable "

@@ -82,6 +82,8 @@ localrules:
     diagnosis_check,
     diagnosis_refit_round,
     diagnosis_refit,
+    diagnosis_realrun_round,
+    diagnosis_realrun,
     loro,
 
 

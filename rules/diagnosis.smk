@@ -233,6 +233,66 @@ rule diagnosis_refit:
         "../scripts/diagnosis_refit.py"
 
 
+# The selection on real runs (calibration.realrun; diagnosis.realrun_selection): each round a checkpoint
+# that takes the last round's runs and lists the next round's, on the calibration records only; beside
+# the walk, whose verdict it does not change.
+checkpoint diagnosis_realrun_round:
+    input:
+        unpack(realrun_round_inputs),
+    output:
+        state="results/{exp}/diagnosis/realrun/round_{r}.json",
+    log:
+        "results/{exp}/logs/diagnosis_realrun_round_{r}.log",
+    wildcard_constraints:
+        r="[0-9]+",
+    conda:
+        CONDA_ENV
+    params:
+        exp=lambda wc: EXPERIMENTS[wc.exp],
+    script:
+        "../scripts/diagnosis_realrun_round.py"
+
+
+# One real FDEM run of a round of the selection on real runs: a fit's linearisation (the selection's own
+# mesh realizations) or a cross-validation point (the check's realizations).
+rule diagnosis_realrun_member:
+    input:
+        batch=lambda wc: batch_file("diagnosis_realrun_member", wc),
+    output:
+        curve="results/{exp}/diagnosis/realrun/iter_{it}/{row}/curve.csv",
+        run="results/{exp}/diagnosis/realrun/iter_{it}/{row}/run.json",
+    wildcard_constraints:
+        it="[0-9]+",
+        row="[0-9]+",
+    params:
+        parameters=lambda wc: {"values": realrun_row(wc)["simulator"]},
+        record_file=lambda wc: design_records(wc.exp)[realrun_row(wc)["record"]],
+        mesh_seed=realrun_mesh_seed,
+        run=lambda wc: {
+            "realrun_round": int(wc.it),
+            "realrun_row": int(wc.row),
+            **{k: realrun_row(wc)[k] for k in ("record", "track", "kind", "mesh")},
+        },
+
+
+rule diagnosis_realrun:
+    """realrun.json: what the selection on real runs names, each candidate's fit and test, the group."""
+    input:
+        last=lambda wc: realrun_last_round(wc.exp),
+    output:
+        realrun=report(
+            "results/{exp}/diagnosis/realrun.json",
+            category="{exp}",
+            subcategory="diagnosis",
+        ),
+    log:
+        "results/{exp}/logs/diagnosis_realrun.log",
+    conda:
+        CONDA_ENV
+    script:
+        "../scripts/diagnosis_realrun.py"
+
+
 rule loro:
     """Leave one record out over a series: the folds' held-out errors before and after, per fold and in
     total, the series' page (summary.html) and the figure."""

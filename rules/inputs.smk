@@ -91,6 +91,7 @@ SIMULATION_STAGES = (
     "diagnosis_member",
     "diagnosis_check_member",
     "diagnosis_refit_member",
+    "diagnosis_realrun_member",
 )
 
 
@@ -98,7 +99,8 @@ def stage_key(stage, wc):
     """The folder of one instance of a stage: the ensemble iteration, or `all`."""
     return (
         f"iter_{wc.it}"
-        if stage in ("member", "replicate", "diagnosis_refit_member")
+        if stage
+        in ("member", "replicate", "diagnosis_refit_member", "diagnosis_realrun_member")
         else "all"
     )
 
@@ -136,6 +138,9 @@ def stage_runs(exp, stage, key):
     if stage == "diagnosis_refit_member":
         it = key.removeprefix("iter_")
         return [{"it": it, "row": str(i)} for i in range(len(refit_rows_of(exp, it)))]
+    if stage == "diagnosis_realrun_member":
+        it = key.removeprefix("iter_")
+        return [{"it": it, "row": str(i)} for i in range(len(realrun_rows_of(exp, it)))]
     raise ValueError(f"not a simulation stage: {stage!r}")
 
 
@@ -204,6 +209,11 @@ def batch_inputs(wc):
         rows = refit_rows_of(exp, it)
         names = {rows[int(r["row"])]["record"] for r in runs}
         files = {"rows": refit_round_file(exp, it)}
+    elif wc.stage == "diagnosis_realrun_member":
+        it = wc.key.removeprefix("iter_")
+        rows = realrun_rows_of(exp, it)
+        names = {rows[int(r["row"])]["record"] for r in runs}
+        files = {"rows": realrun_round_file(exp, it)}
     else:
         names = {r["record"] for r in runs}
         pattern = STAGE_PARAMETERS.get(wc.stage)
@@ -358,6 +368,8 @@ def report_summary_inputs(wc):
         files["check"] = f"results/{wc.exp}/diagnosis/check.json"
     if refit_on(wc.exp):  # the shipped model's parameters on real runs
         files["refit"] = f"results/{wc.exp}/diagnosis/refit.json"
+    if realrun_on(wc.exp):  # the selection on real runs, beside the walk
+        files["realrun"] = f"results/{wc.exp}/diagnosis/realrun.json"
     return files
 
 
@@ -505,6 +517,69 @@ def refit_last_round(exp):
     while refit_state(exp, r)["phase"] != "done":
         r += 1
     return refit_round_file(exp, r)
+
+
+def realrun_on(exp):
+    """Whether the experiment runs the selection on real runs (diagnosis.realrun_selection, calibration.realrun)."""
+    d = diagnosis_cfg(exp)
+    return bool(d) and d.get("realrun_selection") is not None
+
+
+def realrun_experiments():
+    return [e for e in diagnosed_experiments() if realrun_on(e)]
+
+
+def realrun_round_file(exp, r):
+    return f"results/{exp}/diagnosis/realrun/round_{r}.json"
+
+
+def realrun_state(exp, r):
+    """Round `r` of the selection on real runs: its checkpoint's file."""
+    return read_json(checkpoints.diagnosis_realrun_round.get(exp=exp, r=r).output.state)
+
+
+def realrun_rows_of(exp, r):
+    return realrun_state(exp, r)["rows"]
+
+
+def realrun_row(wc):
+    return realrun_rows_of(wc.exp, wc.it)[int(wc.row)]
+
+
+def realrun_mesh_seed(wc):
+    """A fit run on the selection's own realizations; a check run on the check's (its k-th mesh of the
+    record), so that the check meshes are the confirmation walk's where they overlap."""
+    row = realrun_row(wc)
+    stage = "check" if row["kind"] == "check" else "realrun"
+    index = list(design_records(wc.exp)).index(row["record"])
+    return run_mesh_seed(EXPERIMENTS[wc.exp], stage, 0, int(row["mesh"]), index)
+
+
+def realrun_round_inputs(wc):
+    """Round 0 reads the calibration's observations and posterior; round r also every earlier round's file
+    and runs."""
+    r = int(wc.r)
+    files = {
+        "obs": f"results/{wc.exp}/observations/obs.csv",
+        "obs_meta": f"results/{wc.exp}/observations/obs.json",
+        "summary": f"results/{wc.exp}/summary.json",
+    }
+    if r > 0:
+        files["rounds"] = [realrun_round_file(wc.exp, k) for k in range(r)]
+        files["runs"] = [
+            b
+            for k in range(r)
+            for b in stage_batch_files(wc.exp, "diagnosis_realrun_member", f"iter_{k}")
+        ]
+    return files
+
+
+def realrun_last_round(exp):
+    """Walk the selection's checkpoints until a round says it is done; that round's file."""
+    r = 0
+    while realrun_state(exp, r)["phase"] != "done":
+        r += 1
+    return realrun_round_file(exp, r)
 
 
 # rules/sensitivity.smk

@@ -9,4 +9,6 @@ from calibration.workflow_io import atomic_write_text, read_json
 inp = snakemake.input
 check = read_json(inp.check) if "check" in inp.keys() else None
 refit = read_json(inp.refit) if "refit" in inp.keys() else None
-atomic_write_text(snakemake.output.html, summary_html(snakemake.wildcards.exp, read_json(inp.summary), check, refit))
+realrun = read_json(inp.realrun) if "realrun" in inp.keys() else None
+atomic_write_text(snakemake.output.html, summary_html(snakemake.wildcards.exp, read_json(inp.summary), check, refit,
+                                                      realrun))

@@ -37,7 +37,9 @@ def _small(cfg: dict) -> dict:
     d = exp["diagnosis"]
     d.pop("exclude", None)
     d.update(candidates=["rate_strength", "gauge_gain"], design_points=8, members=24,
-             physical_upper={"rate_strength.k": 0.6})
+             physical_upper={"rate_strength.k": 0.6},
+             # the selection on real runs too, at a CI size (a two-value profile, three check meshes)
+             realrun_selection={"candidates": ["rate_strength"], "profile": 2, "check_meshes": 3})
     return cfg
 
 
@@ -78,6 +80,17 @@ def test_a_disc_series_runs_the_loop_and_keeps_the_base_model_when_nothing_is_pl
         # the held-out disc's peak is about 33 MPa: its prediction misses it by less than half
         assert h["peak_rel_error"] < 0.5
     assert "base_kept" in (res / "summary.html").read_text()
+    # the selection on real runs, on the calibration records only, names nothing either
+    real = json.loads((res / "diagnosis" / "realrun.json").read_text())
+    assert real["records"] == ["TinyDisc_01", "TinyDisc_02"] and real["named"] == "base_kept" and real["group"] == []
+    rate = real["candidates"]["rate_strength"]
+    assert set(rate["cv_points"]) == {"TinyDisc_01", "TinyDisc_02"} and 0.0 <= rate["fit"]["rate_strength.k"] <= 0.6
+    # weights, base: 3 linearisations of 3 names and 3 check meshes; rate law: 2 grid values x (4 profile
+    # steps of 3 names + 1 real run), 3 linearisations of 4 names, 3 check meshes; 2 fit meshes, 2 records
+    assert real["runs"] == 2 * (3 + 2 * 3 * 3 + 3 + 2 * (4 * 3 + 1) * 2 + 3 * 4 * 2 + 3)
+    realrun_runs = [p for p in runs if "realrun" in p.parts]
+    assert len(realrun_runs) == real["runs"]
+    assert {json.loads(p.read_text())["record"] for p in realrun_runs} == {"TinyDisc_01", "TinyDisc_02"}
     # a lab's series reports the shipped posterior, the form the coverage harness scores
     summary = json.loads((res / "summary.json").read_text())
     assert summary["posterior_method"] == "emulator_mcmc" and summary["posterior_form"]["emulator_error"] == "ar1"

@@ -32,7 +32,8 @@ def rule_blocks() -> dict[str, str]:
 #: The rules that declare one simulation each and run no job (rules/simulate.smk: rule simulate runs
 #: them in batches and writes their logs): no log and no script of their own.
 DECLARATIONS = {"member", "replicate", "refine_member", "forecast", "truth", "approximation_run",
-                "sensitivity_member", "diagnosis_member", "diagnosis_check_member", "diagnosis_refit_member"}
+                "sensitivity_member", "diagnosis_member", "diagnosis_check_member", "diagnosis_refit_member",
+                "diagnosis_realrun_member"}
 
 
 def job_blocks() -> dict[str, str]:

@@ -1,0 +1,146 @@
+"""calibration.realrun, the selection on real runs in rounds, on a stand-in simulator whose truth is known.
+
+The stand-in: three records at different "rates" c_r; a pulse whose amplitude is sigma_t (1 + mu c_r) with
+the end friction mu, a post-peak decay set by E_t, a face gap that delays the onset of one record. A
+friction the base model cannot absorb into sigma_t (its effect differs from record to record by c_r) must
+be named and fitted near its truth; with none planted, nothing may be named.
+"""
+import json
+
+import numpy as np
+import pytest
+
+from calibration import realrun as rr
+
+T = np.linspace(0.0, 1.0, 60)
+RECORDS = ["R1", "R2", "R3"]
+RATE = {"R1": 0.5, "R2": 1.0, "R3": 1.6}
+BOX = {"sigma_t": (4e6, 6e7), "E_t": (100.0, 5000.0), "interface_friction.mu": (0.0, 0.6),
+       "face_gap.gap_m": (0.0, 4e-4), "rate_strength.k": (0.0, 0.6)}
+NOISE_SD = 0.15     # MPa-scale units of the stand-in (0.5 % of a 30-unit peak)
+
+
+def curve(p, record, seed):
+    """The stand-in's response in MPa-like units; ``seed`` >= 0 adds a mesh realization's small scatter."""
+    shift = p.get("face_gap.gap_m", 0.0) / 4e-4 * 0.1
+    t = np.clip(T - shift, 0.0, None)
+    # the stand-in's rate law acts exactly as its friction does: a sibling the data cannot tell apart
+    amp = p["sigma_t"] / 1e6 * (1.0 + (p.get("interface_friction.mu", 0.0) + p.get("rate_strength.k", 0.0))
+                                * RATE[record])
+    pulse = np.sin(np.pi * np.clip(t / 0.6, 0.0, 1.0) / 2.0) ** 2
+    decay = np.exp(-np.clip(t - 0.6, 0.0, None) * 400.0 / p["E_t"] * 10.0)
+    out = amp * pulse * decay
+    if seed >= 0:
+        out = out * (1.0 + 0.002 * np.random.default_rng(seed).standard_normal())
+    return out
+
+
+def simulate(rows):
+    seeds = {"fit": 3100, "check": 3200}
+    return [curve(r["simulator"], r["record"], seeds[r["kind"]] + 10 * r["mesh"] + RECORDS.index(r["record"]))
+            for r in rows]
+
+
+def data(truth, seed=7):
+    rng = np.random.default_rng(seed)
+    y = {}
+    for i, r in enumerate(RECORDS):
+        e = np.zeros(T.size)
+        for k in range(1, T.size):      # AR(1) noise, lag-1 correlation 0.6
+            e[k] = 0.6 * e[k - 1] + np.sqrt(1 - 0.36) * rng.standard_normal()
+        y[r] = curve(truth, r, -1) + NOISE_SD * e
+    return y
+
+
+NOISE = {r: (NOISE_SD, 0.02) for r in RECORDS}
+TIMES = {r: T for r in RECORDS}
+START = {"sigma_t": 3.5e7, "E_t": 2000.0}
+
+
+def select(truth, candidates=("interface_friction", "face_gap")):
+    state = rr.first_round(START, list(candidates), RECORDS, BOX, profile=3, check_meshes=8)
+    states = [state]
+    while state["phase"] != "done":
+        state = rr.next_round(state, simulate(state["rows"]), data(truth), NOISE, TIMES)
+        json.dumps(state)       # every state is JSON: the workflow keeps one file per round
+        states.append(state)
+    return state, states
+
+
+def test_a_planted_friction_is_named_and_fitted_near_its_truth():
+    state, states = select({"sigma_t": 2.5e7, "E_t": 1200.0, "interface_friction.mu": 0.3})
+    res = state["result"]
+    assert res["named"] == "interface_friction"
+    assert res["group"] == ["interface_friction"]
+    fit = res["candidates"]["interface_friction"]["fit"]
+    # the noise is 0.5 % of the peak over 60 correlated samples per record: mu to within 0.03, sigma_t 3 %
+    assert fit["interface_friction.mu"] == pytest.approx(0.3, abs=0.03)
+    assert fit["sigma_t"] == pytest.approx(2.5e7, rel=0.03)
+    # the base model absorbs the friction into a higher strength, and loses on every record
+    assert res["base"]["fit"]["sigma_t"] > 2.9e7
+    assert all(z > 0 for z in res["candidates"]["interface_friction"]["per_record_z"].values())
+    # base: 3 linearisations + check; friction: 4 profile steps, the profile's real runs, 3 steps, check
+    assert len(states) - 1 == 4 + 1 + 3 + 1
+
+
+def test_a_sibling_the_data_cannot_tell_apart_shares_the_group():
+    state, _ = select({"sigma_t": 2.5e7, "E_t": 1200.0, "interface_friction.mu": 0.3},
+                      candidates=("interface_friction", "rate_strength"))
+    res = state["result"]
+    assert res["candidates"]["rate_strength"]["p"] < rr.LEVEL
+    assert res["versus"][next(e for e in res["versus"])]["z"] == pytest.approx(0.0, abs=1e-6)
+    assert sorted(res["group"]) == ["interface_friction", "rate_strength"]
+
+
+def test_nothing_is_named_on_a_null():
+    state, _ = select({"sigma_t": 2.5e7, "E_t": 1200.0})
+    assert state["result"]["named"] == "base_kept"
+    assert state["result"]["group"] == []
+
+
+def test_a_failed_run_is_left_out_of_its_mean():
+    state = rr.first_round(START, ["face_gap"], RECORDS, BOX, profile=0, check_meshes=4)
+    y = data({"sigma_t": 2.5e7, "E_t": 1200.0})
+    curves = simulate(state["rows"])
+    k = next(i for i, row in enumerate(state["rows"]) if row["kind"] == "fit" and row["name"] is None)
+    curves[k] = None
+    nxt = rr.next_round(state, curves, y, NOISE, TIMES)
+    assert nxt["tracks"]["base"]["step"] == 1 and np.isfinite(nxt["tracks"]["base"]["theta"]["sigma_t"])
+    with pytest.raises(ValueError, match="runs asked for"):
+        rr.next_round(state, curves[:-1], y, NOISE, TIMES)
+
+
+def test_the_rounds_are_reproducible():
+    a, _ = select({"sigma_t": 2.5e7, "E_t": 1200.0, "interface_friction.mu": 0.3})
+    b, _ = select({"sigma_t": 2.5e7, "E_t": 1200.0, "interface_friction.mu": 0.3})
+    assert json.dumps(a, sort_keys=True) == json.dumps(b, sort_keys=True)
+
+
+def test_naming_and_grouping_rules():
+    assert rr.named({"a": (3.0, 0.01), "b": (5.0, 0.001), "c": (9.0, 0.004)}) == "c"
+    assert rr.named({"a": (3.0, 0.01)}) == "base_kept"
+    # the named effect beats b at the level but not d: d shares its group
+    assert rr.grouped("c", {"b": (4.0, 1e-4), "d": (1.0, 0.2)}) == ["c", "d"]
+    with pytest.raises(ValueError, match="at least 3"):
+        rr.first_round(START, [], RECORDS, BOX, check_meshes=2)
+
+
+def test_the_config_block_gets_its_defaults_and_a_wrong_candidate_is_named():
+    import copy
+    from pathlib import Path
+
+    from calibration.workflow_io import ConfigError, load_yaml, validate_config
+
+    repo = Path(__file__).resolve().parents[1]
+    base = load_yaml(repo / "config" / "config.yaml")
+    cfg = copy.deepcopy(base)
+    cfg["experiments"]["marble_loop"]["diagnosis"]["realrun_selection"] = {}
+    out = validate_config(cfg, repo / "config" / "schema.yaml", base_dir=repo)
+    assert out["experiments"]["marble_loop"]["diagnosis"]["realrun_selection"] == {
+        "candidates": ["rate_strength", "interface_friction", "seating", "face_gap"], "profile": 5, "check_meshes": 8}
+    # off unless asked for
+    plain = validate_config(copy.deepcopy(base), repo / "config" / "schema.yaml", base_dir=repo)
+    assert plain["experiments"]["marble_loop"]["diagnosis"]["realrun_selection"] is None
+    cfg["experiments"]["marble_loop"]["diagnosis"]["realrun_selection"] = {"candidates": ["gauge_gain"]}
+    with pytest.raises(ConfigError, match="realrun_selection.candidates.0: 'gauge_gain'"):
+        validate_config(cfg, repo / "config" / "schema.yaml", base_dir=repo)
