@@ -29,13 +29,12 @@ K is fixed before the runs (studies/README.md, the row of this mode).
 ``--versus FIT.json --check-meshes K``: no fitting; the earlier run's named candidate against each other
 candidate that passed against the base there, on the same check meshes (z > 0: the named one predicts
 better). Why: on two development series a second candidate passed too (a sibling of the planted effect,
-or the strength-confounded rate law); the rule of :func:`grouped` says whether the data tell them apart.
+or the strength-confounded rate law); the rule of calibration.realrun.grouped says whether the data tell them apart.
 """
 from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 import time
@@ -51,6 +50,7 @@ import yaml  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT)]
 
+from calibration import realrun as rr  # noqa: E402
 from calibration.observations import curve_on_grid, read_observations  # noqa: E402
 from enkf.covariance import AR1Error  # noqa: E402
 from enkf.diagnosis.crossval import compare_replicated  # noqa: E402
@@ -60,12 +60,7 @@ FIT_MESHES = (3101, 3102)
 CHECK_MESHES = (3201, 3202, 3203)
 RECHECK_FIRST = 3201    # --check-meshes K: the comparison on meshes RECHECK_FIRST .. RECHECK_FIRST + K - 1
 COMPARE_MESHES = CHECK_MESHES   # the weights always take the first three
-GN_STEPS = 3
-LEVEL = 0.005
-SMOOTH = 11
-REL_STEP = {"sigma_t": 0.03, "E_t": 0.15}
-EFFECT_STEP = 0.1       # of the effect parameter's box width
-MAX_MOVE = 0.5          # of a parameter's box width per Gauss-Newton step
+GN_STEPS, LEVEL, REL_STEP, EFFECT_STEP = rr.GN_STEPS, rr.LEVEL, rr.REL_STEP, rr.EFFECT_STEP   # the product's
 PROFILE_STEPS = 2       # --profile-steps: Gauss-Newton steps of sigma_t and E_t at each grid value
 PROFILE_REAL = False    # --profile-real: each grid value's error from real runs at its fit
 
@@ -122,17 +117,7 @@ class Series:
 
 def _names(effect, records):
     """(shared names, {record: its own names}) of the base model plus ``effect`` (None: the base)."""
-    shared, own = ["sigma_t", "E_t"], {r: [] for r in records}
-    if effect is not None:
-        e = fx.get_effect(effect)
-        for p in e.params:
-            name = f"{e.name}.{p.name}"
-            if e.scope == "shared":
-                shared.append(name)
-            else:
-                for r in records:
-                    own[r].append(f"{name}@{r}")
-    return shared, own
+    return rr.names_of(effect, records)
 
 
 def _sim_params(theta, record, shared, own):
@@ -179,23 +164,20 @@ def linearise(s, theta, shared, own, records, vary=None):
     return base, jac, allnames
 
 
+class _Boxes:
+    """The series' boxes as calibration.realrun reads them (``box[name]``)."""
+
+    def __init__(self, s):
+        self.s = s
+
+    def __getitem__(self, name):
+        return self.s.bounds(name)
+
+
 def gn_solve(s, theta, base, jac, allnames, w, records):
-    """One Gauss-Newton update of ``theta`` from the records' data (weighted), each move capped and clipped."""
-    cols = sorted({allnames.index(n) for r in records for n in allnames
-                   if np.any(jac[r][:, allnames.index(n)] != 0)})
-    A = np.vstack([np.sqrt(w[r])[:, None] * jac[r][:, cols] for r in records])
-    b = np.concatenate([np.sqrt(w[r]) * (s.y[r] - base[r]) for r in records])
-    scale = np.linalg.norm(A, axis=0)
-    scale[scale == 0] = 1.0
-    d, *_ = np.linalg.lstsq(A / scale, b, rcond=None)
-    d = d / scale
-    new = dict(theta)
-    for j, c in enumerate(cols):
-        n = allnames[c]
-        lo, hi = s.bounds(n)
-        move = float(np.clip(d[j], -MAX_MOVE * (hi - lo), MAX_MOVE * (hi - lo)))
-        new[n] = float(np.clip(theta[n] + move, lo, hi))
-    return new
+    """One Gauss-Newton update of ``theta`` from the records' data (weighted), each move capped and clipped
+    (calibration.realrun.gn_solve)."""
+    return rr.gn_solve(theta, base, jac, allnames, w, s.y, records, _Boxes(s))
 
 
 def weights(s):
@@ -205,8 +187,7 @@ def weights(s):
     for r in s.records:
         Y = np.array(runs[k:k + len(CHECK_MESHES)])
         k += len(CHECK_MESHES)
-        var = np.convolve(np.var(Y, axis=0, ddof=1), np.ones(SMOOTH) / SMOOTH, mode="same")
-        out[r] = 1.0 / (s.noise[r][0] ** 2 + var)
+        out[r] = rr.smoothed_weights(Y, s.noise[r][0])
     return out
 
 
@@ -274,8 +255,7 @@ def check_runs(s, effect, cv, meshes):
 
 def named(z_p: dict) -> str:
     """The rule: among the candidates whose ``(z, p)`` has p below LEVEL, the largest z; else the base."""
-    passing = {e: z for e, (z, p) in z_p.items() if p < LEVEL}
-    return max(passing, key=passing.get) if passing else "base_kept"
+    return rr.named(z_p, LEVEL)
 
 
 def recheck(s, w, earlier: dict) -> dict:
@@ -298,7 +278,7 @@ def versus(s, w, earlier: dict) -> dict:
     """The named candidate of an earlier run of this script against every other candidate that passed against
     the base there: both fits' cross-validation points run on COMPARE_MESHES and compared by the same paired
     test, the other candidate as the reference (z > 0: the named one predicts the records better). The rule
-    (:func:`grouped`): the named effect stands alone where it beats each of them at LEVEL, else the ones it
+    (calibration.realrun.grouped): the named effect stands alone where it beats each of them at LEVEL, else the ones it
     does not beat share its group."""
     name = earlier["named"]
     cands = earlier["candidates"]
@@ -311,13 +291,8 @@ def versus(s, w, earlier: dict) -> dict:
         theirs = check_runs(s, e, cands[e]["cv_points"], COMPARE_MESHES)
         out["versus"][e] = {**compare(s, w, theirs, mine), "against_base": {k: cands[e][k] for k in ("z", "p", "dof")}}
         print(name, "vs", e, out["versus"][e], flush=True)
-    out["group"] = grouped(name, {e: (v["z"], v["p"]) for e, v in out["versus"].items()})
+    out["group"] = rr.grouped(name, {e: (v["z"], v["p"]) for e, v in out["versus"].items()}, LEVEL)
     return out
-
-
-def grouped(name: str, z_p: dict) -> list:
-    """The named effect's group: itself and every other passing candidate it does not beat at LEVEL."""
-    return [name] + sorted(e for e, (z, p) in z_p.items() if not p < LEVEL)
 
 
 def compare(s, w, base_runs, cand_runs):
@@ -358,22 +333,15 @@ def main(argv=None):
     with Pool(2, initializer=_init, initargs=(a.run,)) as pool:
         s = Series(a.run, a.config, a.exp, pool)
         w = weights(s)
-        if a.versus:
-            result = {"study": "realrun_selection (versus)", "run": a.run, "exp": a.exp, "cores": 2,
-                      "level": LEVEL, "fits_from": a.versus,
-                      **versus(s, w, json.loads(Path(a.versus).read_text()))}
-            result["runs"], result["wall_s"] = s.runs, round(time.perf_counter() - t0, 1)
-            Path(a.out).write_text(json.dumps(result, indent=1) + "\n")
-            print("group:", result["group"], f"({s.runs} runs, {result['wall_s']} s)")
-            return result
-        if a.recheck:
-            result = {"study": "realrun_selection (recheck)", "run": a.run, "exp": a.exp, "cores": 2,
-                      "level": LEVEL, "fits_from": a.recheck,
-                      **recheck(s, w, json.loads(Path(a.recheck).read_text()))}
-            result["runs"], result["wall_s"] = s.runs, round(time.perf_counter() - t0, 1)
-            Path(a.out).write_text(json.dumps(result, indent=1) + "\n")
-            print("named:", result["named"], f"({s.runs} runs, {result['wall_s']} s)")
-            return result
+        for mode, run_mode, key in (("versus", versus, "group"), ("recheck", recheck, "named")):
+            if getattr(a, mode):
+                result = {"study": f"realrun_selection ({mode})", "run": a.run, "exp": a.exp, "cores": 2,
+                          "level": LEVEL, "fits_from": getattr(a, mode),
+                          **run_mode(s, w, json.loads(Path(getattr(a, mode)).read_text()))}
+                result["runs"], result["wall_s"] = s.runs, round(time.perf_counter() - t0, 1)
+                Path(a.out).write_text(json.dumps(result, indent=1) + "\n")
+                print(f"{key}:", result[key], f"({s.runs} runs, {result['wall_s']} s)")
+                return result
         base, base_runs = fit_model(s, None, w)
         result = {"study": "realrun_selection", "run": a.run, "exp": a.exp, "cores": 2, "level": LEVEL,
                   "profile": a.profile, "profile_steps": a.profile_steps, "profile_real": a.profile_real,
