@@ -21,7 +21,11 @@ the repository; its ``results/<experiment>/diagnosis/report.json`` and ``check.j
   calibration record's copy against its own planted value);
 * the proposal's power: the planted effect's place in the first round's emulated ranking and whether
   the walk ran it on real FDEM (:func:`proposals`);
-* wall time and cores per series; every miss with its reason.
+* wall time and cores per series; every miss with its reason;
+* with ``--realrun``, the selection on real runs too (``diagnosis.realrun_selection`` with its defaults,
+  calibration.realrun): what it names beside the walk, scored by :func:`realrun_row` and
+  :func:`realrun_scores` (its candidates are physical, so every non-physical case is right when it names
+  nothing).
 
 Writes ``--out`` (default benchmarks/results/bench_planted.json) after every series, so a stopped run
 keeps what it measured; ``--split PART FOLDER`` files a part's series one file each, and ``--pool PART
@@ -174,6 +178,40 @@ def proposals(report: dict, case: dict) -> dict:
             "walked": walked, "planted_walked": planted is not None and any(e == planted for e, _, _ in walked)}
 
 
+def realrun_row(real: dict, case: dict, truth: dict) -> dict:
+    """What the selection on real runs (diagnosis/realrun.json, ``--realrun``) names, and whether that is right:
+    a physical case its effect (the group may hold another), every other case nothing, since its candidates
+    are physical effects only; the planted value of a shared effect beside its fit."""
+    planted = planted_effect(case)
+    right = real["named"] == planted if case["class"] == "physical" else real["named"] == "base_kept"
+    out = {"named": real["named"], "group": real["group"], "correct": right, "runs": real.get("runs"),
+           "z": {e: round(float(c["z"]), 3) for e, c in real["candidates"].items()}}
+    if right and planted in real["candidates"]:
+        fit = real["candidates"][planted]["fit"]
+        out["fit"] = {k: v for k, v in fit.items() if k.split("@")[0] in truth.get("plant", {})}
+        out["planted"] = truth.get("plant", {})
+    return out
+
+
+def realrun_scores(results: list[dict]) -> dict | None:
+    """The selection on real runs' confusion matrix and its bars' shares, over the series that ran it."""
+    rows = [r for r in results if not r.get("error") and r.get("realrun")]
+    if not rows:
+        return None
+    matrix: dict[str, dict[str, int]] = {}
+    for r in rows:
+        cell = matrix.setdefault(r["case"]["case"], {})
+        cell[r["realrun"]["named"]] = cell.get(r["realrun"]["named"], 0) + 1
+
+    def share(sub):
+        return sum(r["realrun"]["correct"] for r in sub) / len(sub) if sub else None
+    cls = lambda c: [r for r in rows if r["case"]["class"] == c]
+    return {"series": len(rows), "confusion": matrix,
+            "physical_named_top_share": share([r for r in cls("physical") if r.get("above_scatter")]),
+            "null_adds_nothing_share": share(cls("null")), "out_of_catalogue_ok_share": share(cls("out_of_catalogue")),
+            "measurement_nothing_named_share": share(cls("measurement"))}
+
+
 def bar_counts(results: list[dict]) -> dict[str, tuple[int, int]]:
     """``(hits, series)`` of each of the plan's bars over the finished series: a physical effect beyond
     the mesh scatter named right, its parameter inside the 90 % interval where an effect was named right,
@@ -240,6 +278,7 @@ def score(results: list[dict]) -> dict:
         "null_false_positive_rate": (nulls_n - nulls_ok) / nulls_n if nulls_n else None,
         "out_of_catalogue_ok_share": ratio(bars["out_of_catalogue_ok"]),
         "misses": misses,
+        "realrun": realrun_scores(results),
     }
 
 
@@ -321,9 +360,10 @@ def heldout_summary(check: dict) -> dict:
 
 
 def run_series(plan: dict, case: dict, seed: int, work: Path, preset: str, records: int | None,
-               cores: int, dry_run: bool = False) -> dict:
+               cores: int, dry_run: bool = False, realrun: dict | None = None) -> dict:
     """Make, configure, run and score one series; returns its result row. ``dry_run``: the loop is only
-    planned (``snakemake -n``) and nothing is scored, to check the wiring."""
+    planned (``snakemake -n``) and nothing is scored, to check the wiring. ``realrun``: the
+    ``diagnosis.realrun_selection`` block each series gets (the selection on real runs, scored beside the walk)."""
     from tools.make_planted_series import make_series
 
     name = f"planted_{case['case']}_{seed}"
@@ -343,6 +383,8 @@ def run_series(plan: dict, case: dict, seed: int, work: Path, preset: str, recor
                         "--no-approximation-error", "--name", name, "--out", str(cfg)], cwd=ROOT, check=True)
         doc = yaml.safe_load(cfg.read_text())
         doc["experiments"][name]["diagnosis"]["exclude"] = []     # the whole catalogue (module docstring)
+        if realrun is not None:
+            doc["experiments"][name]["diagnosis"]["realrun_selection"] = dict(realrun)
         cfg.write_text(yaml.safe_dump(doc, sort_keys=False))
         t1 = time.perf_counter()
         log = folder / "snakemake.log"
@@ -366,6 +408,8 @@ def run_series(plan: dict, case: dict, seed: int, work: Path, preset: str, recor
         row["gate"] = gate_summary(report)
         row["why"] = report.get("why", "")
         row["heldout"] = heldout_summary(check)
+        if realrun is not None:
+            row["realrun"] = realrun_row(json.loads((diag / "realrun.json").read_text()), case, truth)
     except (subprocess.CalledProcessError, OSError, KeyError, ValueError, SystemExit) as exc:
         row["error"] = f"{type(exc).__name__}: {exc}"
     row["wall_s"] = round(time.perf_counter() - t0, 1)
@@ -426,6 +470,8 @@ def main(argv=None) -> int:
     ap.add_argument("--cores", type=int, default=2)
     ap.add_argument("--dry-run", action="store_true", help="make and configure each series, plan the loop "
                     "(snakemake -n), score nothing")
+    ap.add_argument("--realrun", action="store_true", help="each series also runs the selection on real runs "
+                    "(diagnosis.realrun_selection with its defaults), scored beside the walk")
     ap.add_argument("--work", default=str(ROOT / "results" / "bench_planted"))
     ap.add_argument("--out", default=str(OUT))
     ap.add_argument("--pool", nargs="+", metavar="PART", help="score the series of these parts' JSON together "
@@ -453,7 +499,7 @@ def main(argv=None) -> int:
     for case in cases:
         for seed in seeds:
             row = run_series(plan, case, seed, work, args.preset or plan["truth_mesh"], args.records, args.cores,
-                             args.dry_run)
+                             args.dry_run, {} if args.realrun else None)
             results.append(row)
             print(f"{case['case']} seed {seed}: {row.get('named', row.get('error'))} ({row['wall_s']:.0f} s)",
                   flush=True)

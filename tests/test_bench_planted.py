@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from benchmarks.bench_planted import (acceptance, bar_counts, effect_size, gate_summary, is_correct,  # noqa: E402
-                                      named, named_group, parameter_coverage, proposals, score)
+                                      named, named_group, parameter_coverage, proposals, realrun_row, score)
 from tools.make_planted_series import ar1_noise, make_series, planted_values  # noqa: E402
 
 PLAN = json.loads((ROOT / "benchmarks" / "planted_plan.json").read_text())
@@ -150,6 +150,38 @@ def test_score_gives_the_matrix_and_the_rates():
     assert effect_size(onset, 0.017, 0.005)["above_scatter"]
     assert not effect_size({"tests": [{"peak_change_rel": 0.004, "pre_peak_change_rms_rel": 0.008}]},
                            0.017, 0.005)["above_scatter"]
+
+
+def _realrun(name, group=(), fit=None):
+    cands = {e: {"z": z, "p": 1e-6 if e == name else 0.5, "fit": (fit or {}) if e == name else {}}
+             for e, z in (("interface_friction", 9.0 if name == "interface_friction" else -1.0),
+                          ("rate_strength", 2.0), ("seating", 1.0))}
+    return {"named": name, "group": list(group) or ([name] if name != "base_kept" else []), "candidates": cands,
+            "runs": 1251}
+
+
+def test_the_selection_on_real_runs_is_scored_beside_the_walk():
+    fr = {"plant": {"interface_friction.mu": 0.3}}
+    fit = {"sigma_t": 2.4e7, "E_t": 1.3e4, "interface_friction.mu": 0.27}
+    rows = [{**_row("interface_friction", 1, _report("base_kept"), fr),
+             "realrun": realrun_row(_realrun("interface_friction", fit=fit), CASES["interface_friction"], fr)},
+            {**_row("interface_friction", 2, _report("base_kept"), fr),
+             "realrun": realrun_row(_realrun("seating"), CASES["interface_friction"], fr)},
+            {**_row("null", 1, _report("base_kept"), {"plant": {}}),
+             "realrun": realrun_row(_realrun("base_kept"), CASES["null"], {"plant": {}})},
+            {**_row("lowpass", 1, _report("base_kept"), {"plant": {"lowpass.cutoff_Hz": 5e4}}),
+             "realrun": realrun_row(_realrun("rate_strength"), CASES["lowpass"], {"plant": {}})},
+            _row("null", 2, _report("base_kept"), {"plant": {}})]     # a series run without it: not counted
+    first = rows[0]["realrun"]
+    assert first["correct"] and first["fit"] == {"interface_friction.mu": 0.27} and first["planted"] == fr["plant"]
+    r = score(rows)["realrun"]
+    assert r["series"] == 4
+    assert r["confusion"] == {"interface_friction": {"interface_friction": 1, "seating": 1}, "null": {"base_kept": 1},
+                              "lowpass": {"rate_strength": 1}}
+    assert r["physical_named_top_share"] == pytest.approx(0.5) and r["null_adds_nothing_share"] == 1.0
+    assert r["measurement_nothing_named_share"] == 0.0 and r["out_of_catalogue_ok_share"] is None
+    # the walk's own scores are unchanged by it
+    assert score(rows)["physical_named_top_share"] == 0.0 and score([rows[-1]])["realrun"] is None
 
 
 def _walked(report, gains, steps):
