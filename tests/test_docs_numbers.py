@@ -714,6 +714,8 @@ QUOTES: list[Quote] = [
     Quote("README.md", "covers 90 % with uniform ranks", by=HARNESS),
     Quote("docs/closing-the-loop.md", "prediction by the walk's weighted paired test. An effect is named where its real runs "
           "predict better at\np < {l}, the largest z", lambda J: {"l": __import__("calibration.realrun").realrun.LEVEL}),
+    Quote("README.md", "about {n} FDEM runs for three records", lambda J: {
+        "n": f"{round(J('studies/results/realrun_selection_seating_5392_profile5_k8.json')['runs'], -1):,}"}),
     Quote("docs/closing-the-loop.md", "about {n} runs for\nthree records and four candidates", lambda J: {
         "n": f"{round(J('studies/results/realrun_selection_seating_5392_profile5_k8.json')['runs'], -1):,}"}),
     Quote("README.md", "the walk's level in {p} of {n} simulated data sets", lambda J: {
