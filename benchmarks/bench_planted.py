@@ -110,7 +110,12 @@ def parameter_coverage(report: dict, truth: dict, refit: dict | None = None) -> 
     record, against that record's planted value (truth.json ``tests[].planted``). A parameter the shipped
     model does not carry is not covered. Returns ``{"checks": [...], "covered": share or None, "source"}``."""
     refitted = (refit or {}).get("posterior")
-    post = refitted or _shipped_posterior(report)
+    return coverage_of(refitted or _shipped_posterior(report), truth,
+                       "refit on real runs" if refitted else "selection's fit")
+
+
+def coverage_of(post: dict, truth: dict, source: str) -> dict:
+    """parameter_coverage of the intervals ``post`` (``{name: {"q05", "q95", ...}}``)."""
     planted = {t["name"]: t.get("planted") or {} for t in truth.get("tests", [])}
     checks = []
     for param, value in (truth.get("plant") or {}).items():
@@ -128,7 +133,7 @@ def parameter_coverage(report: dict, truth: dict, refit: dict | None = None) -> 
             checks.append({"param": param, "truth": value, "q05": None, "q95": None, "inside": False,
                            "why": "the shipped model does not carry it"})
     share = sum(c["inside"] for c in checks) / len(checks) if checks else None
-    return {"checks": checks, "covered": share, "source": "refit on real runs" if refitted else "selection's fit"}
+    return {"checks": checks, "covered": share, "source": source}
 
 
 def named_group(report: dict) -> list[str]:
@@ -187,9 +192,11 @@ def realrun_row(real: dict, case: dict, truth: dict) -> dict:
     out = {"named": real["named"], "group": real["group"], "correct": right, "runs": real.get("runs"),
            "z": {e: round(float(c["z"]), 3) for e, c in real["candidates"].items()}}
     if right and planted in real["candidates"]:
-        fit = real["candidates"][planted]["fit"]
-        out["fit"] = {k: v for k, v in fit.items() if k.split("@")[0] in truth.get("plant", {})}
-        out["planted"] = truth.get("plant", {})
+        c = real["candidates"][planted]
+        iv = c.get("interval_90") or {"q05": {}, "q95": {}}
+        post = {k: {"mean": v, "q05": iv["q05"].get(k), "q95": iv["q95"].get(k)} for k, v in c["fit"].items()
+                if k in iv["q05"]}
+        out["coverage"] = coverage_of(post, truth, "selection on real runs")
     return out
 
 
@@ -208,6 +215,8 @@ def realrun_scores(results: list[dict]) -> dict | None:
     cls = lambda c: [r for r in rows if r["case"]["class"] == c]
     return {"series": len(rows), "confusion": matrix,
             "physical_named_top_share": share([r for r in cls("physical") if r.get("above_scatter")]),
+            "parameter_in_90_share": (lambda sub: sum((r["realrun"]["coverage"]["covered"] or 0.0) >= 1.0 for r in sub)
+                                      / len(sub) if sub else None)([r for r in rows if r["realrun"].get("coverage")]),
             "null_adds_nothing_share": share(cls("null")), "out_of_catalogue_ok_share": share(cls("out_of_catalogue")),
             "measurement_nothing_named_share": share(cls("measurement"))}
 

@@ -39,7 +39,7 @@ from enkf.covariance import AR1Error
 from enkf.diagnosis.crossval import compare_replicated
 from shpb import effects as fx
 
-__all__ = ["FIT_MESHES", "GN_STEPS", "LEVEL", "compare_tracks", "first_round", "gn_solve", "grouped", "named",
+__all__ = ["FIT_MESHES", "GN_STEPS", "LEVEL", "compare_tracks", "first_round", "fit_interval", "gn_solve", "grouped", "named",
            "names_of", "next_round", "on_grid", "run_rounds", "series_of", "smoothed_weights",
            "summary_of"]
 
@@ -190,6 +190,47 @@ def _cv_points(last, base, jac, allnames, w, y, records, shared, own, box) -> di
     return cv
 
 
+Z90 = 1.6448536269514722     # the standard normal's 95 % point: a central 90 % interval
+
+
+def fit_interval(theta, last, base, jac, allnames, w, y, records, box, noise, times) -> dict:
+    """The Gauss-Newton fit's 90 % intervals from its last linearisation: the weighted least squares
+    estimator's sandwich covariance ``H^-1 (sum A' W C W A) H^-1`` (``H = sum A' W A``), with ``C`` each
+    record's error as the fit sees it, its AR(1) instrument noise plus the mesh scatter its weights hold, so
+    the weights' neglect of the noise's correlation is accounted for; scaled up by the fit's chi-square per
+    degree of freedom (its residual whitened by ``C``) where the model misses the records by more than
+    those terms allow. Returns ``{"q05", "q95", "sd", "misfit_scale"}``, the parameters the data move
+    (a column no record's Jacobian moves has none); the interval is clipped to the box."""
+    cols = [c for c in range(len(allnames)) if any(np.any(jac[r][:, c] != 0) for r in records)]
+    names = [allnames[c] for c in cols]
+    d = np.array([theta[n] - last[n] for n in names])
+    # columns scaled to unit weighted norm, as in gn_solve: sigma_t [Pa] and a friction coefficient differ
+    # by seven orders of magnitude, past what a pseudo-inverse's cut-off keeps apart
+    u = np.linalg.norm(np.vstack([np.sqrt(w[r])[:, None] * jac[r][:, cols] for r in records]), axis=0)
+    u[u == 0] = 1.0
+    H, M, chi2, n_obs = 0.0, 0.0, 0.0, 0
+    for r in records:
+        A = jac[r][:, cols] / u
+        sd, corr_time = noise[r]
+        C = AR1Error(np.full(y[r].size, sd), times[r], corr_time).dense() + np.diag(np.maximum(1.0 / w[r] - sd ** 2, 0.0))
+        WA = w[r][:, None] * A
+        H = H + A.T @ WA
+        M = M + WA.T @ C @ WA
+        res = y[r] - base[r] - A @ (d * u)
+        chi2 += float(res @ np.linalg.solve(C, res))
+        n_obs += res.size
+    Hi = np.linalg.pinv(H)
+    scale = max(1.0, chi2 / max(n_obs - len(cols), 1))
+    sds = np.sqrt(np.maximum(np.diag(Hi @ M @ Hi), 0.0) * scale) / u
+    out = {"q05": {}, "q95": {}, "sd": {}, "misfit_scale": scale}
+    for n, sdv in zip(names, sds):
+        lo, hi = _bounds(box, n)
+        out["q05"][n] = float(max(lo, theta[n] - Z90 * sdv))
+        out["q95"][n] = float(min(hi, theta[n] + Z90 * sdv))
+        out["sd"][n] = float(sdv)
+    return out
+
+
 def _new_track(effect, start, records, box, profile) -> dict:
     shared, own = names_of(effect, records)
     theta = {n: float(start[n]) for n in BASE}
@@ -250,7 +291,7 @@ def _weights(rows, curves, records, noise) -> dict:
     return w
 
 
-def _advance(t: dict, rows, curves, y, w, records, box) -> None:
+def _advance(t: dict, rows, curves, y, w, records, box, noise, times) -> None:
     """One track's state after its round's runs (module comment above)."""
     sh, own = t["shared"], t["own"]
     part = lambda i: ([row for row in rows if row["part"] == i], [c for row, c in zip(rows, curves) if row["part"] == i])
@@ -274,6 +315,7 @@ def _advance(t: dict, rows, curves, y, w, records, box) -> None:
         t["step"] += 1
         if t["step"] == GN_STEPS:
             t["cv_points"] = _cv_points(last, base, jac, alln, w, y, records, sh, own, box)
+            t["interval"] = fit_interval(t["theta"], last, base, jac, alln, w, y, records, box, noise, times)
             t["stage"] = "check"
     elif t["stage"] == "check":
         t["check_runs"] = {r: [None if c is None else np.asarray(c, float).tolist()
@@ -300,7 +342,8 @@ def compare_tracks(ref: dict, other: dict, y, w, noise, times, records) -> dict:
 
 def _result(state, y, w, noise, times) -> dict:
     T, recs = state["tracks"], state["records"]
-    fits = {k: {"fit": t["theta"], "path": t["path"], "cv_points": t["cv_points"]} for k, t in T.items()}
+    fits = {k: {"fit": t["theta"], "interval_90": t["interval"], "path": t["path"], "cv_points": t["cv_points"]}
+            for k, t in T.items()}
     cands = {e: {**fits[e], **compare_tracks(T["base"], T[e], y, w, noise, times, recs)} for e in T if e != "base"}
     name = named({e: (c["z"], c["p"]) for e, c in cands.items()})
     versus = {}
@@ -332,7 +375,7 @@ def next_round(state: Mapping, curves: Sequence, y: Mapping[str, np.ndarray],
     for key, t in new["tracks"].items():
         mine = [(row, c) for row, c in zip(rows, curves) if row["track"] == key]
         if mine:
-            _advance(t, [m[0] for m in mine], [m[1] for m in mine], y, w, recs, box)
+            _advance(t, [m[0] for m in mine], [m[1] for m in mine], y, w, recs, box, noise, times)
     new["rows"] = [row for k, t in new["tracks"].items()
                    for row in _track_rows(k, t, recs, box, new["check_meshes"])]
     if not new["rows"]:

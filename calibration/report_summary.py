@@ -492,8 +492,14 @@ def _realrun(real) -> list[str]:
     rows = []
     for e, c in real["candidates"].items():
         own = {k: v for k, v in (c.get("fit") or {}).items() if k not in ("sigma_t", "E_t")}
-        fit = ", ".join(f"{escape(k)} {_num(v, _unit(k.split('@')[0])[0])} {escape(_unit(k.split('@')[0])[1])}".strip()
-                        for k, v in own.items())
+        iv = c.get("interval_90") if isinstance(c.get("interval_90"), Mapping) else {}
+
+        def value(k, v):
+            f, unit = _unit(k.split("@")[0])
+            lo, hi = (iv.get("q05") or {}).get(k), (iv.get("q95") or {}).get(k)
+            span = f" [{_num(lo, f)}, {_num(hi, f)}]" if lo is not None and hi is not None else ""
+            return f"{escape(k)} {_num(v, f)}{span} {escape(unit)}".strip()
+        fit = ", ".join(value(k, v) for k, v in own.items())
         rows.append([escape(str(e)), fit, _num(c.get("fit", {}).get("sigma_t"), 1e-6), _num(c.get("z"), fmt=".3g"),
                      _num(c.get("p"), fmt=".2g")])
     name = str(real.get("named"))
@@ -511,7 +517,7 @@ def _realrun(real) -> list[str]:
             f"real runs, each calibration record predicted from the others on "
             f"{escape(str(real.get('check_meshes', '?')))} meshes. {said}. This is beside the walk: the verdict "
             "above is the walk's.</p>",
-            _table(["candidate", "its fitted parameters", "sigma_t [MPa]", "z against the base", "p"], rows)]
+            _table(["candidate", "its fitted parameters [90 %]", "sigma_t [MPa]", "z against the base", "p"], rows)]
 
 
 def summary_html(name: str, summary: Mapping, check: Mapping | None = None, refit: Mapping | None = None,

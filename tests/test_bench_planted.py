@@ -153,7 +153,9 @@ def test_score_gives_the_matrix_and_the_rates():
 
 
 def _realrun(name, group=(), fit=None):
-    cands = {e: {"z": z, "p": 1e-6 if e == name else 0.5, "fit": (fit or {}) if e == name else {}}
+    iv = {"q05": {k: 0.9 * v for k, v in (fit or {}).items()}, "q95": {k: 1.1 * v for k, v in (fit or {}).items()}}
+    cands = {e: {"z": z, "p": 1e-6 if e == name else 0.5, "fit": (fit or {}) if e == name else {},
+                 "interval_90": iv if e == name else {"q05": {}, "q95": {}}}
              for e, z in (("interface_friction", 9.0 if name == "interface_friction" else -1.0),
                           ("rate_strength", 2.0), ("seating", 1.0))}
     return {"named": name, "group": list(group) or ([name] if name != "base_kept" else []), "candidates": cands,
@@ -173,12 +175,16 @@ def test_the_selection_on_real_runs_is_scored_beside_the_walk():
              "realrun": realrun_row(_realrun("rate_strength"), CASES["lowpass"], {"plant": {}})},
             _row("null", 2, _report("base_kept"), {"plant": {}})]     # a series run without it: not counted
     first = rows[0]["realrun"]
-    assert first["correct"] and first["fit"] == {"interface_friction.mu": 0.27} and first["planted"] == fr["plant"]
+    # the friction's 90 % interval [0.243, 0.297] misses the planted 0.3
+    assert first["correct"] and first["coverage"]["checks"] == [
+        {"param": "interface_friction.mu", "truth": 0.3, "q05": pytest.approx(0.243), "q95": pytest.approx(0.297),
+         "inside": False}]
     r = score(rows)["realrun"]
     assert r["series"] == 4
     assert r["confusion"] == {"interface_friction": {"interface_friction": 1, "seating": 1}, "null": {"base_kept": 1},
                               "lowpass": {"rate_strength": 1}}
     assert r["physical_named_top_share"] == pytest.approx(0.5) and r["null_adds_nothing_share"] == 1.0
+    assert r["parameter_in_90_share"] == 0.0
     assert r["measurement_nothing_named_share"] == 0.0 and r["out_of_catalogue_ok_share"] is None
     # the walk's own scores are unchanged by it
     assert score(rows)["physical_named_top_share"] == 0.0 and score([rows[-1]])["realrun"] is None

@@ -251,7 +251,7 @@ def test_the_selection_on_real_runs_is_shown_beside_the_walk_with_its_group():
     cand = {"seating": {"fit": {"sigma_t": 2.45e7, "E_t": 1.2e4, "seating.compliance_m_per_Pa@A": 1.06e-12},
                         "z": 21.78, "p": 5.6e-11},
             "rate_strength": {"fit": {"sigma_t": 1.61e7, "E_t": 1.1e4, "rate_strength.k": 0.37}, "z": 6.76,
-                              "p": 6.0e-6}}
+                              "p": 6.0e-6, "interval_90": {"q05": {"rate_strength.k": 0.31}, "q95": {"rate_strength.k": 0.43}}}}
     real = {"named": "seating", "group": ["seating", "rate_strength"], "level": 0.005, "candidates": cand,
             "runs": 1251, "check_meshes": 8}
     html = summary_html("marble_loop", summary, check, None, real)
@@ -259,7 +259,7 @@ def test_the_selection_on_real_runs_is_shown_beside_the_walk_with_its_group():
     assert "<b>seating</b> is named" in html and "do not tell it apart from rate_strength" in html
     assert "1251 FDEM runs" in html and "beside the walk" in html and "diagnosis/realrun.json" in html
     rows = _cells(html)
-    assert ["rate_strength", "rate_strength.k 0.37", "16.1", "6.76", "6e-06"] in rows
+    assert ["rate_strength", "rate_strength.k 0.37 [0.31, 0.43]", "16.1", "6.76", "6e-06"] in rows
     kept = summary_html("marble_loop", summary, check, None, {**real, "named": "base_kept", "group": []})
     assert "the base model is kept" in kept and "is named" not in kept
     # without the selection on real runs, the page has no such paragraph
