@@ -280,6 +280,15 @@ def _diagnosis_errors(where: str, exp: Mapping, obs: Mapping, base: Path) -> lis
     for key in diag.get("scopes") or {}:
         if key not in offered:
             errors.append(f"{where}.diagnosis.scopes.{key}: not an offered candidate")
+    if diag.get("realrun_selection") is not None:
+        # each calibration record is predicted from the others, on several mesh realizations
+        n = len(obs.get("records") or []) - (1 if diag.get("validation") == "loro" else 0)
+        if n < 2:
+            errors.append(f"{where}.diagnosis.realrun_selection: needs at least 2 calibration records (each is "
+                          f"predicted from the fit on the others), got {n}")
+        if (exp.get("simulation") or {}).get("mesh_realizations") == "shared":
+            errors.append(f"{where}.diagnosis.realrun_selection: compares runs over mesh realizations, but "
+                          f"simulation.mesh_realizations is 'shared' (one mesh); set it to 'per_run'")
     if diag.get("validation") == "loro":
         if held:
             errors.append(f"{where}.diagnosis.heldout_records: with validation loro every record of "

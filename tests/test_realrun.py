@@ -144,6 +144,14 @@ def test_the_config_block_gets_its_defaults_and_a_wrong_candidate_is_named():
     cfg["experiments"]["marble_loop"]["diagnosis"]["realrun_selection"] = {"candidates": ["gauge_gain"]}
     with pytest.raises(ConfigError, match="realrun_selection.candidates.0: 'gauge_gain'"):
         validate_config(cfg, repo / "config" / "schema.yaml", base_dir=repo)
+    cfg["experiments"]["marble_loop"]["diagnosis"]["realrun_selection"] = {}
+    cfg["experiments"]["marble_loop"]["simulation"]["mesh_realizations"] = "shared"
+    cfg["experiments"]["marble_loop"]["observations"]["records"] = cfg["experiments"]["marble_loop"]["observations"][
+        "records"][:1]
+    with pytest.raises(ConfigError) as err:
+        validate_config(cfg, repo / "config" / "schema.yaml", base_dir=repo)
+    assert "realrun_selection: needs at least 2 calibration records" in str(err.value)
+    assert "mesh_realizations is 'shared'" in str(err.value)
 
 
 def _interval_scores(white: bool, seeds=range(100, 140)):
