@@ -49,6 +49,9 @@ def test_plan_keeps_benchmark_and_development_seeds_apart():
     bench = set(PLAN["seeds"]["benchmark"]["per_case"])
     dev = set(PLAN["seeds"]["development"]) | set(PLAN["seeds"]["shipped_example"])
     assert bench and dev and not bench & dev
+    # each later check on fresh series has seeds of its own
+    checks = [set(PLAN["seeds"][k]["per_case"]) for k in ("refit_check", "realrun_check")]
+    assert not (checks[0] & checks[1]) and not any(c & (bench | dev) for c in checks)
     assert {c["class"] for c in PLAN["cases"]} == {"physical", "measurement", "null", "out_of_catalogue"}
 
 
