@@ -511,7 +511,8 @@ def _realrun(real) -> list[str]:
         said = (f"<b>{escape(name)}</b> is named: its real runs predict the calibration records better than the "
                 f"base model's, with the largest z of those below p &lt; {_num(real.get('level'))}"
                 + (f"; the records do not tell it apart from {', '.join(group[1:])}" if len(group) > 1 else
-                   "; it beats every other candidate that passed"))
+                   f"; it beats {', '.join(escape(str(e)) for e in real['versus'])}, which passed too"
+                   if real.get("versus") else "; no other candidate passed"))
     return ['<p style="margin:0.4em 0 0 0">' + f"The selection on real runs ({escape(str(real.get('runs', '?')))} FDEM "
             f"runs on the calibration records; diagnosis/realrun.json): each candidate and the base model fitted on "
             f"real runs, each calibration record predicted from the others on "

@@ -260,6 +260,11 @@ def test_the_selection_on_real_runs_is_shown_beside_the_walk_with_its_group():
     assert "1251 FDEM runs" in html and "beside the walk" in html and "diagnosis/realrun.json" in html
     rows = _cells(html)
     assert ["rate_strength", "rate_strength.k 0.37 [0.31, 0.43]", "16.1", "6.76", "6e-06"] in rows
+    alone = summary_html("marble_loop", summary, check, None, {**real, "group": ["seating"],
+                                                                 "versus": {"rate_strength": {"z": 17.6}}})
+    assert "it beats rate_strength, which passed too" in alone
+    assert "no other candidate passed" in summary_html("marble_loop", summary, check, None,
+                                                       {**real, "group": ["seating"], "versus": {}})
     kept = summary_html("marble_loop", summary, check, None, {**real, "named": "base_kept", "group": []})
     assert "the base model is kept" in kept and "is named" not in kept
     # without the selection on real runs, the page has no such paragraph
