@@ -13,8 +13,9 @@ verdict stays the walk's.
 The algorithm, on the calibration records only:
 
 1. **Weights**: per time ``1 / (noise^2 + mesh scatter^2)``, the scatter the base model's runs at the start
-   show over the first three check meshes (smoothed over :data:`SMOOTH` samples): the walk's weights
-   (:func:`enkf.diagnosis.walk_weights`' argument).
+   show over the first three check meshes (smoothed over :data:`SMOOTH` samples): the walk's form
+   (:func:`enkf.diagnosis.walk_weights`), with the scatter measured on these runs, not the calibration's
+   replicates.
 2. **Fits**: the base model and each candidate (the base names plus the effect's parameters, a per-record
    effect one copy per record) fitted by Gauss-Newton steps whose Jacobian comes from real runs (finite
    differences averaged over :data:`FIT_MESHES` meshes), each move capped at half the parameter's box. A
@@ -39,11 +40,12 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 
 from enkf.covariance import AR1Error
-from enkf.diagnosis.crossval import compare_replicated
+from enkf.diagnosis.crossval import RecordErrors, compare_replicated
+from enkf.diagnosis.weights import Weighted
 from shpb import effects as fx
 
 __all__ = ["FIT_MESHES", "GN_STEPS", "LEVEL", "compare_tracks", "first_round", "fit_interval", "gn_solve", "grouped",
-           "named", "names_of", "next_round", "on_grid", "run_rounds", "series_of", "smoothed_weights", "summary_of"]
+           "named", "names_of", "next_round", "on_grid", "paired_test", "run_rounds", "series_of", "smoothed_weights", "summary_of"]
 
 FIT_MESHES = 2          # meshes a linearisation's runs are averaged over
 WEIGHT_MESHES = 3       # the first check meshes, whose scatter sets the weights
@@ -326,21 +328,25 @@ def _advance(t: dict, rows, curves, y, w, records, box, noise, times) -> None:
         t["stage"] = "done"
 
 
-def compare_tracks(ref: dict, other: dict, y, w, noise, times, records) -> dict:
-    """The walk's paired test of ``other`` against ``ref`` on their check runs (z > 0: ``other`` predicts the
-    records better), each curve weighted by ``sqrt(w)``; a mesh where either run failed is left out."""
-    yy, cur, cand, nz = {}, {}, {}, {}
-    for r in records:
-        pairs = [(a, b) for a, b in zip(ref["check_runs"][r], other["check_runs"][r]) if a is not None and b is not None]
-        sw = np.sqrt(w[r])
-        yy[r] = sw * y[r]
-        cur[r] = sw * np.array([a for a, _ in pairs])
-        cand[r] = sw * np.array([b for _, b in pairs])
-        sd, corr_time = noise[r]
-        nz[r] = AR1Error(sw * sd, times[r], corr_time)
-    c = compare_replicated(yy, cur, cand, nz)
+def paired_test(y, w, noise, times, ref: Mapping, other: Mapping, records) -> dict:
+    """The walk's weighted paired test (:class:`enkf.diagnosis.weights.Weighted`,
+    :func:`enkf.diagnosis.crossval.compare_replicated`) of ``other``'s runs against ``ref``'s, ``{record: (K, m)}``
+    on common meshes (z > 0: ``other`` predicts the records better); ``noise`` each record's AR(1) ``(sd,
+    corr_time)``."""
+    errors = RecordErrors({r: AR1Error(noise[r][0], times[r], noise[r][1]) for r in records})
+    wt = Weighted(errors, list(records), w)
+    c = compare_replicated(wt.scale(y), wt.scale(ref), wt.scale(other), wt.errors.noise)
     return {"z": c["z"], "p": c["p"], "dof": c["dof"],
             "per_record_z": {r: v["delta"] / v["sd"] if v["sd"] > 0 else 0.0 for r, v in c["records"].items()}}
+
+
+def compare_tracks(ref: dict, other: dict, y, w, noise, times, records) -> dict:
+    """:func:`paired_test` of two tracks' check runs; a mesh where either run failed is left out."""
+    a, b = {}, {}
+    for r in records:
+        pairs = [(x, z) for x, z in zip(ref["check_runs"][r], other["check_runs"][r]) if x is not None and z is not None]
+        a[r], b[r] = np.array([x for x, _ in pairs]), np.array([z for _, z in pairs])
+    return paired_test(y, w, noise, times, a, b, records)
 
 
 def _result(state, y, w, noise, times) -> dict:

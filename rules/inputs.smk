@@ -476,9 +476,24 @@ def refit_round_file(exp, r):
     return f"results/{exp}/diagnosis/refit/round_{r}.json"
 
 
+#: Round states already read, by (path, mtime, size): a stage's every run asks for its round's rows several
+#: times while the DAG is built (each param of its declaring rule, its batch), and a round of the selection on
+#: real runs carries its check curves (hundreds of kB)
+_ROUND_STATES = {}
+
+
+def round_state(path):
+    """A checkpoint round's state (the refit's, the selection on real runs'), parsed once per file version."""
+    st = os.stat(path)
+    key = (str(path), st.st_mtime_ns, st.st_size)
+    if key not in _ROUND_STATES:
+        _ROUND_STATES[key] = read_json(path)
+    return _ROUND_STATES[key]
+
+
 def refit_state(exp, r):
     """Refit round `r`'s state: its checkpoint's file."""
-    return read_json(checkpoints.diagnosis_refit_round.get(exp=exp, r=r).output.state)
+    return round_state(checkpoints.diagnosis_refit_round.get(exp=exp, r=r).output.state)
 
 
 def refit_rows_of(exp, r):
@@ -535,7 +550,7 @@ def realrun_round_file(exp, r):
 
 def realrun_state(exp, r):
     """Round `r` of the selection on real runs: its checkpoint's file."""
-    return read_json(checkpoints.diagnosis_realrun_round.get(exp=exp, r=r).output.state)
+    return round_state(checkpoints.diagnosis_realrun_round.get(exp=exp, r=r).output.state)
 
 
 def realrun_rows_of(exp, r):

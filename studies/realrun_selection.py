@@ -52,8 +52,6 @@ sys.path[:0] = [str(ROOT)]
 
 from calibration import realrun as rr  # noqa: E402
 from calibration.observations import curve_on_grid, read_observations  # noqa: E402
-from enkf.covariance import AR1Error  # noqa: E402
-from enkf.diagnosis.crossval import compare_replicated  # noqa: E402
 from shpb import effects as fx  # noqa: E402
 
 FIT_MESHES = (3101, 3102)
@@ -296,16 +294,9 @@ def versus(s, w, earlier: dict) -> dict:
 
 
 def compare(s, w, base_runs, cand_runs):
-    y, cur, cand, noise = {}, {}, {}, {}
-    for r in s.records:
-        sw = np.sqrt(w[r])
-        sd, corr_time = s.noise[r]
-        y[r], cur[r], cand[r] = sw * s.y[r], sw * base_runs[r], sw * cand_runs[r]
-        # the record's AR(1) noise as the workflow estimated it, weighted as the curves are
-        noise[r] = AR1Error(sw * sd, s.obs.time[s.obs.record_slice(r)], corr_time)
-    c = compare_replicated(y, cur, cand, noise)
-    return {"z": c["z"], "p": c["p"], "dof": c["dof"],
-            "per_record_z": {r: v["delta"] / v["sd"] for r, v in c["records"].items()}}
+    """The walk's weighted paired test of the candidate's check runs against the base's (calibration.realrun)."""
+    times = {r: s.obs.time[s.obs.record_slice(r)] for r in s.records}
+    return rr.paired_test(s.y, w, s.noise, times, base_runs, cand_runs, s.records)
 
 
 def main(argv=None):
