@@ -407,14 +407,16 @@ def series_of(obs, exp: Mapping) -> dict:
     """What the rounds read of an experiment's calibration records (``obs``:
     :class:`calibration.observations.Observations`, ``exp``: its config block): ``y``, ``times`` and the
     AR(1) ``noise`` per record, as the workflow estimated it from each record's pre-trigger, and the ``box``
-    of the base parameters (the prior's) and of every catalogue effect (its bound, the upper end at most
-    ``diagnosis.physical_upper``)."""
+    of the base parameters (the prior's) and of every physical effect
+    (:func:`calibration.diagnose.physical_design_ranges`)."""
+    from .diagnose import physical_design_ranges
+
     info = obs.meta["record_info"]
-    upper = {k: float(v) for k, v in ((exp.get("diagnosis") or {}).get("physical_upper") or {}).items()}
     box = {n: [float(v[0]), float(v[1])] for n, v in exp["parameters"].items() if n in BASE}
-    names = [f"{e.name}.{p.name}" for e in fx.effects() for p in e.params]
-    lo, hi = fx.bounds(names)
-    box.update({n: [float(a), float(min(b, upper.get(n, b)))] for n, a, b in zip(names, lo, hi)})
+    # the physical effects' boxes as the walk's design takes them: null to the catalogue's bound or physical_upper
+    names, lo, hi = physical_design_ranges([e.name for e in fx.effects()],
+                                           (exp.get("diagnosis") or {}).get("physical_upper"))
+    box.update({n: [float(a), float(b)] for n, a, b in zip(names, lo, hi)})
     return {"y": {r: obs.values[obs.record_slice(r)] for r in obs.records},
             "times": {r: obs.time[obs.record_slice(r)] for r in obs.records},
             "noise": {r: (float(info[r]["noise_estimate"]["sigma"]), float(info[r]["noise_estimate"]["corr_time"]))

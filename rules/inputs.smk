@@ -550,7 +550,9 @@ def realrun_round_file(exp, r):
 
 def realrun_state(exp, r):
     """Round `r` of the selection on real runs: its checkpoint's file."""
-    return round_state(checkpoints.diagnosis_realrun_round.get(exp=exp, r=r).output.state)
+    return round_state(
+        checkpoints.diagnosis_realrun_round.get(exp=exp, r=r).output.state
+    )
 
 
 def realrun_rows_of(exp, r):
