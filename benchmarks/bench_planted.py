@@ -192,7 +192,8 @@ def realrun_row(real: dict, case: dict, truth: dict) -> dict:
     out = {"named": real["named"], "group": real["group"], "correct": right, "runs": real.get("runs"),
            "z": {e: round(float(c["z"]), 3) for e, c in real["candidates"].items()}}
     if right and planted in real["candidates"]:
-        c = real["candidates"][planted]
+        # the reported fit: corrected for the mesh where the resolution round ran (calibration.realrun)
+        c = real["resolution"] if (real.get("resolution") or {}).get("track") == planted else real["candidates"][planted]
         iv = c.get("interval_90") or {"q05": {}, "q95": {}}
         post = {k: {"mean": v, "q05": iv["q05"].get(k), "q95": iv["q95"].get(k)} for k, v in c["fit"].items()
                 if k in iv["q05"]}

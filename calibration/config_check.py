@@ -289,6 +289,12 @@ def _diagnosis_errors(where: str, exp: Mapping, obs: Mapping, base: Path) -> lis
         if (exp.get("simulation") or {}).get("mesh_realizations") == "shared":
             errors.append(f"{where}.diagnosis.realrun_selection: compares runs over mesh realizations, but "
                           f"simulation.mesh_realizations is 'shared' (one mesh); set it to 'per_run'")
+        res = diag["realrun_selection"].get("resolution")
+        own = exp.get("preset")
+        if res and own in PRESET_ORDER and PRESET_ORDER.index(res["preset"]) <= PRESET_ORDER.index(own):
+            errors.append(f"{where}.diagnosis.realrun_selection.resolution.preset: {res['preset']!r} is not finer "
+                          f"than the experiment's preset {own!r} (presets from coarse to fine: {list(PRESET_ORDER)}); "
+                          f"set a finer one or resolution: null")
     if diag.get("validation") == "loro":
         if held:
             errors.append(f"{where}.diagnosis.heldout_records: with validation loro every record of "

@@ -83,7 +83,7 @@ def check_replicate_count(exp: Mapping) -> int:
 #: simulation's realization is drawn for.
 MESH_PURPOSE = 6
 MESH_STAGES = {"member": 1, "truth": 2, "replicate": 3, "design": 4, "check": 5, "approximation": 6, "refine": 7,
-               "realrun": 8}
+               "realrun": 8, "realrun_coarse": 9, "realrun_fine": 10}
 
 
 def mesh_seed(seed: int, stage: str, k: int = 0, index: int = 0, record: int = 0) -> int:

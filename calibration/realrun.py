@@ -27,9 +27,17 @@ The algorithm, on the calibration records only:
    (:func:`enkf.diagnosis.crossval.compare_replicated`, the curves weighted as in 1); named where
    ``p < level``, the largest ``z``; the named effect against each other passing candidate on the same
    runs, one group unless it beats it at ``level`` (:func:`grouped`).
-5. **Intervals**: each fit's 90 % intervals from its last linearisation (:func:`fit_interval`); they carry
-   the records' noise and mesh scatter, not the model's bias against the data (on a development friction
-   series at the `standard` mesh the fitted friction's interval missed the planted value).
+5. **Intervals**: each fit's 90 % intervals from its last linearisation (:func:`fit_interval`), once its
+   check runs are in: they carry the records' AR(1) noise and the mesh scatter as the check runs'
+   covariance over time (:func:`mesh_term`), a realization moving a whole curve.
+6. **Resolution** (``resolution``: a finer preset): the reported model's fit (the named one, or the base)
+   run on ``meshes`` realizations at the finer preset and at the experiment's, and linearised again there;
+   the records less the mean difference of the two are fitted by one Gauss-Newton step, the difference's
+   own scatter added to the interval's error (:func:`resolution_corrected`). Why: the `fast` mesh fails
+   differently from a finer one at the same parameters, and its fit carries that into the parameters (its
+   `sigma_t` low by 2-11 % on four development series made at `standard`). Off by default: on those series
+   it raised `sigma_t` but held the planted parameters less often than item 5's intervals alone
+   (studies/README.md, realrun_resolution row).
 """
 
 from __future__ import annotations
@@ -45,7 +53,8 @@ from enkf.diagnosis.weights import Weighted
 from shpb import effects as fx
 
 __all__ = ["FIT_MESHES", "GN_STEPS", "LEVEL", "compare_tracks", "first_round", "fit_interval", "gn_solve", "grouped",
-           "named", "names_of", "next_round", "on_grid", "paired_test", "run_rounds", "series_of", "smoothed_weights", "summary_of"]
+           "mesh_covariance", "mesh_term", "named", "names_of", "next_round", "on_grid", "paired_test", "resolution_corrected", "run_rounds",
+           "series_of", "smoothed_weights", "summary_of"]
 
 FIT_MESHES = 2          # meshes a linearisation's runs are averaged over
 WEIGHT_MESHES = 3       # the first check meshes, whose scatter sets the weights
@@ -91,10 +100,14 @@ def _step(box, name, theta) -> float:
     return EFFECT_STEP * (hi - lo)
 
 
+def _smoothed_var(runs) -> np.ndarray:
+    """The runs' sample variance per time (rows: meshes), smoothed over SMOOTH samples."""
+    return np.convolve(np.var(np.asarray(runs), axis=0, ddof=1), np.ones(SMOOTH) / SMOOTH, mode="same")
+
+
 def smoothed_weights(runs: np.ndarray, noise_sd: float) -> np.ndarray:
     """``1 / (noise^2 + var)`` per time, ``var`` the runs' sample variance (rows: meshes) smoothed over SMOOTH."""
-    var = np.convolve(np.var(runs, axis=0, ddof=1), np.ones(SMOOTH) / SMOOTH, mode="same")
-    return 1.0 / (noise_sd ** 2 + var)
+    return 1.0 / (noise_sd ** 2 + _smoothed_var(runs))
 
 
 def gn_solve(theta: Mapping, base: Mapping, jac: Mapping, allnames: Sequence[str], w: Mapping, y: Mapping,
@@ -197,14 +210,25 @@ def _cv_points(last, base, jac, allnames, w, y, records, shared, own, box) -> di
 Z90 = 1.6448536269514722     # the standard normal's 95 % point: a central 90 % interval
 
 
-def fit_interval(theta, last, base, jac, allnames, w, y, records, box, noise, times) -> dict:
+def mesh_covariance(runs) -> np.ndarray:
+    """The sample covariance over time of runs on different mesh realizations (rows). Why full: a
+    realization moves a whole curve (its onset, its peak), so its departures are correlated over the record;
+    taken as independent per sample, a few MPa of scatter average away over hundreds of samples and the
+    intervals come out several times too narrow (on a development friction series, 6 times for the friction)."""
+    X = np.asarray(runs, float)
+    d = X - X.mean(axis=0)
+    return d.T @ d / (len(X) - 1)
+
+
+def fit_interval(theta, last, base, jac, allnames, w, y, records, box, noise, times, mesh=None, extra=None) -> dict:
     """The Gauss-Newton fit's 90 % intervals from its last linearisation: the weighted least squares
     estimator's sandwich covariance ``H^-1 (sum A' W C W A) H^-1`` (``H = sum A' W A``), with ``C`` each
-    record's error as the fit sees it, its AR(1) instrument noise plus the mesh scatter its weights hold, so
-    the weights' neglect of the noise's correlation is accounted for; scaled up by the fit's chi-square per
-    degree of freedom (its residual whitened by ``C``) where the model misses the records by more than
-    those terms allow. Returns ``{"q05", "q95", "sd", "misfit_scale"}``, the parameters the data move
-    (a column no record's Jacobian moves has none); the interval is clipped to the box."""
+    record's error as the fit sees it: its AR(1) instrument noise, plus ``mesh[r]`` (a full covariance over
+    time: the records' own realization and the fit's runs'; None: the scatter the weights hold, per time),
+    plus ``extra[r]`` (a full covariance: an estimated correction's own scatter); scaled up where the
+    model misses the records by more than ``C`` allows (the weighted squared residual over its expectation).
+    Returns ``{"q05", "q95", "sd", "misfit_scale"}``, the parameters the data move (a column no record's
+    Jacobian moves has none); the interval is clipped to the box."""
     cols = [c for c in range(len(allnames)) if any(np.any(jac[r][:, c] != 0) for r in records)]
     names = [allnames[c] for c in cols]
     d = np.array([theta[n] - last[n] for n in names])
@@ -212,20 +236,23 @@ def fit_interval(theta, last, base, jac, allnames, w, y, records, box, noise, ti
     # by seven orders of magnitude, past what a pseudo-inverse's cut-off keeps apart
     u = np.linalg.norm(np.vstack([np.sqrt(w[r])[:, None] * jac[r][:, cols] for r in records]), axis=0)
     u[u == 0] = 1.0
-    H, M, chi2, n_obs = 0.0, 0.0, 0.0, 0
+    H, M, sse, expected = 0.0, 0.0, 0.0, 0.0
     for r in records:
         A = jac[r][:, cols] / u
         sd, corr_time = noise[r]
-        scatter = np.maximum(1.0 / w[r] - sd ** 2, 0.0)      # what the weights hold beyond the noise
-        C = AR1Error(np.full(y[r].size, sd), times[r], corr_time).dense() + np.diag(scatter)
+        scatter = np.diag(np.maximum(1.0 / w[r] - sd ** 2, 0.0))     # what the weights hold beyond the noise
+        C = (AR1Error(np.full(y[r].size, sd), times[r], corr_time).dense() + (scatter if mesh is None else mesh[r])
+             + (0.0 if extra is None else extra[r]))
         WA = w[r][:, None] * A
         H = H + A.T @ WA
         M = M + WA.T @ C @ WA
         res = y[r] - base[r] - A @ (d * u)
-        chi2 += float(res @ np.linalg.solve(C, res))
-        n_obs += res.size
+        sse += float(np.sum(w[r] * res ** 2))
+        expected += float(np.sum(w[r] * np.diag(C)))
     Hi = np.linalg.pinv(H)
-    scale = max(1.0, chi2 / max(n_obs - len(cols), 1))
+    # the weighted squared residual against its expectation under C, tr(WC) - tr(H^-1 M) (the fit's own
+    # share taken out): a covariance from a few meshes has too low a rank to whiten a residual with
+    scale = max(1.0, sse / max(expected - float(np.trace(Hi @ M)), 1e-300))
     sds = np.sqrt(np.maximum(np.diag(Hi @ M @ Hi), 0.0) * scale) / u
     out = {"q05": {}, "q95": {}, "sd": {}, "misfit_scale": scale}
     for n, sdv in zip(names, sds):
@@ -234,6 +261,40 @@ def fit_interval(theta, last, base, jac, allnames, w, y, records, box, noise, ti
         out["q95"][n] = float(min(hi, theta[n] + Z90 * sdv))
         out["sd"][n] = float(sdv)
     return out
+
+
+def mesh_term(check_runs: Mapping, records) -> dict:
+    """``fit_interval``'s ``mesh``: per record the covariance of a track's check runs (its cross-validation
+    point on every check mesh, near its fit), once for the records' own realization and once over the
+    FIT_MESHES the fit's curves average."""
+    return {r: (1.0 + 1.0 / FIT_MESHES) * mesh_covariance([c for c in check_runs[r] if c is not None])
+            for r in records}
+
+
+def resolution_corrected(theta, rows, curves, shared, own, w, y, records, box, noise, times, mesh=None) -> dict:
+    """``theta`` corrected for the experiment's mesh resolution (module docstring, item 6). ``rows``: the
+    resolution round's, a linearisation at ``theta`` (kind ``fit``) and runs at ``theta`` at the
+    experiment's preset (``coarse``) and at the finer one (``fine``); ``curves`` their runs (None: failed).
+    The records less ``b = mean(fine) - mean(coarse)`` fitted by one Gauss-Newton step from ``theta`` (its
+    curve: every coarse run there averaged); the interval (``mesh``: :func:`fit_interval`'s) gains ``b``'s
+    own sampling covariance. Returns ``{"fit", "interval_90", "bias_rms"}`` (``bias_rms`` per record, the
+    records' units)."""
+    lin = [(row, c) for row, c in zip(rows, curves) if row["kind"] == "fit"]
+    _, jac, alln = _linearised([row for row, _ in lin], [c for _, c in lin], shared, own, records)
+    at, y_c, extra, rms = {}, {}, {}, {}
+    for r in records:
+        runs = {k: [c for row, c in zip(rows, curves) if row["record"] == r and row["kind"] == k and c is not None]
+                for k in ("coarse", "fine")}
+        if min(len(v) for v in runs.values()) < 2:
+            raise RuntimeError(f"record {r}: fewer than two runs at a preset succeeded in the resolution round")
+        b = np.mean(runs["fine"], axis=0) - np.mean(runs["coarse"], axis=0)
+        extra[r] = sum(mesh_covariance(v) / len(v) for v in runs.values())
+        at[r] = np.mean(runs["coarse"] + [c for row, c in lin if row["record"] == r and row["name"] is None
+                                          and c is not None], axis=0)
+        y_c[r], rms[r] = y[r] - b, float(np.sqrt(np.mean(b ** 2)))
+    fit = gn_solve(theta, at, jac, alln, w, y_c, records, box)
+    return {"fit": fit, "interval_90": fit_interval(fit, theta, at, jac, alln, w, y_c, records, box, noise, times,
+                                                    mesh=mesh, extra=extra), "bias_rms": rms}
 
 
 def _new_track(effect, start, records, box, profile) -> dict:
@@ -251,8 +312,13 @@ def _new_track(effect, start, records, box, profile) -> dict:
     return t
 
 
-def _track_rows(key: str, t: dict, records, box, check_meshes: int) -> list[dict]:
+def _track_rows(key: str, t: dict, records, box, check_meshes: int, resolution=None) -> list[dict]:
     sh, own = t["shared"], t["own"]
+    if t["stage"] == "resolution":
+        at = [{"track": key, "part": 0, "record": r, "simulator": _sim_params(t["theta"], r, sh, own), "kind": kind,
+               "mesh": m, "name": None, "h": 0.0, "preset": resolution["preset"] if kind == "fine" else None}
+              for r in records for kind in ("coarse", "fine") for m in range(int(resolution["meshes"]))]
+        return _lin_rows(key, 0, t["theta"], sh, own, records, box) + at
     if t["stage"] == "profile":
         return [row for i, g in enumerate(t["grid"])
                 for row in _lin_rows(key, i, g["theta"], sh, own, records, box, vary=BASE)]
@@ -267,10 +333,12 @@ def _track_rows(key: str, t: dict, records, box, check_meshes: int) -> list[dict
 
 
 def first_round(start: Mapping[str, float], candidates: Sequence[str], records: Sequence[str],
-                box: Mapping[str, Sequence[float]], *, profile: int = 5, check_meshes: int = 8) -> dict:
+                box: Mapping[str, Sequence[float]], *, profile: int = 5, check_meshes: int = 8,
+                resolution: Mapping | None = None) -> dict:
     """Round 0: the weights' runs (the base at ``start`` on the first check meshes) and every track's first
     linearisation. ``box``: ``{name: (lower, upper)}`` for ``sigma_t``, ``E_t`` and every candidate's
-    parameters (a per-record parameter by its plain name)."""
+    parameters (a per-record parameter by its plain name); ``resolution``: ``{"preset", "meshes"}``, the
+    finer preset and the run count of the last round (module docstring, item 6), None: no such round."""
     if check_meshes < WEIGHT_MESHES:
         raise ValueError(f"check_meshes must be at least {WEIGHT_MESHES} (the weights' meshes), got {check_meshes}")
     records = list(records)
@@ -281,7 +349,7 @@ def first_round(start: Mapping[str, float], candidates: Sequence[str], records: 
              "kind": "check", "mesh": m, "name": None, "h": 0.0} for r in records for m in range(WEIGHT_MESHES)]
     state = {"phase": "running", "round": 0, "records": records, "box": {k: list(v) for k, v in box.items()},
              "start": dict(start), "profile": profile, "check_meshes": check_meshes, "weights": None,
-             "tracks": tracks, "rows": rows}
+             "resolution": None if resolution is None else dict(resolution), "tracks": tracks, "rows": rows}
     state["rows"] += [row for k, t in tracks.items() for row in _track_rows(k, t, records, box, check_meshes)]
     return state
 
@@ -320,11 +388,21 @@ def _advance(t: dict, rows, curves, y, w, records, box, noise, times) -> None:
         t["step"] += 1
         if t["step"] == GN_STEPS:
             t["cv_points"] = _cv_points(last, base, jac, alln, w, y, records, sh, own, box)
-            t["interval"] = fit_interval(t["theta"], last, base, jac, alln, w, y, records, box, noise, times)
+            # the last linearisation, for the interval once the check runs give the mesh covariance
+            t["lin"] = {"last": last, "allnames": alln, "base": {r: base[r].tolist() for r in records},
+                        "jac": {r: jac[r].tolist() for r in records}}
             t["stage"] = "check"
+    elif t["stage"] == "resolution":
+        t["resolution"] = resolution_corrected(t["theta"], rows, curves, sh, own, w, y, records, box, noise, times,
+                                               mesh=mesh_term(t["check_runs"], records))
+        t["stage"] = "done"
     elif t["stage"] == "check":
         t["check_runs"] = {r: [None if c is None else np.asarray(c, float).tolist()
                                for row, c in zip(rows, curves) if row["record"] == r] for r in records}
+        lin = t["lin"]
+        t["interval"] = fit_interval(t["theta"], lin["last"], {r: np.asarray(v) for r, v in lin["base"].items()},
+                                     {r: np.asarray(v) for r, v in lin["jac"].items()}, lin["allnames"], w, y,
+                                     records, box, noise, times, mesh=mesh_term(t["check_runs"], records))
         t["stage"] = "done"
 
 
@@ -387,9 +465,26 @@ def next_round(state: Mapping, curves: Sequence, y: Mapping[str, np.ndarray],
             _advance(t, [m[0] for m in mine], [m[1] for m in mine], y, w, recs, box, noise, times)
     new["rows"] = [row for k, t in new["tracks"].items()
                    for row in _track_rows(k, t, recs, box, new["check_meshes"])]
-    if not new["rows"]:
-        new["phase"], new["result"] = "done", _result(new, y, w, noise, times)
+    if new["rows"]:
+        return new
+    res = new.get("resolution")
+    if "result" not in new:
+        new["result"] = _result(new, y, w, noise, times)
+        if res:   # the reported model's fit at the finer preset: one more round
+            key = _reported(new["result"])
+            new["tracks"][key]["stage"] = "resolution"
+            new["rows"] = _track_rows(key, new["tracks"][key], recs, box, new["check_meshes"], res)
+            return new
+    else:
+        key = _reported(new["result"])
+        new["result"] = {**new["result"], "resolution": {"track": key, **res, **new["tracks"][key]["resolution"]}}
+    new["phase"] = "done"
     return new
+
+
+def _reported(result: Mapping) -> str:
+    """The track whose fit the result reports: the named effect's, or the base's."""
+    return "base" if result["named"] == "base_kept" else result["named"]
 
 
 def run_rounds(state: dict, simulate: Callable[[Sequence[dict]], Sequence], y, noise, times) -> dict:
@@ -439,7 +534,8 @@ def summary_of(state: Mapping) -> dict:
     """realrun.json: the last round's result with the selection's settings and its cost in runs."""
     return {"named": state["result"]["named"], "group": state["result"]["group"], "level": state["result"]["level"],
             "candidates": state["result"]["candidates"], "versus": state["result"]["versus"],
-            "base": state["result"]["base"], "records": state["records"], "start": state["start"],
+            "base": state["result"]["base"], "resolution": state["result"].get("resolution"),
+            "records": state["records"], "start": state["start"],
             "profile": state["profile"], "check_meshes": state["check_meshes"], "rounds": state["round"],
             "runs": state.get("runs_so_far", 0),
             "note": ("beside the confirmation walk: the report's verdict is the walk's; an effect is named where "

@@ -518,7 +518,26 @@ def _realrun(real) -> list[str]:
             f"real runs, each calibration record predicted from the others on "
             f"{escape(str(real.get('check_meshes', '?')))} meshes. {said}. This is beside the walk: the verdict "
             "above is the walk's.</p>",
-            _table(["candidate", "its fitted parameters [90 %]", "sigma_t [MPa]", "z against the base", "p"], rows)]
+            _table(["candidate", "its fitted parameters [90 %]", "sigma_t [MPa]", "z against the base", "p"], rows)
+            ] + _resolution(real.get("resolution"))
+
+
+def _resolution(res) -> list[str]:
+    """The reported fit corrected for the mesh (calibration.realrun.resolution_corrected), in a sentence."""
+    if not isinstance(res, Mapping) or not isinstance(res.get("fit"), Mapping):
+        return []
+    iv = res.get("interval_90") or {}
+    parts = []
+    for k, v in res["fit"].items():
+        f, unit = _unit(k.split("@")[0])
+        lo, hi = (iv.get("q05") or {}).get(k), (iv.get("q95") or {}).get(k)
+        span = f" [{_num(lo, f)}, {_num(hi, f)}]" if lo is not None and hi is not None else ""
+        parts.append(f"{escape(k)} {_num(v, f)}{span} {escape(unit)}".strip())
+    model = "the base model" if res.get("track") == "base" else escape(str(res.get("track")))
+    return ['<p style="margin:0.4em 0 0 0">' + f"Corrected for the mesh: {model}'s fit run on "
+            f"{escape(str(res.get('meshes', '?')))} meshes at <code>{escape(str(res.get('preset')))}</code> and at the "
+            f"experiment's preset, the records less the difference fitted again (90 % intervals, the difference's "
+            f"own scatter in them): {'; '.join(parts)}. These are the values to quote.</p>"]
 
 
 def summary_html(name: str, summary: Mapping, check: Mapping | None = None, refit: Mapping | None = None,

@@ -198,12 +198,15 @@ SIMULATION_GROUPS = "simulations"
 
 def simulation_preset(rule_name, wc):
     """The preset of one simulation job: the truth at the observations' preset, the approximation
-    error's runs at theirs (fine_<i> at the finer preset), every other at the experiment's.
+    error's runs at theirs (fine_<i> at the finer preset), a run of the real-run selection's resolution
+    round at its row's, every other at the experiment's.
     """
     if rule_name == "truth":
         return EXPERIMENTS[wc.exp]["observations"]["preset"]
     if rule_name == "approximation_run":
         return approximation_preset(wc.exp, wc.run)
+    if rule_name == "diagnosis_realrun_member":
+        return realrun_row(wc).get("preset") or EXPERIMENTS[wc.exp]["preset"]
     return EXPERIMENTS[wc.exp]["preset"]
 
 

@@ -254,7 +254,8 @@ checkpoint diagnosis_realrun_round:
 
 
 # One real FDEM run of a round of the selection on real runs: a fit's linearisation (the selection's own
-# mesh realizations) or a cross-validation point (the check's realizations).
+# mesh realizations), a cross-validation point (the check's realizations), or a run of the resolution
+# round (its own realizations; at the finer preset where the row names one).
 rule diagnosis_realrun_member:
     input:
         batch=lambda wc: batch_file("diagnosis_realrun_member", wc),
@@ -265,6 +266,7 @@ rule diagnosis_realrun_member:
         it="[0-9]+",
         row="[0-9]+",
     params:
+        sim=lambda wc: sim_settings(wc.exp, realrun_row(wc).get("preset")),
         parameters=lambda wc: {"values": realrun_row(wc)["simulator"]},
         record_file=lambda wc: design_records(wc.exp)[realrun_row(wc)["record"]],
         mesh_seed=realrun_mesh_seed,

@@ -565,9 +565,12 @@ def realrun_row(wc):
 
 def realrun_mesh_seed(wc):
     """A fit run on the selection's own realizations; a check run on the check's (its k-th mesh of the
-    record), so that the check meshes are the confirmation walk's where they overlap."""
+    record), so that the check meshes are the confirmation walk's where they overlap; the resolution
+    round's runs at each preset on realizations of their own."""
     row = realrun_row(wc)
-    stage = "check" if row["kind"] == "check" else "realrun"
+    stage = {"check": "check", "fit": "realrun"}.get(
+        row["kind"], f"realrun_{row['kind']}"
+    )
     index = list(design_records(wc.exp)).index(row["record"])
     return run_mesh_seed(EXPERIMENTS[wc.exp], stage, 0, int(row["mesh"]), index)
 

@@ -19,7 +19,8 @@ if int(snakemake.wildcards.r) == 0:
     # from the workflow's reported posterior mean, every effect at its null
     post = read_json(inp.summary)["posterior"]
     state = first_round({n: float(post[n]["mean"]) for n in ("sigma_t", "E_t")}, cfg["candidates"], list(obs.records),
-                        s["box"], profile=int(cfg["profile"]), check_meshes=int(cfg["check_meshes"]))
+                        s["box"], profile=int(cfg["profile"]), check_meshes=int(cfg["check_meshes"]),
+                        resolution=cfg.get("resolution"))
 else:
     last = read_json(inp.rounds[-1])
     folder = Path(inp.rounds[0]).parent / f"iter_{len(inp.rounds) - 1}"

@@ -39,8 +39,10 @@ def _small(cfg: dict) -> dict:
     d.update(candidates=["rate_strength", "gauge_gain"], design_points=8, members=24,
              physical_upper={"rate_strength.k": 0.6},
              # the selection on real runs too, at a CI size (the rate law fitted from its null, no profile; three
-             # check meshes): its rounds through the workflow; the profile is tested on a stand-in (test_realrun.py)
-             realrun_selection={"candidates": ["rate_strength"], "profile": 0, "check_meshes": 3})
+             # check meshes; a resolution round on two meshes a preset): its rounds through the workflow; the
+             # profile is tested on a stand-in (test_realrun.py)
+             realrun_selection={"candidates": ["rate_strength"], "profile": 0, "check_meshes": 3,
+                                "resolution": {"preset": "standard", "meshes": 2}})
     return cfg
 
 
@@ -87,11 +89,19 @@ def test_a_disc_series_runs_the_loop_and_keeps_the_base_model_when_nothing_is_pl
     rate = real["candidates"]["rate_strength"]
     assert set(rate["cv_points"]) == {"TinyDisc_01", "TinyDisc_02"} and 0.0 <= rate["fit"]["rate_strength.k"] <= 0.6
     # per record: the weights' 3 runs; the base's 3 linearisations of 3 names on 2 fit meshes and its 3 check
-    # runs; the rate law's 3 linearisations of 4 names on 2 fit meshes and its 3 check runs
-    assert real["runs"] == 2 * (3 + 3 * 3 * 2 + 3 + 3 * 4 * 2 + 3) and real["rounds"] == 4
-    realrun_runs = [p for p in runs if "realrun" in p.parts]
+    # runs; the rate law's 3 linearisations of 4 names on 2 fit meshes and its 3 check runs; the resolution
+    # round of the reported (base) fit: a linearisation of 3 names on 2 meshes, 2 runs at each preset
+    assert real["runs"] == 2 * (3 + 3 * 3 * 2 + 3 + 3 * 4 * 2 + 3 + 3 * 2 + 2 + 2) and real["rounds"] == 5
+    realrun_runs = [json.loads(p.read_text()) for p in runs if "realrun" in p.parts]
     assert len(realrun_runs) == real["runs"]
-    assert {json.loads(p.read_text())["record"] for p in realrun_runs} == {"TinyDisc_01", "TinyDisc_02"}
+    assert {r["record"] for r in realrun_runs} == {"TinyDisc_01", "TinyDisc_02"}
+    # the finer preset's runs are the resolution round's, and only those
+    assert sorted((r["kind"], r["preset"]) for r in realrun_runs if r["preset"] != "fast") == [("fine", "standard")] * 4
+    res_fit = real["resolution"]
+    assert res_fit["track"] == "base" and res_fit["preset"] == "standard" and set(res_fit["bias_rms"]) == {
+        "TinyDisc_01", "TinyDisc_02"}
+    iv = res_fit["interval_90"]
+    assert iv["q05"]["sigma_t"] <= res_fit["fit"]["sigma_t"] <= iv["q95"]["sigma_t"]
     # a lab's series reports the shipped posterior, the form the coverage harness scores
     summary = json.loads((res / "summary.json").read_text())
     assert summary["posterior_method"] == "emulator_mcmc" and summary["posterior_form"]["emulator_error"] == "ar1"

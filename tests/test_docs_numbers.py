@@ -274,6 +274,16 @@ def _series_walls(J, series: str) -> dict:
 
 
 @functools.lru_cache(maxsize=None)
+def _interval_forms(J) -> dict:
+    d = J("studies/results/realrun_interval_forms.json")
+    f, errs = d["forms"], d["sigma_t_rel_error"]
+    assert all(e < 0 for e in errs)
+    return {"n": f["before"]["series"], "m": f["before"]["parameters"], "b": f["before"]["planted_inside"],
+            "p": f["per_sample"]["planted_inside"], "a": f["after"]["planted_inside"],
+            "bp": f["before"]["parameters_inside"], "pp": f["per_sample"]["parameters_inside"],
+            "ap": f["after"]["parameters_inside"], "lo": -100 * max(errs), "hi": -100 * min(errs)}
+
+
 def J(path: str):
     return json.loads((ROOT / path).read_text())
 
@@ -714,6 +724,11 @@ QUOTES: list[Quote] = [
     Quote("README.md", "covers 90 % with uniform ranks", by=HARNESS),
     Quote("docs/closing-the-loop.md", "prediction by the walk's weighted paired test. An effect is named where its real runs "
           "predict better at\np < {l}, the largest z", lambda J: {"l": __import__("calibration.realrun").realrun.LEVEL}),
+    Quote("docs/closing-the-loop.md", "planted parameter lay inside its interval in {b} of {n} ({p} of {n} with the "
+          "per-sample form), every reported\nparameter in {bp} of {m} ({pp} of {m})", _interval_forms),
+    Quote("docs/closing-the-loop.md", "`sigma_t` came out {lo:.0f}-{hi:.0f} % low on every series", _interval_forms),
+    Quote("docs/closing-the-loop.md", "on the same series it held {ap} of {m} but the planted parameter in only {a} of {n}",
+          _interval_forms),
     Quote("README.md", "about {n} FDEM runs for three records", lambda J: {
         "n": f"{round(J('studies/results/realrun_selection_seating_5392_profile5_k8.json')['runs'], -1):,}"}),
     Quote("docs/closing-the-loop.md", "about {n} runs for\nthree records and four candidates", lambda J: {

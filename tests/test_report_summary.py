@@ -269,3 +269,11 @@ def test_the_selection_on_real_runs_is_shown_beside_the_walk_with_its_group():
     assert "the base model is kept" in kept and "is named" not in kept
     # without the selection on real runs, the page has no such paragraph
     assert "selection on real runs" not in summary_html("marble_loop", summary, check)
+    assert "Corrected for the mesh" not in alone
+    # the resolution round's corrected fit, where it ran: the values to quote
+    res = {"track": "seating", "preset": "standard", "meshes": 4, "bias_rms": {"A": 2.4e6},
+           "fit": {"sigma_t": 2.30e7, "seating.compliance_m_per_Pa@A": 1.04e-12},
+           "interval_90": {"q05": {"sigma_t": 2.13e7}, "q95": {"sigma_t": 2.47e7}}}
+    corrected = summary_html("marble_loop", summary, check, None, {**real, "resolution": res})
+    assert "Corrected for the mesh: seating's fit run on 4 meshes at <code>standard</code>" in corrected
+    assert "sigma_t 23 [21.3, 24.7] MPa" in corrected and "These are the values to quote" in corrected
