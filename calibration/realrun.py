@@ -53,8 +53,8 @@ from enkf.diagnosis.weights import Weighted
 from shpb import effects as fx
 
 __all__ = ["FIT_MESHES", "GN_STEPS", "LEVEL", "compare_tracks", "first_round", "fit_interval", "gn_solve", "grouped",
-           "mesh_covariance", "mesh_term", "named", "names_of", "next_round", "on_grid", "paired_test", "resolution_corrected", "run_rounds",
-           "series_of", "smoothed_weights", "summary_of"]
+           "mesh_covariance", "mesh_term", "named", "names_of", "next_round", "on_grid", "paired_test",
+           "resolution_corrected", "run_rounds", "series_of", "smoothed_weights", "summary_of"]
 
 FIT_MESHES = 2          # meshes a linearisation's runs are averaged over
 WEIGHT_MESHES = 3       # the first check meshes, whose scatter sets the weights
@@ -214,7 +214,7 @@ def mesh_covariance(runs) -> np.ndarray:
     """The sample covariance over time of runs on different mesh realizations (rows). Why full: a
     realization moves a whole curve (its onset, its peak), so its departures are correlated over the record;
     taken as independent per sample, a few MPa of scatter average away over hundreds of samples and the
-    intervals come out several times too narrow (on a development friction series, 6 times for the friction)."""
+    intervals come out several times too narrow (about ten times for a development series' friction)."""
     X = np.asarray(runs, float)
     d = X - X.mean(axis=0)
     return d.T @ d / (len(X) - 1)
@@ -267,8 +267,13 @@ def mesh_term(check_runs: Mapping, records) -> dict:
     """``fit_interval``'s ``mesh``: per record the covariance of a track's check runs (its cross-validation
     point on every check mesh, near its fit), once for the records' own realization and once over the
     FIT_MESHES the fit's curves average."""
-    return {r: (1.0 + 1.0 / FIT_MESHES) * mesh_covariance([c for c in check_runs[r] if c is not None])
-            for r in records}
+    out = {}
+    for r in records:
+        runs = [c for c in check_runs[r] if c is not None]
+        if len(runs) < 2:
+            raise RuntimeError(f"record {r}: fewer than two check runs succeeded; no mesh covariance for the intervals")
+        out[r] = (1.0 + 1.0 / FIT_MESHES) * mesh_covariance(runs)
+    return out
 
 
 def resolution_corrected(theta, rows, curves, shared, own, w, y, records, box, noise, times, mesh=None) -> dict:
