@@ -53,8 +53,8 @@ from enkf.diagnosis.weights import Weighted
 from shpb import effects as fx
 
 __all__ = ["FIT_MESHES", "GN_STEPS", "LEVEL", "compare_tracks", "first_round", "fit_interval", "gn_solve", "grouped",
-           "mesh_covariance", "mesh_term", "named", "names_of", "next_round", "on_grid", "paired_test",
-           "resolution_corrected", "run_rounds", "series_of", "smoothed_weights", "summary_of"]
+           "mesh_covariance", "mesh_term", "named", "names_of", "next_round", "paired_test", "resolution_corrected",
+           "run_rounds", "smoothed_weights"]
 
 FIT_MESHES = 2          # meshes a linearisation's runs are averaged over
 WEIGHT_MESHES = 3       # the first check meshes, whose scatter sets the weights
@@ -498,51 +498,3 @@ def run_rounds(state: dict, simulate: Callable[[Sequence[dict]], Sequence], y, n
     while state["phase"] != "done":
         state = next_round(state, simulate(state["rows"]), y, noise, times)
     return state
-
-
-# --- the workflow's side -------------------------------------------------------------------------------
-
-
-def series_of(obs, exp: Mapping) -> dict:
-    """What the rounds read of an experiment's calibration records (``obs``:
-    :class:`calibration.observations.Observations`, ``exp``: its config block): ``y``, ``times`` and the
-    AR(1) ``noise`` per record, as the workflow estimated it from each record's pre-trigger, and the ``box``
-    of the base parameters (the prior's) and of every physical effect
-    (:func:`calibration.diagnose.physical_design_ranges`)."""
-    from .diagnose import physical_design_ranges
-
-    info = obs.meta["record_info"]
-    box = {n: [float(v[0]), float(v[1])] for n, v in exp["parameters"].items() if n in BASE}
-    # the physical effects' boxes as the walk's design takes them: null to the catalogue's bound or physical_upper
-    names, lo, hi = physical_design_ranges([e.name for e in fx.effects()],
-                                           (exp.get("diagnosis") or {}).get("physical_upper"))
-    box.update({n: [float(a), float(b)] for n, a, b in zip(names, lo, hi)})
-    return {"y": {r: obs.values[obs.record_slice(r)] for r in obs.records},
-            "times": {r: obs.time[obs.record_slice(r)] for r in obs.records},
-            "noise": {r: (float(info[r]["noise_estimate"]["sigma"]), float(info[r]["noise_estimate"]["corr_time"]))
-                      for r in obs.records},
-            "box": box}
-
-
-def on_grid(frame, times: np.ndarray) -> np.ndarray | None:
-    """A run's curve (``time_s``, ``stress_Pa``) on a record's grid; None for a failed run or one that does
-    not cover the grid."""
-    from .observations import curve_on_grid
-
-    if len(frame) < 2:
-        return None
-    v = curve_on_grid(frame["time_s"].to_numpy(float), frame["stress_Pa"].to_numpy(float), times)
-    return v if np.all(np.isfinite(v)) else None
-
-
-def summary_of(state: Mapping) -> dict:
-    """realrun.json: the last round's result with the selection's settings and its cost in runs."""
-    return {"named": state["result"]["named"], "group": state["result"]["group"], "level": state["result"]["level"],
-            "candidates": state["result"]["candidates"], "versus": state["result"]["versus"],
-            "base": state["result"]["base"], "resolution": state["result"].get("resolution"),
-            "records": state["records"], "start": state["start"],
-            "profile": state["profile"], "check_meshes": state["check_meshes"], "rounds": state["round"],
-            "runs": state.get("runs_so_far", 0),
-            "note": ("beside the confirmation walk: the report's verdict is the walk's; an effect is named where "
-                     "its real runs predict the calibration records better than the base's at p < level, the "
-                     "largest z; the group holds the passing candidates the named one does not beat")}

@@ -519,7 +519,26 @@ def _realrun(real) -> list[str]:
             f"{escape(str(real.get('check_meshes', '?')))} meshes. {said}. This is beside the walk: the verdict "
             "above is the walk's.</p>",
             _table(["candidate", "its fitted parameters [90 %]", "sigma_t [MPa]", "z against the base", "p"], rows)
-            ] + _resolution(real.get("resolution"))
+            ] + _resolution(real.get("resolution")) + _realrun_heldout(real.get("heldout"))
+
+
+def _realrun_heldout(held) -> list[str]:
+    """The held-out records' errors at the selection on real runs' fits (diagnosis/realrun_heldout.json)."""
+    if not isinstance(held, Mapping) or not isinstance(held.get("records"), Mapping) or not held["records"]:
+        return []
+    rows = []
+    for h, ev in held["records"].items():
+        cells = []
+        for model in ("before", "after"):
+            e = ev.get(model) if isinstance(ev, Mapping) else None
+            cells += ([_num(e.get("rmse"), 1e-6), _num(e.get("peak_rel_error"), 100, "+.1f")] if isinstance(e, Mapping)
+                      else ["-", "-"])
+        rows.append([escape(str(h))] + cells)
+    return ['<p style="margin:0.4em 0 0 0">The held-out records predicted from these fits, made without them '
+            "(each run on every check mesh; before: the base model's fit, after: the named effect's, a per-record "
+            "value at the calibration records' mean; diagnosis/realrun_heldout.json):</p>",
+            _table(["held-out record", "RMSE before [MPa]", "peak before [%]", "RMSE after [MPa]", "peak after [%]"],
+                   rows)]
 
 
 def _resolution(res) -> list[str]:

@@ -277,8 +277,10 @@ rule diagnosis_realrun_member:
         },
 
 
-rule diagnosis_realrun:
-    """realrun.json: what the selection on real runs names, each candidate's fit and test, the group."""
+checkpoint diagnosis_realrun:
+    """realrun.json: what the selection on real runs names, each candidate's fit and test, the group; and
+    the held-out records' prediction runs at the fits it reports (calibration.realrun_files.heldout_rows).
+    """
     input:
         last=lambda wc: realrun_last_round(wc.exp),
     output:
@@ -287,12 +289,69 @@ rule diagnosis_realrun:
             category="{exp}",
             subcategory="diagnosis",
         ),
+        heldout_rows="results/{exp}/diagnosis/realrun_heldout_rows.json",
     log:
         "results/{exp}/logs/diagnosis_realrun.log",
     conda:
         CONDA_ENV
+    params:
+        heldout=lambda wc: list(heldout_records(wc.exp)),
+        check_meshes=lambda wc: diagnosis_cfg(wc.exp)["realrun_selection"][
+            "check_meshes"
+        ],
     script:
         "../scripts/diagnosis_realrun.py"
+
+
+# One held-out record's prediction at a fit the selection on real runs reports, on the k-th check mesh of
+# the record (the walk's held-out runs' realization k).
+rule diagnosis_realrun_heldout_member:
+    input:
+        batch=lambda wc: batch_file("diagnosis_realrun_heldout_member", wc),
+    output:
+        curve="results/{exp}/diagnosis/realrun_heldout/{row}/curve.csv",
+        run="results/{exp}/diagnosis/realrun_heldout/{row}/run.json",
+    wildcard_constraints:
+        row="[0-9]+",
+    params:
+        parameters=lambda wc: {"values": realrun_heldout_row(wc)["simulator"]},
+        record_file=lambda wc: design_records(wc.exp)[realrun_heldout_row(wc)["record"]],
+        mesh_seed=lambda wc: run_mesh_seed(
+            EXPERIMENTS[wc.exp],
+            "check",
+            0,
+            int(realrun_heldout_row(wc)["mesh"]),
+            list(design_records(wc.exp)).index(realrun_heldout_row(wc)["record"]),
+        ),
+        run=lambda wc: {
+            "realrun_heldout_row": int(wc.row),
+            **{
+                k: realrun_heldout_row(wc)[k]
+                for k in ("record", "model", "track", "mesh")
+            },
+        },
+
+
+rule diagnosis_realrun_heldout:
+    """realrun_heldout.json: the held-out records' errors before (the base's fit) and after (the named
+    effect's), from fits made on the calibration records alone."""
+    input:
+        rows="results/{exp}/diagnosis/realrun_heldout_rows.json",
+        runs=lambda wc: stage_batch_files(wc.exp, "diagnosis_realrun_heldout_member"),
+        obs="results/{exp}/diagnosis/heldout/obs.csv",
+        obs_meta="results/{exp}/diagnosis/heldout/obs.json",
+    output:
+        heldout=report(
+            "results/{exp}/diagnosis/realrun_heldout.json",
+            category="{exp}",
+            subcategory="diagnosis",
+        ),
+    log:
+        "results/{exp}/logs/diagnosis_realrun_heldout.log",
+    conda:
+        CONDA_ENV
+    script:
+        "../scripts/diagnosis_realrun_heldout.py"
 
 
 rule loro:

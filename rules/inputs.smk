@@ -92,6 +92,7 @@ SIMULATION_STAGES = (
     "diagnosis_check_member",
     "diagnosis_refit_member",
     "diagnosis_realrun_member",
+    "diagnosis_realrun_heldout_member",
 )
 
 
@@ -141,6 +142,8 @@ def stage_runs(exp, stage, key):
     if stage == "diagnosis_realrun_member":
         it = key.removeprefix("iter_")
         return [{"it": it, "row": str(i)} for i in range(len(realrun_rows_of(exp, it)))]
+    if stage == "diagnosis_realrun_heldout_member":
+        return [{"row": str(i)} for i in range(len(realrun_heldout_rows_of(exp)))]
     raise ValueError(f"not a simulation stage: {stage!r}")
 
 
@@ -214,6 +217,10 @@ def batch_inputs(wc):
         rows = realrun_rows_of(exp, it)
         names = {rows[int(r["row"])]["record"] for r in runs}
         files = {"rows": realrun_round_file(exp, it)}
+    elif wc.stage == "diagnosis_realrun_heldout_member":
+        rows = realrun_heldout_rows_of(exp)
+        names = {rows[int(r["row"])]["record"] for r in runs}
+        files = {"rows": f"results/{exp}/diagnosis/realrun_heldout_rows.json"}
     else:
         names = {r["record"] for r in runs}
         pattern = STAGE_PARAMETERS.get(wc.stage)
@@ -370,6 +377,10 @@ def report_summary_inputs(wc):
         files["refit"] = f"results/{wc.exp}/diagnosis/refit.json"
     if realrun_on(wc.exp):  # the selection on real runs, beside the walk
         files["realrun"] = f"results/{wc.exp}/diagnosis/realrun.json"
+        if heldout_records(wc.exp):  # its fits' held-out errors
+            files["realrun_heldout"] = (
+                f"results/{wc.exp}/diagnosis/realrun_heldout.json"
+            )
     return files
 
 
@@ -592,6 +603,17 @@ def realrun_round_inputs(wc):
             for b in stage_batch_files(wc.exp, "diagnosis_realrun_member", f"iter_{k}")
         ]
     return files
+
+
+def realrun_heldout_rows_of(exp):
+    """The held-out prediction runs of the selection on real runs (its checkpoint's rows file)."""
+    return round_state(checkpoints.diagnosis_realrun.get(exp=exp).output.heldout_rows)[
+        "rows"
+    ]
+
+
+def realrun_heldout_row(wc):
+    return realrun_heldout_rows_of(wc.exp)[int(wc.row)]
 
 
 def realrun_last_round(exp):

@@ -8,7 +8,8 @@ log_to(snakemake.log[0])  # the job's output goes to its log (rules/*.smk)
 from pathlib import Path
 
 from calibration.observations import read_curve, read_observations
-from calibration.realrun import first_round, next_round, on_grid, series_of
+from calibration.realrun import first_round, next_round
+from calibration.realrun_files import on_grid, series_of
 from calibration.workflow_io import atomic_write_json, read_json
 
 inp, e = snakemake.input, snakemake.params.exp

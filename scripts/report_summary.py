@@ -10,5 +10,7 @@ inp = snakemake.input
 check = read_json(inp.check) if "check" in inp.keys() else None
 refit = read_json(inp.refit) if "refit" in inp.keys() else None
 realrun = read_json(inp.realrun) if "realrun" in inp.keys() else None
+if "realrun_heldout" in inp.keys():
+    realrun = {**realrun, "heldout": read_json(inp.realrun_heldout)}
 atomic_write_text(snakemake.output.html, summary_html(snakemake.wildcards.exp, read_json(inp.summary), check, refit,
                                                       realrun))

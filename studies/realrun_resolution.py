@@ -31,6 +31,7 @@ import numpy as np  # noqa: E402
 import yaml  # noqa: E402
 
 from calibration import realrun as rr  # noqa: E402
+from calibration.realrun_files import series_of  # noqa: E402
 from calibration.observations import curve_on_grid, read_observations  # noqa: E402
 
 MESHES = {"fit": 3101, "check": 3201, "coarse": 3301, "fine": 3401}   # first mesh seed of each kind of run
@@ -86,7 +87,7 @@ def main(argv=None):
     t0 = time.perf_counter()
     exp = yaml.safe_load(Path(a.config).read_text())["experiments"][a.exp]
     obs = read_observations(Path(a.run) / "observations/obs.csv", Path(a.run) / "observations/obs.json")
-    s = rr.series_of(obs, exp)
+    s = series_of(obs, exp)
     records = list(obs.records)
     shared, own = rr.names_of(a.effect, records)
     theta = _fit_of(json.loads(Path(a.fit).read_text()), a.effect)

@@ -16,7 +16,8 @@ from calibration.observations import read_observations
 run, cfgp, exp_name, fitf, effect, truthf, statef, out = sys.argv[1:9]
 exp = yaml.safe_load(open(cfgp))["experiments"][exp_name]
 obs = read_observations(Path(run)/"observations/obs.csv", Path(run)/"observations/obs.json")
-s = rr.series_of(obs, exp); recs = list(obs.records)
+from calibration.realrun_files import series_of
+s = series_of(obs, exp); recs = list(obs.records)
 shared, own = rr.names_of(effect, recs)
 doc = json.load(open(fitf)); theta = {k: float(v) for k, v in doc["candidates"][effect]["fit"].items()}
 truth = json.load(open(truthf)); planted = {t["name"]: t.get("planted") or {} for t in truth["tests"]}

@@ -14,6 +14,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 import yaml
 
 from test_workflow import snakemake
@@ -102,6 +103,21 @@ def test_a_disc_series_runs_the_loop_and_keeps_the_base_model_when_nothing_is_pl
         "TinyDisc_01", "TinyDisc_02"}
     iv = res_fit["interval_90"]
     assert iv["q05"]["sigma_t"] <= res_fit["fit"]["sigma_t"] <= iv["q95"]["sigma_t"]
+    # the held-out disc predicted at the reported (base, corrected) fit on the 3 check meshes, on the walk's
+    # held-out realizations, and scored against its record
+    held_runs = [json.loads(p.read_text()) for p in runs if "realrun_heldout" in p.parts]
+    assert sorted((r["record"], r["model"], r["mesh"]) for r in held_runs) == [("TinyDisc_03", "before", m)
+                                                                                 for m in range(3)]
+    from calibration.model_error import run_mesh_seed
+
+    exp_cfg = yaml.safe_load((tmp_path / "config.yaml").read_text())["experiments"][EXP]
+    assert sorted(r["mesh_seed"] for r in held_runs) == sorted(run_mesh_seed(exp_cfg, "check", 0, m, 2)
+                                                                for m in range(3))
+    assert held_runs[0]["params"]["sigma_t"] == pytest.approx(res_fit["fit"]["sigma_t"])
+    rh = json.loads((res / "diagnosis" / "realrun_heldout.json").read_text())
+    assert list(rh["records"]) == ["TinyDisc_03"] and "after" not in rh["records"]["TinyDisc_03"]
+    assert rh["records"]["TinyDisc_03"]["before"]["replicates"] == 3 and rh["failed"] == 0
+    assert "The held-out records predicted from these fits" in (res / "summary.html").read_text()
     # a lab's series reports the shipped posterior, the form the coverage harness scores
     summary = json.loads((res / "summary.json").read_text())
     assert summary["posterior_method"] == "emulator_mcmc" and summary["posterior_form"]["emulator_error"] == "ar1"

@@ -272,3 +272,33 @@ def test_the_resolution_round_runs_the_reported_fit_at_both_presets():
     assert all(0.3 < v < 1.5 for v in res["bias_rms"].values()), res["bias_rms"]
     assert res["fit"]["sigma_t"] == pytest.approx(2.5e7, rel=0.02)
     assert state["result"]["base"]["fit"]["sigma_t"] == pytest.approx(1.04 * 2.5e7, rel=0.02)
+
+
+def test_the_held_out_records_are_predicted_at_the_reported_fits_with_the_population_value():
+    from calibration.realrun_files import heldout_errors, heldout_rows, summary_of
+
+    truth = {"sigma_t": 2.5e7, "E_t": 1200.0, "interface_friction.mu": 0.3}
+    state = rr.run_rounds(rr.first_round(START, ["interface_friction", "face_gap"], RECORDS[:2], BOX, profile=3,
+                                         check_meshes=4), simulate, data(truth), NOISE, TIMES)
+    summary = summary_of(state)
+    assert summary["named"] == "interface_friction"
+    rows = heldout_rows(summary, ["R3"], 4)
+    # R3 was neither fitted nor run by the rounds; here it is run at the base's fit and the friction's
+    assert state["records"] == ["R1", "R2"]
+    assert [r["model"] for r in rows] == ["before"] * 4 + ["after"] * 4 and {r["record"] for r in rows} == {"R3"}
+    assert rows[4]["simulator"] == summary["candidates"]["interface_friction"]["fit"]
+    y = data(truth)
+    err = heldout_errors(rows, simulate([{**r, "kind": "check"} for r in rows]), {"R3": y["R3"]}, {"R3": T})
+    # the friction's fit predicts the unseen record better than the base's (its strength set by two rates)
+    assert err["R3"]["after"]["rmse"] < 0.5 * err["R3"]["before"]["rmse"]
+    assert err["R3"]["after"]["replicates"] == 4
+    # a per-record effect at the calibration records' mean; a failed run left out; base kept: before only
+    gap = {"named": "face_gap", "base": {"fit": {"sigma_t": 2e7, "E_t": 900.0}},
+           "candidates": {"face_gap": {"fit": {"sigma_t": 2.1e7, "E_t": 1000.0, "face_gap.gap_m@R1": 1e-4,
+                                               "face_gap.gap_m@R2": 3e-4}}}}
+    rows = heldout_rows(gap, ["R3"], 2)
+    assert rows[-1]["simulator"] == pytest.approx({"sigma_t": 2.1e7, "E_t": 1000.0, "face_gap.gap_m": 2e-4})
+    curves = simulate([{**r, "kind": "check"} for r in rows])
+    curves[-1] = None
+    assert heldout_errors(rows, curves, {"R3": y["R3"]}, {"R3": T})["R3"]["after"]["replicates"] == 1
+    assert {r["model"] for r in heldout_rows({**gap, "named": "base_kept"}, ["R3"], 2)} == {"before"}

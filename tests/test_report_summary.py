@@ -277,3 +277,10 @@ def test_the_selection_on_real_runs_is_shown_beside_the_walk_with_its_group():
     corrected = summary_html("marble_loop", summary, check, None, {**real, "resolution": res})
     assert "Corrected for the mesh: seating's fit run on 4 meshes at <code>standard</code>" in corrected
     assert "sigma_t 23 [21.3, 24.7] MPa" in corrected and "These are the values to quote" in corrected
+    # the held-out records' errors at the selection's fits, where it ran them
+    held = {"records": {"H1": {"before": {"rmse": 20.4e6, "peak_rel_error": 0.119},
+                               "after": {"rmse": 12.1e6, "peak_rel_error": -0.021}}}, "runs": 16}
+    shown = summary_html("marble_loop", summary, check, None, {**real, "heldout": held})
+    assert "The held-out records predicted from these fits, made without them" in shown
+    assert ["H1", "20.4", "+11.9", "12.1", "-2.1"] in _cells(shown)
+    assert "held-out records predicted" not in corrected

@@ -33,7 +33,7 @@ def rule_blocks() -> dict[str, str]:
 #: them in batches and writes their logs): no log and no script of their own.
 DECLARATIONS = {"member", "replicate", "refine_member", "forecast", "truth", "approximation_run",
                 "sensitivity_member", "diagnosis_member", "diagnosis_check_member", "diagnosis_refit_member",
-                "diagnosis_realrun_member"}
+                "diagnosis_realrun_member", "diagnosis_realrun_heldout_member"}
 
 
 def job_blocks() -> dict[str, str]:
