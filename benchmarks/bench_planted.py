@@ -420,6 +420,8 @@ def run_series(plan: dict, case: dict, seed: int, work: Path, preset: str, recor
         row["heldout"] = heldout_summary(check)
         if realrun is not None:
             row["realrun"] = realrun_row(json.loads((diag / "realrun.json").read_text()), case, truth)
+            if (diag / "realrun_heldout.json").exists():     # its fits' held-out errors, reported, not scored
+                row["realrun"]["heldout"] = json.loads((diag / "realrun_heldout.json").read_text())["records"]
     except (subprocess.CalledProcessError, OSError, KeyError, ValueError, SystemExit) as exc:
         row["error"] = f"{type(exc).__name__}: {exc}"
     row["wall_s"] = round(time.perf_counter() - t0, 1)
