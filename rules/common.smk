@@ -84,6 +84,7 @@ localrules:
     diagnosis_refit,
     diagnosis_realrun_round,
     diagnosis_realrun,
+    diagnosis_realrun_heldout,
     loro,
 
 
